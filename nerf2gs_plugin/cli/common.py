@@ -1,0 +1,22 @@
+"""What every ns2gs-* front end shares: one-line errors and exit codes."""
+
+from __future__ import annotations
+
+import sys
+from typing import Callable, TypeVar
+
+from nerf2gs_plugin.errors import UserError
+
+T = TypeVar("T")
+
+
+def run_cli(main: Callable[[], T]) -> T:
+    """Run ``main``; bad input becomes ``error: <one line>`` on stderr and exit status 2."""
+    try:
+        return main()
+    except UserError as e:
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(2)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        sys.exit(130)

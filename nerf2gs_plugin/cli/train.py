@@ -1,0 +1,53 @@
+"""ns2gs-train <method> --data DATA [--augment-from REF] [--pipeline.model.x ...]"""
+
+from __future__ import annotations
+
+import sys
+
+import tyro
+
+from nerf2gs_plugin.cli.common import run_cli
+from nerf2gs_plugin.engine.trainer import Trainer, TrainerConfig
+from nerf2gs_plugin.registry import discover_methods, report_failures
+
+
+def train(config: TrainerConfig) -> None:
+    trainer = Trainer(config)
+    trainer.setup()
+    if config.viewer:
+        from viewer.server import attach_training_viewer
+
+        attach_training_viewer(trainer)
+    try:
+        run_dir = trainer.train()
+    except KeyboardInterrupt:
+        path = trainer.save_checkpoint(trainer.step)
+        print(f"interrupted: checkpoint saved to {path}", file=sys.stderr)
+        raise
+    print(f"run saved to {run_dir}")
+
+
+def main() -> None:
+    disc = discover_methods()
+    report_failures(disc)
+    configs = {name: spec.config for name, spec in sorted(disc.methods.items())}
+    descriptions = {name: spec.description for name, spec in disc.methods.items()}
+    if not configs:
+        raise SystemExit("no methods registered")
+    if len(sys.argv) > 1 and not sys.argv[1].startswith("-") and sys.argv[1] not in configs:
+        from nerf2gs_plugin.errors import ConfigError
+
+        raise ConfigError(f"unknown method '{sys.argv[1]}'; known methods: {', '.join(sorted(configs))}")
+    config = tyro.extras.subcommand_cli_from_dict(
+        configs,
+        description="Train a method. " + "; ".join(f"{k}: {v}" for k, v in sorted(descriptions.items())),
+    )
+    train(config)
+
+
+def entrypoint() -> None:
+    run_cli(main)
+
+
+if __name__ == "__main__":
+    entrypoint()

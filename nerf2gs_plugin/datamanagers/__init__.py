@@ -1,0 +1,1 @@
+"""DataManagers: turn a parsed dataset into training batches (rays or whole images)."""

@@ -1,0 +1,113 @@
+"""DataManager: owns the parsed dataset and hands out training and eval batches.
+
+Training images live in an :class:`ImageSet`; an optional second ImageSet of *extra* views (the
+bird's-eye views of an augmented run) is sampled with probability ``extra_prob`` and weighted by
+its per-image weight. The AugmentedDataManager fills both; methods never know which is which.
+"""
+
+from __future__ import annotations
+
+from abc import abstractmethod
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterator, Optional
+
+import torch
+
+from nerf2gs_plugin.cameras import Cameras
+from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
+from nerf2gs_plugin.datamanagers.image_set import ImageSet, load_image_set
+from nerf2gs_plugin.engine.config import InstantiateConfig
+from nerf2gs_plugin.errors import DataError
+
+# eval splits in the order they are reported; a dataset may hold any subset (or others)
+PREFERRED_EVAL_SPLITS = ("street", "bev_1", "bev_2", "val", "test")
+
+
+@dataclass
+class DataManagerConfig(InstantiateConfig):
+    _target: type = field(default_factory=lambda: DataManager)
+    downscale: float = 1.0
+    """Shrink images on load by this factor (2 = half size)."""
+
+
+class DataManager:
+    config: DataManagerConfig
+
+    def __init__(self, config: DataManagerConfig, data: Path, device: torch.device | str = "cpu", seed: int = 0) -> None:
+        from nerf2gs_plugin.data import parse_dataset, list_splits
+
+        self.config = config
+        self.data = Path(data)
+        self.device = torch.device(device)
+        self.train_data: DataparserOutputs = parse_dataset(self.data, "train", downscale=config.downscale)
+        if len(self.train_data) == 0:
+            raise DataError("the train split is empty", self.data)
+        self.train_images: ImageSet = load_image_set(self.train_data).to(self.device)
+        self.extra_images: Optional[ImageSet] = None
+        self.extra_prob = 0.0
+        self._split_names = [s for s in list_splits(self.data) if s != "train"]
+        self._eval_cache: dict[str, tuple[DataparserOutputs, ImageSet]] = {}
+        self.generator = torch.Generator().manual_seed(seed)
+
+    # ------------------------------------------------------------------ augmentation hooks
+    def set_train_images(self, images: ImageSet) -> None:
+        """Replace the training pixels (e.g. with transient-free composites); cameras stay."""
+        self.train_images = images.to(self.device)
+
+    def set_extra_images(self, images: Optional[ImageSet], prob: float) -> None:
+        """Mix ``images`` into training with probability ``prob`` per sample."""
+        self.extra_images = images.to(self.device) if images is not None and len(images) else None
+        self.extra_prob = float(prob) if self.extra_images is not None else 0.0
+
+    @property
+    def all_train_cameras(self) -> Cameras:
+        """Real then extra training cameras: the index space of ``camera_indices``/``image_idx``."""
+        if self.extra_images is None:
+            return self.train_images.cameras
+        return Cameras.cat([self.train_images.cameras, self.extra_images.cameras])
+
+    # ------------------------------------------------------------------ eval
+    def eval_split_names(self) -> list[str]:
+        ordered = [s for s in PREFERRED_EVAL_SPLITS if s in self._split_names]
+        return ordered + [s for s in self._split_names if s not in ordered]
+
+    def eval_split(self, name: str) -> tuple[DataparserOutputs, ImageSet]:
+        from nerf2gs_plugin.data import parse_dataset
+
+        if name not in self._eval_cache:
+            if name not in self._split_names:
+                raise DataError(f"no eval split '{name}' (the dataset has: {', '.join(self.eval_split_names()) or 'none'})", self.data)
+            outputs = parse_dataset(self.data, name, downscale=self.config.downscale)
+            if len(outputs) == 0:
+                raise DataError(f"eval split '{name}' is empty", self.data)
+            self._eval_cache[name] = (outputs, load_image_set(outputs).to(self.device))
+        return self._eval_cache[name]
+
+    def eval_images(self, name: str) -> Iterator[tuple[Cameras, dict[str, Any]]]:
+        _, images = self.eval_split(name)
+        for i in range(len(images)):
+            yield images.cameras[i], images.image_batch(i)
+
+    def next_eval(self, step: int) -> tuple[Cameras, dict[str, Any]]:
+        """One whole eval image (cycling through the first eval split), for periodic eval."""
+        names = self.eval_split_names()
+        if not names:
+            return self.train_images.cameras[step % len(self.train_images)], self.train_images.image_batch(step % len(self.train_images))
+        _, images = self.eval_split(names[0])
+        i = step % len(images)
+        return images.cameras[i], images.image_batch(i)
+
+    # ------------------------------------------------------------------ training
+    @abstractmethod
+    def next_train(self, step: int) -> tuple[Any, dict[str, Any]]: ...
+
+    def _use_extra(self) -> bool:
+        return self.extra_images is not None and torch.rand((), generator=self.generator).item() < self.extra_prob
+
+    def state_dict(self) -> dict:
+        return {"generator": self.generator.get_state()}
+
+    def load_state_dict(self, state: dict) -> None:
+        if "generator" in state:
+            self.generator.set_state(state["generator"])

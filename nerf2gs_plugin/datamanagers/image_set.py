@@ -1,0 +1,107 @@
+"""ImageSet: the pixels of a set of cameras in one flat buffer, so rays and whole images are
+gathered with tensor indexing whatever the image sizes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional
+
+import torch
+from torch import Tensor
+
+from nerf2gs_plugin.cameras import Cameras
+from nerf2gs_plugin.data.dataparser_outputs import MASK_KINDS, DataparserOutputs
+
+
+@dataclass
+class ImageSet:
+    cameras: Cameras
+    pixels: Tensor  # [P, 3] float in [0, 1], images concatenated row-major
+    offsets: Tensor  # [N] long, first pixel of each image
+    masks: dict[str, Tensor] = field(default_factory=dict)  # kind -> [P] bool
+    weights: Optional[Tensor] = None  # [N] loss weight per image
+    names: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if self.weights is None:
+            self.weights = torch.ones(len(self.cameras), device=self.pixels.device)
+
+    def __len__(self) -> int:
+        return len(self.cameras)
+
+    @property
+    def num_pixels(self) -> int:
+        return self.pixels.shape[0]
+
+    def hw(self, i: int) -> tuple[int, int]:
+        return int(self.cameras.height[i]), int(self.cameras.width[i])
+
+    def _slice(self, flat: Tensor, i: int) -> Tensor:
+        h, w = self.hw(i)
+        start = int(self.offsets[i])
+        return flat[start : start + h * w].reshape(h, w, -1)
+
+    def image(self, i: int) -> Tensor:
+        """``[H, W, 3]``"""
+        return self._slice(self.pixels, i)
+
+    def mask(self, kind: str, i: int) -> Optional[Tensor]:
+        """``[H, W, 1]`` bool, or None when the set has no masks of that kind."""
+        if kind not in self.masks:
+            return None
+        return self._slice(self.masks[kind], i)
+
+    def image_batch(self, i: int) -> dict:
+        batch = {"image": self.image(i), "image_idx": i, "weight": self.weights[i]}
+        for kind in self.masks:
+            batch[f"{kind}_mask"] = self.mask(kind, i)
+        return batch
+
+    def locate(self, flat_index: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """Flat pixel indices ``[R]`` -> (image index, v, u), each ``[R]``."""
+        img = torch.searchsorted(self.offsets, flat_index, right=True) - 1
+        local = flat_index - self.offsets[img]
+        w = self.cameras.width.to(flat_index.device)[img]
+        return img, local // w, local % w
+
+    def to(self, device) -> "ImageSet":
+        return ImageSet(
+            self.cameras.to(device),
+            self.pixels.to(device),
+            self.offsets.to(device),
+            {k: v.to(device) for k, v in self.masks.items()},
+            self.weights.to(device),
+            list(self.names),
+        )
+
+    def with_images(self, images: list[Tensor]) -> "ImageSet":
+        """Same cameras and masks, new pixels (e.g. composites)."""
+        return ImageSet(self.cameras, torch.cat([im.reshape(-1, 3) for im in images]), self.offsets, dict(self.masks), self.weights, list(self.names))
+
+    @staticmethod
+    def from_images(cameras: Cameras, images: list[Tensor], masks: Optional[dict[str, list[Tensor]]] = None,
+                    weights: Optional[Tensor] = None, names: Optional[list[str]] = None) -> "ImageSet":
+        sizes = torch.tensor([im.shape[0] * im.shape[1] for im in images], dtype=torch.long)
+        offsets = torch.cat([torch.zeros(1, dtype=torch.long), sizes.cumsum(0)[:-1]])
+        pixels = torch.cat([im.reshape(-1, 3).float() for im in images]) if images else torch.zeros(0, 3)
+        flat_masks = {k: torch.cat([m.reshape(-1).bool() for m in ms]) for k, ms in (masks or {}).items()}
+        return ImageSet(cameras, pixels, offsets.to(pixels.device), flat_masks, weights, names or [f"{i:05d}" for i in range(len(images))])
+
+
+def load_image_set(outputs: DataparserOutputs) -> ImageSet:
+    """Read every image (and mask) of a split into an ImageSet."""
+    from nerf2gs_plugin.data.images import load_image, load_mask
+
+    images, masks = [], {k: [] for k in MASK_KINDS if k in outputs.mask_filenames}
+    for i, path in enumerate(outputs.image_filenames):
+        img = load_image(path, outputs.downscale)
+        h, w = int(outputs.cameras.height[i]), int(outputs.cameras.width[i])
+        if tuple(img.shape[:2]) != (h, w):
+            from nerf2gs_plugin.errors import DataError
+
+            raise DataError(f"image is {img.shape[1]}x{img.shape[0]} but its camera says {w}x{h}", path)
+        images.append(img)
+        for kind in masks:
+            mpath = outputs.mask_filenames[kind][i]
+            masks[kind].append(load_mask(mpath, (h, w)) if mpath is not None else torch.zeros(h, w, dtype=torch.bool))
+    return ImageSet.from_images(outputs.cameras, images, masks, names=[p.name for p in outputs.image_filenames])

@@ -1,0 +1,1 @@
+"""Model and Pipeline contracts, the Trainer, callbacks, optimizers, checkpoints and configs."""

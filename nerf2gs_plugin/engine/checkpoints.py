@@ -1,0 +1,70 @@
+"""Checkpoints: atomic save, latest-step lookup, and loading with clear errors."""
+
+from __future__ import annotations
+
+import io
+import re
+from pathlib import Path
+from typing import Any, Optional
+
+import torch
+
+from nerf2gs_plugin.data.fingerprint import dataset_fingerprint, file_hash  # noqa: F401 (re-exported)
+from nerf2gs_plugin.engine.config import atomic_write_bytes
+from nerf2gs_plugin.errors import CheckpointError
+
+CHECKPOINT_FORMAT_VERSION = 1
+_STEP_RE = re.compile(r"^step-(\d{9})\.ckpt$")
+
+
+def checkpoint_path(run_dir: Path, step: int) -> Path:
+    return Path(run_dir) / "checkpoints" / f"step-{step:09d}.ckpt"
+
+
+def list_checkpoints(run_dir: Path) -> list[Path]:
+    ckpt_dir = Path(run_dir) / "checkpoints"
+    if not ckpt_dir.is_dir():
+        return []
+    found = [(int(m.group(1)), p) for p in ckpt_dir.iterdir() if (m := _STEP_RE.match(p.name))]
+    return [p for _, p in sorted(found)]
+
+
+def resolve_checkpoint(path: Path) -> tuple[Path, Path]:
+    """A run directory (latest checkpoint) or a ``.ckpt`` file -> (run_dir, checkpoint file)."""
+    path = Path(path)
+    if path.is_file():
+        if path.suffix != ".ckpt":
+            raise CheckpointError("not a checkpoint (expected a run directory or a .ckpt file)", path)
+        run_dir = path.parent.parent if path.parent.name == "checkpoints" else path.parent
+        return run_dir, path
+    if not path.exists():
+        raise CheckpointError("no such run directory or checkpoint", path)
+    ckpts = list_checkpoints(path)
+    if not ckpts:
+        raise CheckpointError("run directory holds no checkpoints/step-*.ckpt", path)
+    return path, ckpts[-1]
+
+
+def save_checkpoint(path: Path, payload: dict[str, Any]) -> None:
+    buf = io.BytesIO()
+    torch.save({"format_version": CHECKPOINT_FORMAT_VERSION, **payload}, buf)
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def load_checkpoint(path: Path, expected_method: Optional[str] = None, map_location: Any = "cpu") -> dict[str, Any]:
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError("checkpoint file not found", path)
+    try:
+        # weights_only: a checkpoint is tensors and plain values, never code
+        ckpt = torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as e:  # noqa: BLE001 - any failure to read is a corrupt file to the user
+        reason = str(e).strip().splitlines()[0][:120] if str(e).strip() else type(e).__name__
+        raise CheckpointError(f"corrupt or unreadable checkpoint ({reason})", path) from None
+    if not isinstance(ckpt, dict) or "method_name" not in ckpt or "model" not in ckpt:
+        raise CheckpointError("not an nerf2gs checkpoint (missing method_name/model)", path)
+    if ckpt.get("format_version") != CHECKPOINT_FORMAT_VERSION:
+        raise CheckpointError(f"checkpoint format {ckpt.get('format_version')!r}, expected {CHECKPOINT_FORMAT_VERSION}", path)
+    if expected_method is not None and ckpt["method_name"] != expected_method:
+        raise CheckpointError(f"checkpoint is of method '{ckpt['method_name']}', not '{expected_method}'", path)
+    return ckpt

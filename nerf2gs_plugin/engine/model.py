@@ -1,0 +1,95 @@
+"""The Model contract every method implements (built-in or third-party plugin)."""
+
+from __future__ import annotations
+
+from abc import abstractmethod
+from dataclasses import dataclass, field
+from typing import Any, Union
+
+import torch
+from torch import Tensor, nn
+
+from nerf2gs_plugin.cameras import Cameras, RayBundle
+from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
+from nerf2gs_plugin.engine.callbacks import TrainingCallback, TrainingCallbackAttributes
+from nerf2gs_plugin.engine.config import InstantiateConfig
+
+
+@dataclass
+class ModelConfig(InstantiateConfig):
+    _target: type = field(default_factory=lambda: Model)
+
+
+class Model(nn.Module):
+    """A trainable scene representation.
+
+    Ray methods (NeRFs) get a :class:`RayBundle` in :meth:`get_outputs`; image methods (splatting)
+    get a one-camera :class:`Cameras`. Either way, :meth:`render_camera` renders one whole image and
+    is what eval, the viewer and the augmentation of another method call.
+
+    Batches (from the DataManager):
+      * rays:   ``{"rgb": [R,3], "weight": [R,1], "image_idx": [R], "<kind>_mask": [R,1] bool}``
+      * images: ``{"image": [H,W,3], "weight": float tensor [], "image_idx": int, "<kind>_mask": [H,W,1] bool}``
+      with ``<kind>`` in sky / ground / transient when the dataset has those masks.
+    """
+
+    config: ModelConfig
+
+    def __init__(self, config: ModelConfig, train_data: DataparserOutputs, **kwargs: Any) -> None:
+        super().__init__()
+        self.config = config
+        self.scene_box = train_data.scene_box.clone()
+        self.num_train_images = len(train_data)
+        self.populate_modules(train_data)
+
+    @property
+    def device(self) -> torch.device:
+        for p in self.parameters():
+            return p.device
+        for b in self.buffers():
+            return b.device
+        return torch.device("cpu")
+
+    def populate_modules(self, train_data: DataparserOutputs) -> None:
+        """Create fields, parameters and losses (nerfstudio's hook of the same name)."""
+
+    @abstractmethod
+    def get_param_groups(self) -> dict[str, list[nn.Parameter]]:
+        """Parameter groups by name; the method config has an optimizer for each name."""
+
+    @abstractmethod
+    def get_outputs(self, inputs: Union[RayBundle, Cameras]) -> dict[str, Tensor]: ...
+
+    @abstractmethod
+    def get_loss_dict(self, outputs: dict[str, Tensor], batch: dict[str, Any], metrics_dict: dict[str, Tensor]) -> dict[str, Tensor]:
+        """Scalar losses; the trainer minimises their sum."""
+
+    def get_metrics_dict(self, outputs: dict[str, Tensor], batch: dict[str, Any]) -> dict[str, Tensor]:
+        from nerf2gs_plugin.engine.losses import psnr_from_mse
+
+        pred = outputs["rgb"]
+        gt = batch["rgb"] if "rgb" in batch else batch["image"]
+        return {"psnr": psnr_from_mse(((pred.detach() - gt) ** 2).mean())}
+
+    def get_training_callbacks(self, attrs: TrainingCallbackAttributes) -> list[TrainingCallback]:
+        return []
+
+    @abstractmethod
+    @torch.no_grad()
+    def render_camera(self, camera: Cameras) -> dict[str, Tensor]:
+        """One camera (``len(camera) == 1``) in, ``{"rgb": [H,W,3], "depth": [H,W,1],
+        "accumulation": [H,W,1], ...}`` out, on the model's device."""
+
+    def num_primitives(self) -> int:
+        """Gaussians, anchors or surfels; grid cells or hash entries for fields."""
+        return 0
+
+    def size_report(self) -> dict[str, float]:
+        """Primitives, parameters and megabytes of state: printed beside every quality figure."""
+        n_params = sum(p.numel() for p in self.parameters())
+        n_bytes = sum(t.numel() * t.element_size() for t in self.state_dict().values())
+        return {"primitives": int(self.num_primitives()), "parameters": int(n_params), "megabytes": n_bytes / 2**20}
+
+    def load_model_state(self, state: dict[str, Tensor]) -> None:
+        """Load a state dict; methods whose parameter shapes change (densification) override this."""
+        self.load_state_dict(state)

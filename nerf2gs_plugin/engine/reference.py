@@ -1,0 +1,70 @@
+"""Loading a trained run back: for eval, the viewer, export, and as the augmentation reference."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import torch
+
+from nerf2gs_plugin.engine.checkpoints import dataset_fingerprint, file_hash, load_checkpoint, resolve_checkpoint
+from nerf2gs_plugin.engine.config import load_config, read_config_doc
+from nerf2gs_plugin.engine.pipeline import Pipeline
+from nerf2gs_plugin.engine.trainer import TrainerConfig
+from nerf2gs_plugin.errors import CheckpointError, ConfigError
+
+
+@dataclass
+class LoadedRun:
+    run_dir: Path
+    checkpoint: Path
+    config: TrainerConfig
+    pipeline: Pipeline
+    step: int
+    checkpoint_hash: str
+    train_seconds: float
+
+    @property
+    def model(self):
+        return self.pipeline.model
+
+
+def load_run(path: Path, device: torch.device | str = "cpu", data: Optional[Path] = None) -> LoadedRun:
+    """A run directory or ``.ckpt`` -> its pipeline with the checkpoint loaded (eval mode)."""
+    from nerf2gs_plugin.registry import get_method
+
+    run_dir, ckpt_file = resolve_checkpoint(path)
+    doc = read_config_doc(run_dir / "config.yml")
+    spec = get_method(doc["method_name"])
+    config: TrainerConfig = load_config(run_dir / "config.yml", spec.config)
+    if data is not None:
+        config = dataclasses.replace(config, data=Path(data))
+    if not Path(config.data).exists():
+        raise ConfigError(f"the run's dataset {config.data} does not exist (pass the dataset path explicitly)", run_dir / "config.yml")
+    ckpt = load_checkpoint(ckpt_file, expected_method=doc["method_name"], map_location=device)
+    pipeline = Pipeline(config.pipeline, config.data, device)
+    try:
+        pipeline.model.load_model_state(ckpt["model"])
+    except (RuntimeError, KeyError) as e:
+        raise CheckpointError(f"checkpoint does not fit the {doc['method_name']} model ({str(e).splitlines()[0][:160]})", ckpt_file) from None
+    pipeline.model.eval()
+    return LoadedRun(run_dir, ckpt_file, config, pipeline, int(ckpt["step"]), file_hash(ckpt_file), float(ckpt.get("train_seconds", 0.0)))
+
+
+def attach_augmentation(datamanager, reference: Path, augment, device: torch.device | str) -> None:
+    """Load the reference run and let the AugmentedDataManager logic rewrite the training set."""
+    from nerf2gs_plugin.datamanagers.augmented import augment_datamanager
+
+    run_dir, ckpt_file = resolve_checkpoint(reference)
+    ckpt = load_checkpoint(ckpt_file, map_location="cpu")
+    ours = dataset_fingerprint(datamanager.train_data.image_filenames)
+    if ckpt.get("dataset") != ours:
+        raise CheckpointError(
+            f"reference was trained on a different dataset (fingerprint {ckpt.get('dataset')} vs {ours} for {datamanager.data})", ckpt_file
+        )
+    ref = load_run(ckpt_file, device=device, data=datamanager.data)
+    if not hasattr(ref.model, "render_camera") or getattr(type(ref.model).render_camera, "__isabstractmethod__", False):
+        raise CheckpointError(f"method '{ref.config.method_name}' cannot render cameras (no render_camera)", ckpt_file)
+    augment_datamanager(datamanager, ref.model.render_camera, f"{ref.config.method_name}:{ref.checkpoint_hash}", run_dir, augment)

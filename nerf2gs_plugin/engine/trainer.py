@@ -1,0 +1,221 @@
+"""Trainer: the optimisation loop, periodic eval, checkpoints, resume, progress and NaN guard."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import random
+import time
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+import torch
+
+from nerf2gs_plugin.datamanagers.augmented import AugmentConfig
+from nerf2gs_plugin.engine.callbacks import TrainingCallbackAttributes, TrainingCallbackLocation as Loc
+from nerf2gs_plugin.engine.checkpoints import (
+    checkpoint_path,
+    dataset_fingerprint,
+    list_checkpoints,
+    load_checkpoint,
+    resolve_checkpoint,
+    save_checkpoint,
+)
+from nerf2gs_plugin.engine.config import atomic_write_text, save_config
+from nerf2gs_plugin.engine.optimizers import OptimizerConfig, Optimizers
+from nerf2gs_plugin.engine.pipeline import Pipeline, PipelineConfig
+from nerf2gs_plugin.errors import ConfigError, TrainingDiverged
+
+
+def pick_device(name: str = "auto") -> torch.device:
+    """CUDA when present, else CPU; never hard-coded."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise ConfigError(f"device '{name}' requested but CUDA is not available")
+    return torch.device(name)
+
+
+@dataclass
+class TrainerConfig:
+    """Everything one training run needs; ``ns2gs-train <method>`` exposes every field as a flag."""
+
+    method_name: str = "unnamed"
+    data: Path = Path("data/street")
+    """Dataset folder (nerfstudio transforms.json or a COLMAP model)."""
+    output_dir: Path = Path("outputs")
+    experiment_name: Optional[str] = None
+    """Defaults to the dataset folder's name: runs go to output_dir/experiment/method/timestamp."""
+    timestamp: str = "{timestamp}"
+    max_num_iterations: int = 2000
+    steps_per_eval_image: int = 250
+    steps_per_save: int = 1000
+    keep_all_checkpoints: bool = False
+    seed: int = 42
+    device: str = "auto"
+    load_checkpoint: Optional[Path] = None
+    """Resume from this run directory or .ckpt file (same method)."""
+    augment_from: Optional[Path] = None
+    """Reference run directory or .ckpt: train on its composites and bird's-eye views."""
+    augment: AugmentConfig = field(default_factory=AugmentConfig)
+    pipeline: PipelineConfig = field(default_factory=PipelineConfig)
+    optimizers: dict[str, OptimizerConfig] = field(default_factory=dict)
+    progress: bool = True
+    """Show a rich progress bar."""
+    viewer: bool = False
+    """Serve the live viewer (viser) while training."""
+
+    def run_dir(self) -> Path:
+        name = self.experiment_name or Path(self.data).name
+        return Path(self.output_dir) / name / self.method_name / self.timestamp
+
+
+class Trainer:
+    def __init__(self, config: TrainerConfig) -> None:
+        if config.timestamp == "{timestamp}":
+            config = dataclasses.replace(config, timestamp=datetime.now().strftime("%Y-%m-%d_%H%M%S"))
+        self.config = config
+        self.device = pick_device(config.device)
+        self.run_dir = config.run_dir()
+        self.step = 0
+        self.last_good_checkpoint: Optional[Path] = None
+        self.history: list[dict[str, float]] = []
+        self.train_seconds = 0.0
+        self.step_hooks: list = []  # called after every step (the live viewer attaches here)
+
+    # ------------------------------------------------------------------ setup
+    def setup(self) -> None:
+        torch.manual_seed(self.config.seed)
+        np.random.seed(self.config.seed)
+        random.seed(self.config.seed)
+        self.pipeline = Pipeline(self.config.pipeline, self.config.data, self.device, seed=self.config.seed)
+        if self.config.augment_from is not None:
+            from nerf2gs_plugin.engine.reference import attach_augmentation
+
+            attach_augmentation(self.pipeline.datamanager, self.config.augment_from, self.config.augment, self.device)
+        self.optimizers = Optimizers(self.config.optimizers, self.pipeline.model.get_param_groups())
+        attrs = TrainingCallbackAttributes(optimizers=self.optimizers, pipeline=self.pipeline)
+        self.callbacks = self.pipeline.model.get_training_callbacks(attrs)
+        if self.config.load_checkpoint is not None:
+            self._resume(self.config.load_checkpoint)
+
+    def _resume(self, path: Path) -> None:
+        _, ckpt_file = resolve_checkpoint(path)
+        ckpt = load_checkpoint(ckpt_file, expected_method=self.config.method_name, map_location=self.device)
+        self.pipeline.model.load_model_state(ckpt["model"])
+        # parameters may have been re-created (densified): rebuild optimizers on the loaded tensors
+        self.optimizers = Optimizers(self.config.optimizers, self.pipeline.model.get_param_groups())
+        self.optimizers.load_state_dict(ckpt.get("optimizers", {}))
+        attrs = TrainingCallbackAttributes(optimizers=self.optimizers, pipeline=self.pipeline)
+        self.callbacks = self.pipeline.model.get_training_callbacks(attrs)
+        self.pipeline.datamanager.load_state_dict(ckpt.get("datamanager", {}))
+        if "torch_rng" in ckpt:
+            torch.set_rng_state(ckpt["torch_rng"].cpu())
+        self.step = int(ckpt["step"]) + 1
+        self.train_seconds = float(ckpt.get("train_seconds", 0.0))
+        self.last_good_checkpoint = ckpt_file
+
+    def _write_run_files(self) -> None:
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        save_config(self.run_dir / "config.yml", self.config.method_name, self.config)
+        from nerf2gs_plugin.data import save_dataparser_transform
+
+        save_dataparser_transform(self.run_dir / "dataparser_transforms.json", self.pipeline.datamanager.train_data)
+
+    def save_checkpoint(self, step: int) -> Path:
+        path = checkpoint_path(self.run_dir, step)
+        dm = self.pipeline.datamanager
+        save_checkpoint(
+            path,
+            {
+                "method_name": self.config.method_name,
+                "step": step,
+                "model": self.pipeline.model.state_dict(),
+                "optimizers": self.optimizers.state_dict(),
+                "datamanager": dm.state_dict(),
+                "torch_rng": torch.get_rng_state(),
+                "dataset": dataset_fingerprint(dm.train_data.image_filenames),
+                "train_seconds": self.train_seconds,
+                "size": self.pipeline.model.size_report(),
+            },
+        )
+        if not self.config.keep_all_checkpoints:
+            for old in list_checkpoints(self.run_dir):
+                if old != path:
+                    old.unlink(missing_ok=True)
+        self.last_good_checkpoint = path
+        return path
+
+    # ------------------------------------------------------------------ loop
+    def _run_callbacks(self, where: Loc, step: int) -> None:
+        for cb in self.callbacks:
+            cb.run(where, step)
+
+    def train_step(self, step: int) -> dict[str, float]:
+        model = self.pipeline.model
+        model.train()
+        self._run_callbacks(Loc.BEFORE_STEP, step)
+        self.optimizers.zero_grad()
+        _, losses, metrics = self.pipeline.get_train_loss_dict(step)
+        loss = sum(losses.values())
+        if not torch.isfinite(loss):
+            bad = [k for k, v in losses.items() if not torch.isfinite(v)]
+            where = f"; last good checkpoint: {self.last_good_checkpoint}" if self.last_good_checkpoint else "; no checkpoint was written yet"
+            raise TrainingDiverged(f"training diverged at step {step}: non-finite loss in {', '.join(bad)}{where}")
+        loss.backward()
+        self._run_callbacks(Loc.AFTER_BACKWARD, step)
+        self.optimizers.step(step)
+        self._run_callbacks(Loc.AFTER_STEP, step)
+        out = {"loss": float(loss)}
+        out.update({k: float(v) for k, v in metrics.items() if torch.is_tensor(v) and v.numel() == 1})
+        return out
+
+    def train(self) -> Path:
+        """Run to ``max_num_iterations``; returns the run directory."""
+        from nerf2gs_plugin.progress import make_progress
+
+        self._write_run_files()
+        cfg = self.config
+        start = self.step
+        ema: dict[str, float] = {}
+        with make_progress(enabled=cfg.progress) as progress:
+            task = progress.add_task(f"train {cfg.method_name}", total=cfg.max_num_iterations, completed=start, stats="")
+            for step in range(start, cfg.max_num_iterations):
+                t0 = time.perf_counter()
+                stats = self.train_step(step)
+                self.train_seconds += time.perf_counter() - t0
+                self.step = step
+                for k, v in stats.items():
+                    ema[k] = v if k not in ema else 0.9 * ema[k] + 0.1 * v
+                record = {"step": step, **stats}
+                if cfg.steps_per_eval_image and (step + 1) % cfg.steps_per_eval_image == 0:
+                    record.update(self.pipeline.get_eval_image_metrics(step))
+                    ema["eval_psnr"] = record["eval_psnr"]
+                self.history.append(record)
+                if (step + 1) % cfg.steps_per_save == 0 and step + 1 < cfg.max_num_iterations:
+                    self.save_checkpoint(step)
+                for hook in self.step_hooks:
+                    hook(step)
+                progress.update(task, advance=1, stats=_format_stats(ema, self.pipeline.model.num_primitives()))
+        self.save_checkpoint(cfg.max_num_iterations - 1)
+        atomic_write_text(self.run_dir / "train_log.json", json.dumps({"train_seconds": self.train_seconds, "history": self.history[-2000:]}))
+        return self.run_dir
+
+
+def _format_stats(ema: dict[str, float], primitives: int) -> str:
+    parts = [f"loss {ema['loss']:.4f}"] if "loss" in ema else []
+    if "psnr" in ema:
+        parts.append(f"psnr {ema['psnr']:.2f}")
+    if "eval_psnr" in ema:
+        parts.append(f"eval {ema['eval_psnr']:.2f}")
+    if primitives:
+        parts.append(f"prims {primitives}")
+    return " ".join(parts)
+
+
+def is_finite_number(x: float) -> bool:
+    return isinstance(x, (int, float)) and math.isfinite(x)

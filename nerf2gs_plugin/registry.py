@@ -1,0 +1,88 @@
+"""Method registry: built-in methods in code, third-party ones from the ``nerf2gs.methods``
+entry-point group. A plugin that fails to load is reported by name and skipped."""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from dataclasses import dataclass
+from functools import lru_cache
+from importlib.metadata import entry_points
+
+from nerf2gs_plugin.engine.trainer import TrainerConfig
+from nerf2gs_plugin.errors import ConfigError
+
+ENTRY_POINT_GROUP = "nerf2gs.methods"
+
+# name -> "module:attribute" of a MethodSpecification; imported lazily so one broken method
+# (e.g. a missing optional dependency) never hides the others.
+BUILTIN_METHODS: dict[str, str] = {
+    "streetnerf": "nerf2gs_plugin.methods.streetnerf.config:streetnerf_method",
+    "splatfacto": "nerf2gs_plugin.methods.splatfacto.config:splatfacto_method",
+    "scaffold-gs": "nerf2gs_plugin.methods.scaffold_gs.config:scaffold_gs_method",
+    "2dgs": "nerf2gs_plugin.methods.two_dgs.config:two_dgs_method",
+}
+
+
+@dataclass
+class MethodSpecification:
+    """A method: its default config (a tyro-parsable TrainerConfig) and a one-line description."""
+
+    config: TrainerConfig
+    description: str
+
+
+@dataclass
+class Discovery:
+    methods: dict[str, MethodSpecification]
+    failures: dict[str, str]  # name -> one-line reason
+
+
+def _load_ref(ref: str) -> object:
+    module, attr = ref.split(":")
+    return getattr(importlib.import_module(module), attr)
+
+
+@lru_cache(maxsize=1)
+def discover_methods() -> Discovery:
+    methods: dict[str, MethodSpecification] = {}
+    failures: dict[str, str] = {}
+    for name, ref in BUILTIN_METHODS.items():
+        try:
+            spec = _load_ref(ref)
+        except ModuleNotFoundError as e:
+            if e.name and e.name.startswith("nerf2gs_plugin.methods"):
+                continue  # not built yet in this tree: not a failure
+            failures[name] = f"{type(e).__name__}: {e}"
+            continue
+        except Exception as e:  # noqa: BLE001
+            failures[name] = f"{type(e).__name__}: {e}"
+            continue
+        methods[name] = spec
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        try:
+            spec = ep.load()
+            if not isinstance(spec, MethodSpecification):
+                raise TypeError(f"entry point {ep.value} is a {type(spec).__name__}, not a MethodSpecification")
+        except Exception as e:  # noqa: BLE001 - a broken plugin must never break the others
+            failures[ep.name] = f"{type(e).__name__}: {e}"
+            continue
+        if ep.name in methods:
+            failures[ep.name] = f"name clashes with an already registered method; plugin {ep.value} ignored"
+            continue
+        methods[ep.name] = spec
+    return Discovery(methods, failures)
+
+
+def report_failures(discovery: Discovery, file=None) -> None:
+    for name, reason in discovery.failures.items():
+        print(f"warning: method plugin '{name}' failed to load and is skipped ({reason})", file=file or sys.stderr)
+
+
+def get_method(name: str) -> MethodSpecification:
+    disc = discover_methods()
+    if name not in disc.methods:
+        known = ", ".join(sorted(disc.methods)) or "none"
+        extra = f" (it failed to load: {disc.failures[name]})" if name in disc.failures else ""
+        raise ConfigError(f"unknown method '{name}'{extra}; known methods: {known}")
+    return disc.methods[name]

@@ -1,0 +1,9 @@
+"""Shared test setup: caches in known places, small thread count, deterministic seeds."""
+
+import os
+from pathlib import Path
+
+_ROOT = Path(__file__).resolve().parents[1]
+os.environ.setdefault("XDG_CACHE_HOME", str(_ROOT / ".cache"))
+os.environ.setdefault("TORCH_EXTENSIONS_DIR", str(_ROOT / ".cache" / "torch_extensions"))
+os.environ.setdefault("MPLCONFIGDIR", str(_ROOT / ".cache" / "matplotlib"))

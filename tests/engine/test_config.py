@@ -1,0 +1,68 @@
+from pathlib import Path
+
+import pytest
+import yaml
+
+from nerf2gs_plugin.engine.config import atomic_write_text, load_config, save_config
+from nerf2gs_plugin.engine.optimizers import OptimizerConfig
+from nerf2gs_plugin.errors import ConfigError
+from nerf2gs_plugin.registry import get_method
+
+
+def _default():
+    return get_method("voxel-grid").config
+
+
+def test_config_round_trip(tmp_path):
+    import dataclasses
+
+    cfg = _default()
+    cfg = dataclasses.replace(cfg, data=Path("/some/data"), max_num_iterations=77,
+                              optimizers={"grid": OptimizerConfig(lr=0.5, lr_final=0.01)})
+    save_config(tmp_path / "config.yml", cfg.method_name, cfg)
+    text = (tmp_path / "config.yml").read_text()
+    assert "!!python" not in text  # safe YAML, plain values only
+    loaded = load_config(tmp_path / "config.yml", _default())
+    assert loaded.max_num_iterations == 77 and loaded.data == Path("/some/data")
+    assert loaded.optimizers["grid"].lr == 0.5 and loaded.optimizers["grid"].lr_final == 0.01
+    assert loaded.pipeline.model.resolution == cfg.pipeline.model.resolution
+
+
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        ("method_name: [unclosed", "malformed YAML"),
+        ("- just\n- a list\n", "not an nerf2gs config"),
+        ("format_version: 99\nmethod_name: voxel-grid\nconfig: {}\n", "format version"),
+        ("format_version: 1\nmethod_name: voxel-grid\nconfig: {no_such_field: 1}\n", "unknown field 'no_such_field'"),
+        ("format_version: 1\nmethod_name: voxel-grid\nconfig: {max_num_iterations: lots}\n", "expected a number"),
+    ],
+)
+def test_bad_config_is_one_clear_error(tmp_path, content, message):
+    path = tmp_path / "config.yml"
+    path.write_text(content)
+    with pytest.raises(ConfigError) as e:
+        load_config(path, _default())
+    assert message in str(e.value) and str(path) in str(e.value)
+    assert "\n" not in str(e.value)
+
+
+def test_atomic_write_leaves_old_file_on_failure(tmp_path, monkeypatch):
+    path = tmp_path / "f.txt"
+    atomic_write_text(path, "old")
+
+    def boom(*a, **k):
+        raise OSError("disk full")
+
+    monkeypatch.setattr("os.replace", boom)
+    with pytest.raises(OSError):
+        atomic_write_text(path, "new")
+    assert path.read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["f.txt"]  # no temp file left
+
+
+def test_optimizer_schedule():
+    cfg = OptimizerConfig(lr=1e-2, lr_final=1e-4, max_steps=100, warmup_steps=10)
+    assert cfg.lr_at(0) == pytest.approx(1e-2 * 0.1)
+    assert cfg.lr_at(100) == pytest.approx(1e-4)
+    assert cfg.lr_at(50) == pytest.approx(1e-3, rel=1e-6)

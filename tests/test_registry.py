@@ -1,0 +1,42 @@
+import sys
+import textwrap
+
+import pytest
+
+from nerf2gs_plugin import registry
+from nerf2gs_plugin.errors import ConfigError
+
+
+def test_example_plugin_is_discovered():
+    disc = registry.discover_methods()
+    assert "voxel-grid" in disc.methods
+    spec = registry.get_method("voxel-grid")
+    assert spec.config.method_name == "voxel-grid"
+
+
+def test_unknown_method_lists_known_ones():
+    with pytest.raises(ConfigError) as e:
+        registry.get_method("no-such-method")
+    assert "unknown method 'no-such-method'" in str(e.value) and "voxel-grid" in str(e.value)
+
+
+def test_broken_plugin_is_reported_and_isolated(tmp_path, monkeypatch, capsys):
+    dist = tmp_path / "broken_plugin-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: broken-plugin\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text("[nerf2gs.methods]\nbroken-method = broken_plugin_mod:spec\n")
+    (tmp_path / "broken_plugin_mod.py").write_text(textwrap.dedent("""
+        import this_module_does_not_exist_anywhere
+    """))
+    monkeypatch.syspath_prepend(str(tmp_path))
+    registry.discover_methods.cache_clear()
+    try:
+        disc = registry.discover_methods()
+        assert "broken-method" in disc.failures and "this_module_does_not_exist_anywhere" in disc.failures["broken-method"]
+        assert "voxel-grid" in disc.methods  # the others still load
+        registry.report_failures(disc, file=sys.stderr)
+        assert "method plugin 'broken-method' failed to load" in capsys.readouterr().err
+        with pytest.raises(ConfigError, match="failed to load"):
+            registry.get_method("broken-method")
+    finally:
+        registry.discover_methods.cache_clear()
