@@ -38,10 +38,8 @@ def main() -> None:
         from nerf2gs_plugin.errors import ConfigError
 
         raise ConfigError(f"unknown method '{sys.argv[1]}'; known methods: {', '.join(sorted(configs))}")
-    config = tyro.extras.subcommand_cli_from_dict(
-        configs,
-        description="Train a method. " + "; ".join(f"{k}: {v}" for k, v in sorted(descriptions.items())),
-    )
+    union = tyro.extras.subcommand_type_from_defaults(defaults=configs, descriptions=descriptions)
+    config = tyro.cli(tyro.conf.FlagConversionOff[union], description="Train a method (nerf2gs).")
     train(config)
 
 

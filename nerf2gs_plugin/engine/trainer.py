@@ -170,7 +170,7 @@ class Trainer:
         self._run_callbacks(Loc.AFTER_BACKWARD, step)
         self.optimizers.step(step)
         self._run_callbacks(Loc.AFTER_STEP, step)
-        out = {"loss": float(loss)}
+        out = {"loss": float(loss.detach())}
         out.update({k: float(v) for k, v in metrics.items() if torch.is_tensor(v) and v.numel() == 1})
         return out
 

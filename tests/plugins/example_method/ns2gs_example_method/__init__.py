@@ -26,6 +26,7 @@ class VoxelGridConfig(ModelConfig):
     resolution: int = 48
     num_samples: int = 48
     background: tuple[float, float, float] = (0.5, 0.6, 0.8)
+    """Initial colour of the learned background."""
 
 
 class VoxelGridModel(Model):
@@ -34,9 +35,10 @@ class VoxelGridModel(Model):
     def populate_modules(self, train_data) -> None:
         r = self.config.resolution
         self.grid = nn.Parameter(torch.zeros(1, 4, r, r, r))  # density logit + rgb logits
+        self.background = nn.Parameter(torch.logit(torch.tensor(self.config.background)))  # seen where rays leave the box
 
     def get_param_groups(self) -> dict[str, list[nn.Parameter]]:
-        return {"grid": [self.grid]}
+        return {"grid": [self.grid, self.background]}
 
     def _query(self, pts: Tensor) -> tuple[Tensor, Tensor]:
         lo, hi = self.scene_box[0].to(pts), self.scene_box[1].to(pts)
@@ -60,7 +62,7 @@ class VoxelGridModel(Model):
         trans = torch.cumprod(torch.cat([torch.ones_like(alpha[:, :1]), 1 - alpha[:, :-1] + 1e-10], -1), -1)
         w = alpha * trans
         acc = w.sum(-1, keepdim=True)
-        bg = torch.tensor(self.config.background, device=acc.device)
+        bg = torch.sigmoid(self.background)
         color = (w[..., None] * rgb.reshape(-1, n, 3)).sum(1) + (1 - acc) * bg
         depth = (w * t).sum(-1, keepdim=True) / acc.clamp_min(1e-6)
         return {"rgb": color, "depth": depth, "accumulation": acc}

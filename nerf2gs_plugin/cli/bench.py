@@ -1,0 +1,141 @@
+"""ns2gs-bench quick | paper-table | ablation | raster | field
+
+Results (JSON + Markdown + PNG, with the machine) go to benchmarks/results/; trained runs are kept
+under benchmarks/runs/ and reused when nothing that matters changed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal, Optional
+
+import tyro
+
+from nerf2gs_plugin.cli.common import run_cli
+
+RESULTS = Path("benchmarks/results")
+RUNS = Path("benchmarks/runs")
+
+
+def ensure_street(data: Optional[Path], runs_root: Path) -> Path:
+    """The dataset to bench on: the given one, or the embedded synthetic street (made once)."""
+    if data is not None:
+        return data
+    from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_street
+
+    path = runs_root / "data" / "street"
+    if not (path / "transforms.json").is_file():
+        generate_street(SynthStreetConfig(out=path))
+    return path
+
+
+@dataclass
+class Quick:
+    """10-minute CPU version of the paper table: StreetNeRF, Splatfacto with and without --augment-from."""
+
+    data: Optional[Path] = None
+    out: Path = RESULTS
+    runs: Path = RUNS
+
+    def main(self) -> None:
+        from nerf2gs_plugin.eval.bench_paper import paper_table_plan, run_named_bench
+
+        data = ensure_street(self.data, self.runs)
+        plan = paper_table_plan("quick", targets=("splatfacto",))
+        run_named_bench("quick", plan, data, self.runs, self.out, "Quick paper table (synthetic street, CPU scale)",
+                        compare=[("splatfacto + NeRF views", "splatfacto"), ("splatfacto + NeRF views", "StreetNeRF")],
+                        figure_labels=["StreetNeRF", "splatfacto", "splatfacto + NeRF views"])
+
+
+@dataclass
+class PaperTable:
+    """Table 1/S1: StreetNeRF and, per target, baseline / + NeRF views / + NeRF views + enhancer."""
+
+    data: Optional[Path] = None
+    scale: Literal["quick", "default"] = "default"
+    targets: tuple[str, ...] = ("splatfacto", "scaffold-gs", "2dgs")
+    enhancer: bool = True
+    out: Path = RESULTS
+    runs: Path = RUNS
+
+    def main(self) -> None:
+        from nerf2gs_plugin.eval.bench_paper import paper_table_plan, run_named_bench
+
+        data = ensure_street(self.data, self.runs)
+        enh = bench_enhancer(data, self.runs, self.scale) if self.enhancer else None
+        plan = paper_table_plan(self.scale, self.targets, enh)
+        compare = [(f"{t} + NeRF views", t) for t in self.targets] + [(f"{t} + NeRF views + enhancer", t) for t in self.targets if enh]
+        run_named_bench("paper_table", plan, data, self.runs, self.out, f"Paper table, synthetic street ({self.scale} scale)",
+                        compare=compare, figure_labels=["StreetNeRF", "splatfacto", "splatfacto + NeRF views"])
+
+
+@dataclass
+class Ablation:
+    """Table 2: additional views from Splatfacto itself vs from StreetNeRF; StreetNeRF's own ablations."""
+
+    data: Optional[Path] = None
+    scale: Literal["quick", "default"] = "default"
+    enhancer: bool = True
+    out: Path = RESULTS
+    runs: Path = RUNS
+
+    def main(self) -> None:
+        from nerf2gs_plugin.eval.bench_paper import ablation_plan, run_named_bench
+
+        data = ensure_street(self.data, self.runs)
+        enh = bench_enhancer(data, self.runs, self.scale) if self.enhancer else None
+        plan = ablation_plan(self.scale, enh)
+        t = "splatfacto"
+        compare = [(f"{t} + views from {t}", t), (f"{t} + views from StreetNeRF", t)]
+        compare += [(f"StreetNeRF w/o {f}", "StreetNeRF") for f in ("sky", "ground_reg", "transient_mask", "appearance")]
+        run_named_bench("ablation", plan, data, self.runs, self.out, f"Ablation, synthetic street ({self.scale} scale)", compare=compare)
+
+
+def bench_enhancer(data: Path, runs_root: Path, scale: str) -> str:
+    """Train (once) the built-in enhancer on this dataset; returns the --augment.enhancer spec."""
+    from nerf2gs_plugin.enhance.bench import ensure_bench_enhancer
+
+    return f"onnx:{ensure_bench_enhancer(data, runs_root, scale)}"
+
+
+@dataclass
+class Raster:
+    """Rasterizer speed: cpu extension vs torch reference (and gsplat on a GPU)."""
+
+    scale: Literal["quick", "full"] = "quick"
+    out: Path = RESULTS
+
+    def main(self) -> None:
+        from nerf2gs_plugin.eval.bench_raster import run
+
+        run(self.out, self.scale)
+
+
+@dataclass
+class Field:
+    """Hash-grid encoding speed: cpu extension vs torch reference."""
+
+    scale: Literal["quick", "full"] = "quick"
+    out: Path = RESULTS
+
+    def main(self) -> None:
+        from nerf2gs_plugin.eval.bench_field import run
+
+        run(self.out, self.scale)
+
+
+def main() -> None:
+    cmd = tyro.extras.subcommand_cli_from_dict(
+        {"quick": Quick(), "paper-table": PaperTable(), "ablation": Ablation(), "raster": Raster(), "field": Field()},
+        description=__doc__,
+    )
+    cmd.main()
+
+
+def entrypoint() -> None:
+    run_cli(main)
+
+
+if __name__ == "__main__":
+    entrypoint()

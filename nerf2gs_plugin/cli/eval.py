@@ -1,0 +1,68 @@
+"""ns2gs-eval RUN [--split street,bev_1,bev_2] [--output out.json]"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import tyro
+
+from nerf2gs_plugin.cli.common import run_cli
+from nerf2gs_plugin.engine.config import atomic_write_text
+
+
+@dataclass
+class EvalArgs:
+    run: tyro.conf.Positional[Path]
+    """Run directory or .ckpt file."""
+    split: Optional[str] = None
+    """Comma-separated eval splits (default: every split the dataset has)."""
+    output: Optional[Path] = None
+    """JSON output (default: RUN/eval.json)."""
+    render_dir: Optional[Path] = None
+    """Where the GT | render | error grids go (default: RUN/eval_renders)."""
+    max_images: Optional[int] = None
+    data: Optional[Path] = None
+    """Dataset folder, if it moved since training."""
+    device: str = "auto"
+
+
+def print_table(result: dict) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"{result['method_name']} @ step {result['step']}")
+    for col in ("split", "PSNR", "SSIM", "LPIPS", "images"):
+        table.add_column(col, justify="right")
+    for split, r in result["results"].items():
+        lp = f"{r['lpips']:.3f}" if r.get("lpips") is not None else "missing"
+        table.add_row(split, f"{r['psnr']:.2f}", f"{r['ssim']:.3f}", lp, str(r["num_images"]))
+    size = result["size"]
+    Console().print(table)
+    Console().print(f"render {result['fps']:.2f} FPS | {size['primitives']} primitives, {size['parameters']} parameters, "
+                    f"{size['megabytes']:.2f} MB | trained {result['train_seconds']:.0f} s")
+
+
+def main() -> None:
+    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.engine.trainer import pick_device
+    from nerf2gs_plugin.eval.evaluate import evaluate_run
+
+    args = tyro.cli(EvalArgs)
+    run = load_run(args.run, device=pick_device(args.device), data=args.data)
+    splits = [s.strip() for s in args.split.split(",")] if args.split else None
+    result = evaluate_run(run, splits, args.max_images, render_dir=args.render_dir or run.run_dir / "eval_renders")
+    out = args.output or run.run_dir / "eval.json"
+    atomic_write_text(out, json.dumps(result, indent=2))
+    print_table(result)
+    print(f"wrote {out}")
+
+
+def entrypoint() -> None:
+    run_cli(main)
+
+
+if __name__ == "__main__":
+    entrypoint()

@@ -1,0 +1,64 @@
+"""Pictures people would rather look at than numbers: eval grids and bench charts."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+import torch
+from torch import Tensor
+
+
+def _mpl():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_eval_grid(path: Path, pairs: Sequence[tuple[Tensor, Tensor]], title: str = "") -> None:
+    """Rows of GT | render | error (|GT-render| x4, clipped), written atomically."""
+    plt = _mpl()
+    n = len(pairs)
+    fig, axes = plt.subplots(n, 3, figsize=(9, 1.9 * n + 0.4), squeeze=False)
+    for r, (gt, pred) in enumerate(pairs):
+        err = ((gt - pred).abs().mean(-1) * 4).clamp(0, 1)
+        for c, (img, label) in enumerate(((gt, "GT"), (pred, "render"), (err, "|error| x4"))):
+            ax = axes[r][c]
+            ax.imshow(img.numpy(), cmap="inferno" if img.ndim == 2 else None, vmin=0, vmax=1)
+            ax.set_xticks([])
+            ax.set_yticks([])
+            if r == 0:
+                ax.set_title(label, fontsize=9)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    save_figure(fig, path)
+
+
+def save_figure(fig, path: Path) -> None:
+    import os
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
+    fig.savefig(tmp, dpi=110)
+    _mpl().close(fig)
+    os.replace(tmp, path)
+
+
+def image_row(images: Sequence[Tensor], labels: Sequence[str], path: Path, title: str = "") -> None:
+    """One labelled row of images (e.g. real | composite | BEV | enhanced BEV)."""
+    plt = _mpl()
+    fig, axes = plt.subplots(1, len(images), figsize=(3.2 * len(images), 2.2), squeeze=False)
+    for ax, img, label in zip(axes[0], images, labels):
+        ax.imshow(torch.as_tensor(img).clamp(0, 1).numpy())
+        ax.set_title(label, fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    save_figure(fig, path)

@@ -1,0 +1,114 @@
+import dataclasses
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+from nerf2gs_plugin.engine.checkpoints import list_checkpoints, load_checkpoint
+from nerf2gs_plugin.engine.reference import load_run
+from nerf2gs_plugin.engine.trainer import Trainer
+from nerf2gs_plugin.errors import CheckpointError, TrainingDiverged
+from nerf2gs_plugin.registry import get_method
+
+BIN = Path(sys.executable).parent
+
+
+def _config(data, out, steps=60, **kw):
+    cfg = get_method("voxel-grid").config
+    return dataclasses.replace(cfg, data=data, output_dir=out, max_num_iterations=steps, steps_per_save=30,
+                               steps_per_eval_image=0, progress=False, timestamp="run", **kw)
+
+
+def _eval_psnr(pipeline, split="street"):
+    vals = []
+    if split == "train":
+        ims = pipeline.datamanager.train_images
+        pairs = [(ims.cameras[i], {"image": ims.image(i)}) for i in (1, 3)]
+    else:
+        pairs = pipeline.datamanager.eval_images(split)
+    for cam, batch in pairs:
+        out = pipeline.model.render_camera(cam)
+        vals.append(float(-10 * torch.log10(((out["rgb"] - batch["image"]) ** 2).mean())))
+    return sum(vals) / len(vals)
+
+
+def test_plugin_trains_and_psnr_rises(tiny_scene, tmp_path):
+    trainer = Trainer(_config(tiny_scene, tmp_path, steps=150))
+    trainer.setup()
+    before, before_train = _eval_psnr(trainer.pipeline), _eval_psnr(trainer.pipeline, "train")
+    run_dir = trainer.train()
+    after, after_train = _eval_psnr(trainer.pipeline), _eval_psnr(trainer.pipeline, "train")
+    assert after_train > before_train + 8.0, (before_train, after_train)
+    assert after > before, (before, after)
+    assert (run_dir / "config.yml").is_file() and (run_dir / "dataparser_transforms.json").is_file()
+    assert [p.name for p in list_checkpoints(run_dir)] == ["step-000000149.ckpt"]
+    run = load_run(run_dir)
+    assert abs(_eval_psnr(run.pipeline) - after) < 1e-4
+
+
+def test_resume_gives_same_next_step(tiny_scene, tmp_path):
+    full = Trainer(_config(tiny_scene, tmp_path / "a", steps=40, keep_all_checkpoints=True))
+    full.setup()
+    full.train()
+    ckpt_mid = [p for p in list_checkpoints(full.run_dir) if p.name == "step-000000029.ckpt"][0]
+    resumed = Trainer(_config(tiny_scene, tmp_path / "b", steps=40, load_checkpoint=ckpt_mid))
+    resumed.setup()
+    assert resumed.step == 30
+    resumed.train()
+    a = load_checkpoint(list_checkpoints(full.run_dir)[-1])["model"]["grid"]
+    b = load_checkpoint(list_checkpoints(resumed.run_dir)[-1])["model"]["grid"]
+    assert torch.allclose(a, b, atol=1e-5)  # same data order and RNG after resume
+
+
+def test_nan_stops_with_clear_error_and_keeps_checkpoint(tiny_scene, tmp_path, monkeypatch):
+    trainer = Trainer(_config(tiny_scene, tmp_path, steps=60))
+    trainer.setup()
+    model = trainer.pipeline.model
+    orig = model.get_loss_dict
+
+    def poisoned(outputs, batch, metrics):
+        losses = orig(outputs, batch, metrics)
+        if trainer_step[0] >= 35:
+            losses["rgb"] = losses["rgb"] * float("nan")
+        return losses
+
+    trainer_step = [0]
+    orig_step = trainer.train_step
+
+    def counting(step):
+        trainer_step[0] = step
+        return orig_step(step)
+
+    monkeypatch.setattr(model, "get_loss_dict", poisoned)
+    monkeypatch.setattr(trainer, "train_step", counting)
+    with pytest.raises(TrainingDiverged, match="step 35.*last good checkpoint.*step-000000029"):
+        trainer.train()
+    ckpts = list_checkpoints(trainer.run_dir)
+    assert [p.name for p in ckpts] == ["step-000000029.ckpt"]
+    assert torch.isfinite(load_checkpoint(ckpts[0])["model"]["grid"]).all()
+
+
+def test_cli_bad_inputs_are_one_line(tiny_scene, tmp_path):
+    def run(*args):
+        p = subprocess.run([str(BIN / "ns2gs-train"), *args], capture_output=True, text=True, timeout=120)
+        return p.returncode, p.stderr.strip()
+
+    code, err = run("no-such-method", "--data", str(tiny_scene))
+    assert code == 2 and "unknown method 'no-such-method'" in err and "voxel-grid" in err and "Traceback" not in err
+    code, err = run("voxel-grid", "--data", str(tmp_path / "missing"), "--progress", "False")
+    assert code == 2 and "dataset folder does not exist" in err and "Traceback" not in err
+    bad = tmp_path / "corrupt.ckpt"
+    bad.write_bytes(b"not a checkpoint")
+    code, err = run("voxel-grid", "--data", str(tiny_scene), "--load-checkpoint", str(bad), "--output-dir", str(tmp_path))
+    assert code == 2 and "corrupt or unreadable checkpoint" in err and str(bad) in err
+
+
+def test_checkpoint_of_other_method_is_rejected(tiny_scene, tmp_path):
+    trainer = Trainer(_config(tiny_scene, tmp_path, steps=2))
+    trainer.setup()
+    run_dir = trainer.train()
+    ckpt = list_checkpoints(run_dir)[-1]
+    with pytest.raises(CheckpointError, match="of method 'voxel-grid', not 'splatfacto'"):
+        load_checkpoint(ckpt, expected_method="splatfacto")
