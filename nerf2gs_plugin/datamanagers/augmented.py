@@ -120,10 +120,13 @@ class AugmentedViews:
 def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, render_fn: RenderFn, ref_key: str,
                            dataset: str, cache_root: Path, config: AugmentConfig) -> AugmentedViews:
     """Render (or reuse from the cache) the composites and the additional views."""
-    from nerf2gs_plugin.enhance import make_enhancer
     from nerf2gs_plugin.progress import make_progress
 
-    enhancer = make_enhancer(config.enhancer)
+    enhancer = None
+    if config.enhancer not in ("", "none"):
+        from nerf2gs_plugin.enhance import make_enhancer
+
+        enhancer = make_enhancer(config.enhancer)
     bev = bev_cameras(train.cameras, up, delta_h_world, config.theta_pitch, config.every_n) if config.extra_views else None
     has_transient = "transient" in train.masks and config.composites
     key = cache_key(ref_key, dataset, config, bev, train.cameras, enhancer.cache_key() if enhancer else "none")

@@ -1,0 +1,142 @@
+import dataclasses
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+from nerf2gs_plugin.datamanagers.augmented import AugmentConfig, augment_datamanager, bev_cameras, composite
+from nerf2gs_plugin.datamanagers.full_image import FullImageDataManagerConfig
+from nerf2gs_plugin.engine.trainer import Trainer
+from nerf2gs_plugin.errors import CheckpointError
+from nerf2gs_plugin.registry import get_method
+
+BIN = Path(sys.executable).parent
+
+
+class CountingRenderer:
+    """A stand-in reference: a constant grey image, counting its calls."""
+
+    def __init__(self):
+        self.calls = 0
+
+    def __call__(self, camera):
+        self.calls += 1
+        h, w = int(camera.height[0]), int(camera.width[0])
+        return {"rgb": torch.full((h, w, 3), 0.3), "depth": torch.ones(h, w, 1)}
+
+
+def _dm(data):
+    return FullImageDataManagerConfig().setup(data=data, device="cpu")
+
+
+def test_bev_poses_are_delta_h_metres_up_and_pitched(tiny_scene):
+    dm = _dm(tiny_scene)
+    td = dm.train_data
+    assert abs(td.dataparser_scale - 1.0) > 0.1  # the normalisation is not the identity
+    cams = bev_cameras(dm.train_images.cameras, td.up, td.metres_to_world(10.0), 30.0)
+    rise = cams.centers - dm.train_images.cameras.centers
+    # back in the original (metric) frame: exactly 10 m along the data's up (+z)
+    R = td.dataparser_transform[:, :3]
+    rise_orig = (rise / td.dataparser_scale) @ R  # R is orthonormal: inverse = transpose
+    assert torch.allclose(rise_orig * td.metres_per_unit, torch.tensor([0.0, 0.0, 10.0]).expand_as(rise_orig), atol=1e-4)
+    # pitch relative to the input view's forward: 30 degrees further down
+    up = td.up / td.up.norm()
+    f_in = -dm.train_images.cameras.camera_to_worlds[:, :, 2]
+    f_out = -cams.camera_to_worlds[:, :, 2]
+    pitch_in = torch.rad2deg(torch.asin((f_in @ up).clamp(-1, 1)))
+    pitch_out = torch.rad2deg(torch.asin((f_out @ up).clamp(-1, 1)))
+    assert torch.allclose(pitch_in - pitch_out, torch.full_like(pitch_in, 30.0), atol=1e-3)
+    assert len(bev_cameras(dm.train_images.cameras, up, 1.0, 30.0, every_n=3)) == 3
+
+
+def test_composite_changes_only_masked_pixels():
+    real = torch.rand(20, 30, 3)
+    render = torch.rand(20, 30, 3)
+    mask = torch.zeros(20, 30, 1, dtype=torch.bool)
+    mask[5:8, 10:14] = True
+    out = composite(real, render, mask, dilate_px=0)
+    assert torch.equal(out[mask[..., 0]], render[mask[..., 0]])
+    assert torch.equal(out[~mask[..., 0]], real[~mask[..., 0]])
+    grown = composite(real, render, mask, dilate_px=2)
+    changed = (grown != real).any(-1)
+    assert changed[3:10, 8:16].all() and not changed[:2].any() and not changed[:, :7].any()
+
+
+def test_augmentation_cache_reuse_and_invalidation(tiny_scene, tmp_path):
+    cfg = AugmentConfig(delta_h=3.0, theta_pitch=30.0)
+    dm = _dm(tiny_scene)
+    real = [dm.train_images.image(i).clone() for i in range(len(dm.train_images))]
+    r1 = CountingRenderer()
+    views = augment_datamanager(dm, r1, "ref:abc", tmp_path, cfg)
+    n_transient = sum(bool(dm.train_images.mask("transient", i).any()) for i in range(len(dm.train_images)))
+    assert r1.calls == n_transient + len(dm.train_images) and not views.reused
+    # composites: only transient (dilated) pixels changed, images without transients untouched
+    for i in range(len(real)):
+        m = dm.train_images.mask("transient", i)
+        diff = (dm.train_images.image(i) - real[i]).abs().amax(-1) > 1.5 / 255
+        if not m.any():
+            assert not diff.any()
+        else:
+            assert diff.any() and not diff[~torch.nn.functional.max_pool2d(m.float().permute(2, 0, 1)[None], 5, 1, 2)[0, 0].bool()].any()
+    assert dm.extra_images is not None and len(dm.extra_images) == len(dm.train_images)
+    assert 0 < dm.extra_prob < 1
+    # same parameters: nothing rendered again
+    r2 = CountingRenderer()
+    views2 = augment_datamanager(_dm(tiny_scene), r2, "ref:abc", tmp_path, cfg)
+    assert r2.calls == 0 and views2.reused and views2.cache_dir == views.cache_dir
+    # a changed parameter or another reference re-renders
+    r3 = CountingRenderer()
+    augment_datamanager(_dm(tiny_scene), r3, "ref:abc", tmp_path, dataclasses.replace(cfg, delta_h=5.0))
+    r4 = CountingRenderer()
+    augment_datamanager(_dm(tiny_scene), r4, "ref:other", tmp_path, cfg)
+    assert r3.calls > 0 and r4.calls > 0
+    assert not list((tmp_path / "augment_cache").glob(".tmp-*"))  # no half-written entries
+
+
+def test_interrupted_render_leaves_no_cache_entry(tiny_scene, tmp_path):
+    class Failing(CountingRenderer):
+        def __call__(self, camera):
+            if self.calls == 3:
+                raise KeyboardInterrupt
+            return super().__call__(camera)
+
+    with pytest.raises(KeyboardInterrupt):
+        augment_datamanager(_dm(tiny_scene), Failing(), "ref:x", tmp_path, AugmentConfig())
+    assert not [p for p in (tmp_path / "augment_cache").iterdir() if not p.name.startswith(".tmp-")]
+    r = CountingRenderer()
+    augment_datamanager(_dm(tiny_scene), r, "ref:x", tmp_path, AugmentConfig())
+    assert r.calls > 0
+
+
+def _train_voxel(data, out, steps=20, **kw):
+    cfg = dataclasses.replace(get_method("voxel-grid").config, data=data, output_dir=out, max_num_iterations=steps,
+                              steps_per_eval_image=0, progress=False, timestamp="run", **kw)
+    t = Trainer(cfg)
+    t.setup()
+    return t.train()
+
+
+def test_plugin_trains_with_augment_from_cli(tiny_scene, tmp_path):
+    ref = _train_voxel(tiny_scene, tmp_path / "ref")
+    p = subprocess.run([str(BIN / "ns2gs-train"), "voxel-grid", "--data", str(tiny_scene), "--augment-from", str(ref),
+                        "--augment.delta-h", "2", "--max-num-iterations", "10", "--progress", "False",
+                        "--output-dir", str(tmp_path / "tgt")], capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert list((ref / "augment_cache").glob("*/manifest.json"))
+
+
+def test_bad_references(tiny_scene, tmp_path):
+    from tiny_scene import write_tiny_scene
+
+    other = write_tiny_scene(tmp_path / "other", n_train=6)
+    ref_other = _train_voxel(other, tmp_path / "ref_other", steps=2)
+    with pytest.raises(CheckpointError, match="different dataset"):
+        _train_voxel(tiny_scene, tmp_path / "t1", steps=2, augment_from=ref_other)
+    with pytest.raises(CheckpointError, match="no such run directory"):
+        _train_voxel(tiny_scene, tmp_path / "t2", steps=2, augment_from=tmp_path / "missing")
+    empty = tmp_path / "empty_run"
+    empty.mkdir()
+    with pytest.raises(CheckpointError, match="holds no checkpoints"):
+        _train_voxel(tiny_scene, tmp_path / "t3", steps=2, augment_from=empty)
