@@ -202,6 +202,8 @@ def augment_datamanager(datamanager, render_fn: RenderFn, ref_key: str, cache_ro
         datamanager.train_images, train_data.up, train_data.metres_to_world(config.delta_h), render_fn, ref_key,
         dataset_fingerprint(train_data.image_filenames), cache_root, config,
     )
+    datamanager.original_train_images = datamanager.train_images
+    datamanager.augment_every_n = max(config.every_n, 1)
     if views.composites is not None:
         datamanager.set_train_images(views.composites)
     if views.extra is not None:

@@ -1,0 +1,61 @@
+"""Datasets: nerfstudio and COLMAP parsers, masks, undistortion, normalisation, synthetic street.
+
+The datamanagers call :func:`parse_dataset` and :func:`list_splits` only; the format is detected
+from the folder (``transforms.json`` -> nerfstudio, a COLMAP ``sparse`` model -> COLMAP).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Union
+
+from nerf2gs_plugin.data.colmap_parser import ColmapDataParserConfig, find_model_dir
+from nerf2gs_plugin.data.dataparser_outputs import MASK_KINDS, DataparserOutputs
+from nerf2gs_plugin.data.nerfstudio_parser import NerfstudioDataParserConfig
+from nerf2gs_plugin.data.normalize import (
+    DataparserTransform,
+    NormalizeOptions,
+    load_dataparser_transform,
+    save_dataparser_transform,
+)
+from nerf2gs_plugin.errors import DataError
+
+__all__ = [
+    "MASK_KINDS",
+    "ColmapDataParserConfig",
+    "DataparserOutputs",
+    "DataparserTransform",
+    "NerfstudioDataParserConfig",
+    "NormalizeOptions",
+    "dataparser_config",
+    "list_splits",
+    "load_dataparser_transform",
+    "parse_dataset",
+    "save_dataparser_transform",
+]
+
+ParserConfig = Union[NerfstudioDataParserConfig, ColmapDataParserConfig]
+
+
+def dataparser_config(data: Union[str, Path], downscale: float = 1.0) -> ParserConfig:
+    """The parser config for a dataset folder (or a ``transforms.json`` file), by auto-detection."""
+    data = Path(data)
+    if data.is_file() and data.suffix.lower() == ".json":
+        return NerfstudioDataParserConfig(data=data, downscale=downscale)
+    if not data.exists():
+        raise DataError("dataset folder does not exist", data)
+    if (data / "transforms.json").is_file():
+        return NerfstudioDataParserConfig(data=data, downscale=downscale)
+    if find_model_dir(data) is not None:
+        return ColmapDataParserConfig(data=data, downscale=downscale)
+    raise DataError("not a dataset: no transforms.json and no COLMAP model (sparse/0 or sparse/)", data)
+
+
+def parse_dataset(data: Union[str, Path], split: str = "train", downscale: float = 1.0) -> DataparserOutputs:
+    """One split of the dataset at ``data``, normalised (same transform for every split)."""
+    return dataparser_config(data, downscale).parse(split)
+
+
+def list_splits(data: Union[str, Path]) -> list[str]:
+    """Split names of the dataset at ``data``: "train" first, then its eval splits."""
+    return dataparser_config(data).splits()

@@ -1,0 +1,1 @@
+"""Scaffold-GS: anchor-based neural Gaussians."""

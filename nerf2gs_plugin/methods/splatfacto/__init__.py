@@ -1,0 +1,1 @@
+"""Splatfacto (nerfstudio's 3DGS) on this project's rasterizer."""

@@ -1,0 +1,103 @@
+"""Splatfacto's registered configuration.
+
+Default (CPU scale, the synthetic street at ~200x112 px on 2 cores): 3000 steps, refinement every
+100 steps from step 300 to 1500, opacity reset every 1000 steps, SH degree +1 every 300 steps,
+soft budget of 60k Gaussians.
+
+Paper scale (nerfstudio's splatfacto defaults, for a GPU)::
+
+    ns2gs-train splatfacto --data DATA --max-num-iterations 30000 \\
+      --pipeline.model.sh-degree-interval 1000 --pipeline.model.warmup-length 500 \\
+      --pipeline.model.reset-alpha-every 3000 --pipeline.model.stop-split-at 15000 \\
+      --pipeline.model.stop-screen-size-at 4000 --pipeline.model.num-random 50000 \\
+      --pipeline.model.max-gaussians 0 --pipeline.model.max-pause-after-reset 1000 \\
+      --optimizers.means.max-steps 30000 --optimizers.means.lr-final 1.6e-6 --steps-per-save 2000
+
+(:func:`paper_scale` applies the same changes in code; ``splatfacto_paper_method`` is that config.)
+:func:`with_steps` rescales every step-valued schedule (and the learning-rate decay) to another
+step budget, e.g. a quick 800-step run; overriding ``--max-num-iterations`` alone keeps the
+3000-step schedules.
+MCMC with a hard budget: ``--pipeline.model.strategy mcmc --pipeline.model.cap-max N``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from nerf2gs_plugin.datamanagers.full_image import FullImageDataManagerConfig
+from nerf2gs_plugin.engine.optimizers import OptimizerConfig
+from nerf2gs_plugin.engine.pipeline import PipelineConfig
+from nerf2gs_plugin.engine.trainer import TrainerConfig
+from nerf2gs_plugin.methods.splatfacto.model import SplatfactoModelConfig
+from nerf2gs_plugin.registry import MethodSpecification
+
+DEFAULT_STEPS = 3000
+PAPER_STEPS = 30000
+
+
+def gaussian_optimizers(max_steps: int) -> dict[str, OptimizerConfig]:
+    """nerfstudio's splatfacto learning rates; the means' schedule spans the whole run."""
+    return {
+        "means": OptimizerConfig(lr=1.6e-4, eps=1e-15, lr_final=1.6e-6, max_steps=max_steps),
+        "scales": OptimizerConfig(lr=5e-3, eps=1e-15),
+        "quats": OptimizerConfig(lr=1e-3, eps=1e-15),
+        "opacities": OptimizerConfig(lr=5e-2, eps=1e-15),
+        "features_dc": OptimizerConfig(lr=2.5e-3, eps=1e-15),
+        "features_rest": OptimizerConfig(lr=2.5e-3 / 20, eps=1e-15),
+        "background": OptimizerConfig(lr=1e-2, eps=1e-15),
+    }
+
+
+SCHEDULE_FIELDS = ("sh_degree_interval", "warmup_length", "reset_alpha_every", "stop_split_at", "stop_screen_size_at",
+                   "max_pause_after_reset", "mcmc_refine_stop", "dist_start", "normal_start",
+                   "start_stat", "update_from", "update_until")
+
+
+def with_steps(config: TrainerConfig, steps: int, optimizers=None) -> TrainerConfig:
+    """``config`` (at its own ``max_num_iterations``) with every schedule scaled to ``steps``;
+    refinement intervals shrink with it (at least 20 steps apart)."""
+    ratio = steps / max(config.max_num_iterations, 1)
+    model = config.pipeline.model
+    changes = {f: max(1, int(round(getattr(model, f) * ratio))) for f in SCHEDULE_FIELDS if hasattr(model, f)}
+    for f in ("refine_every", "update_interval"):
+        if hasattr(model, f):
+            changes[f] = max(20, min(getattr(model, f), int(round(getattr(model, f) * ratio))))
+    opts = {name: dataclasses.replace(o, max_steps=steps) if o.lr_final is not None else o for name, o in config.optimizers.items()}
+    return dataclasses.replace(
+        config, max_num_iterations=steps, steps_per_save=min(config.steps_per_save, steps),
+        pipeline=dataclasses.replace(config.pipeline, model=dataclasses.replace(model, **changes)),
+        optimizers=optimizers or opts,
+    )
+
+
+def paper_scale(config: TrainerConfig) -> TrainerConfig:
+    """The original step counts and schedules (30k steps) for a GPU."""
+    model = dataclasses.replace(
+        config.pipeline.model, sh_degree_interval=1000, warmup_length=500, reset_alpha_every=3000,
+        stop_split_at=15000, stop_screen_size_at=4000, num_random=50000, max_gaussians=0,
+        max_pause_after_reset=1000, cap_max=1_000_000, mcmc_refine_stop=25000,
+    )
+    return dataclasses.replace(
+        config, max_num_iterations=PAPER_STEPS, steps_per_save=2000, steps_per_eval_image=1000,
+        pipeline=dataclasses.replace(config.pipeline, model=model), optimizers=gaussian_optimizers(PAPER_STEPS),
+    )
+
+
+splatfacto_config = TrainerConfig(
+    method_name="splatfacto",
+    max_num_iterations=DEFAULT_STEPS,
+    steps_per_eval_image=500,
+    steps_per_save=1000,
+    pipeline=PipelineConfig(datamanager=FullImageDataManagerConfig(), model=SplatfactoModelConfig()),
+    optimizers=gaussian_optimizers(DEFAULT_STEPS),
+)
+
+splatfacto_method = MethodSpecification(
+    config=splatfacto_config,
+    description="Splatfacto: nerfstudio's 3D Gaussian splatting (densify/prune or MCMC), CPU-scale defaults.",
+)
+
+splatfacto_paper_method = MethodSpecification(
+    config=paper_scale(splatfacto_config),
+    description="Splatfacto at the paper's scale (30k steps, nerfstudio schedules; for a GPU).",
+)

@@ -1,0 +1,249 @@
+"""Splatfacto: nerfstudio's 3D Gaussian splatting, on this project's rasterizer.
+
+Parameters (an ``nn.ParameterDict`` ``gauss``; each key is also an optimizer group):
+``means [N,3]``, ``scales [N,3]`` (log), ``quats [N,4]`` (wxyz, unnormalised), ``opacities [N]``
+(logit), ``features_dc [N,3]`` and ``features_rest [N,K-1,3]`` (SH, K = (sh_degree+1)^2).
+The SH degree used for rendering rises by one every ``sh_degree_interval`` steps up to
+``sh_degree``. Densification follows :mod:`.strategy` (default or MCMC).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal, Optional
+
+import torch
+from torch import Tensor, nn
+
+from nerf2gs_plugin.cameras import Cameras
+from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
+from nerf2gs_plugin.engine.callbacks import TrainingCallback, TrainingCallbackAttributes, TrainingCallbackLocation as Loc
+from nerf2gs_plugin.engine.losses import psnr_from_mse
+from nerf2gs_plugin.engine.model import Model, ModelConfig
+from nerf2gs_plugin.methods.gaussian_utils import knn_mean_distance, logit, normalize_quats, num_sh_bases, random_quats, rgb_to_sh
+from nerf2gs_plugin.methods.splatfacto.shared import Background, BackgroundMode, composite, image_loss
+from nerf2gs_plugin.methods.splatfacto.strategy import (
+    DefaultStrategy,
+    DefaultStrategyConfig,
+    MCMCStrategy,
+    MCMCStrategyConfig,
+)
+
+
+@dataclass
+class SplatfactoModelConfig(ModelConfig):
+    """Defaults are the CPU scale (see ``config.py`` for the step counts and the paper-scale flags)."""
+
+    _target: type = field(default_factory=lambda: SplatfactoModel)
+    sh_degree: int = 3
+    sh_degree_interval: int = 300
+    """Raise the SH degree every this many steps (nerfstudio: 1000 of 30000)."""
+    ssim_lambda: float = 0.2
+    num_random: int = 5000
+    """Random Gaussians in the scene box when the dataset has no sparse points (nerfstudio: 50000)."""
+    init_opacity: float = 0.1
+    background: BackgroundMode = "sky"
+    """sky: learned view-direction background; random: random colour per step; learned; black; white."""
+    sky_sh_degree: int = 3
+    sky_alpha_weight: float = 0.05
+    """Push accumulation to 0 on sky-mask pixels (when the dataset has sky masks)."""
+    mask_transients: bool = False
+    """Ignore transient-mask pixels in the loss (the baseline-with-masks variant)."""
+    rasterize_mode: Literal["classic", "antialiased"] = "classic"
+    backend: str = "auto"
+    near_plane: float = 0.01
+    far_plane: float = 1e10
+    strategy: Literal["default", "mcmc"] = "default"
+    # ---- default strategy (nerfstudio names; CPU-scale values, paper values in config.py)
+    warmup_length: int = 300
+    refine_every: int = 100
+    reset_alpha_every: int = 1000
+    stop_split_at: int = 1500
+    densify_grad_thresh: float = 0.0008
+    densify_size_thresh: float = 0.01
+    n_split_samples: int = 2
+    cull_alpha_thresh: float = 0.1
+    cull_scale_thresh: float = 0.5
+    cull_screen_size: float = 0.15
+    split_screen_size: float = 0.05
+    stop_screen_size_at: int = 400
+    continue_cull_post_densification: bool = True
+    max_pause_after_reset: int = 300
+    """Cap on nerfstudio's pause after an opacity reset (num_images + refine_every steps)."""
+    max_gaussians: int = 60000
+    """Soft budget for the default strategy on a CPU (0 = unlimited, as nerfstudio)."""
+    # ---- MCMC strategy
+    cap_max: int = 30000
+    """Hard budget of Gaussians with ``--pipeline.model.strategy mcmc``."""
+    mcmc_noise_lr: float = 5e5
+    mcmc_min_opacity: float = 0.005
+    mcmc_init_opacity: float = 0.5
+    mcmc_init_scale: float = 0.1
+    mcmc_refine_stop: int = 2500
+    opacity_reg: float = 0.01
+    scale_reg: float = 0.01
+
+
+class SplatfactoModel(Model):
+    config: SplatfactoModelConfig
+
+    # ------------------------------------------------------------------ setup
+    def populate_modules(self, train_data: DataparserOutputs) -> None:
+        cfg = self.config
+        gen = torch.Generator().manual_seed(0)
+        means, colors = self._initial_points(train_data, gen)
+        if cfg.strategy == "mcmc" and means.shape[0] > cfg.cap_max:
+            sel = torch.randperm(means.shape[0], generator=gen)[: cfg.cap_max]
+            means, colors = means[sel], colors[sel]
+        n = means.shape[0]
+        dist = knn_mean_distance(means).clamp_min(1e-4)
+        init_op = cfg.mcmc_init_opacity if cfg.strategy == "mcmc" else cfg.init_opacity
+        if cfg.strategy == "mcmc":  # gsplat's MCMC recipe: opaque but small initial Gaussians
+            dist = dist * cfg.mcmc_init_scale
+        k = num_sh_bases(cfg.sh_degree)
+        self.gauss = nn.ParameterDict({
+            "means": nn.Parameter(means),
+            "scales": nn.Parameter(torch.log(dist)[:, None].repeat(1, 3)),
+            "quats": nn.Parameter(random_quats(n, gen)),
+            "opacities": nn.Parameter(torch.full((n,), float(logit(init_op)))),
+            "features_dc": nn.Parameter(rgb_to_sh(colors)),
+            "features_rest": nn.Parameter(torch.zeros(n, k - 1, 3)),
+        })
+        self.background = Background(cfg.background, cfg.sky_sh_degree)
+        self.register_buffer("step", torch.zeros((), dtype=torch.long))
+        self._meta: Optional[dict[str, Any]] = None
+        self.strategy = self._make_strategy()
+
+    def _initial_points(self, data: DataparserOutputs, gen: torch.Generator) -> tuple[Tensor, Tensor]:
+        """Sparse points (normalised world) and their colours in [0,1]; random in the box if none."""
+        if data.points3D_xyz is not None and len(data.points3D_xyz) > 0:
+            xyz = data.points3D_xyz.float().clone()
+            rgb = data.points3D_rgb.float() / 255.0 if data.points3D_rgb is not None else torch.full_like(xyz, 0.5)
+            return xyz, rgb
+        lo, hi = self.scene_box[0], self.scene_box[1]
+        xyz = lo + (hi - lo) * torch.rand(self.config.num_random, 3, generator=gen)
+        return xyz, torch.rand(self.config.num_random, 3, generator=gen)
+
+    def _make_strategy(self) -> Any:
+        c = self.config
+        if c.strategy == "mcmc":
+            return MCMCStrategy(MCMCStrategyConfig(
+                cap_max=c.cap_max, noise_lr=c.mcmc_noise_lr, refine_start_iter=c.warmup_length,
+                refine_stop_iter=c.mcmc_refine_stop, refine_every=c.refine_every, min_opacity=c.mcmc_min_opacity,
+            ))
+        return DefaultStrategy(DefaultStrategyConfig(
+            warmup_length=c.warmup_length, refine_every=c.refine_every, reset_alpha_every=c.reset_alpha_every,
+            stop_split_at=c.stop_split_at, densify_grad_thresh=c.densify_grad_thresh,
+            densify_size_thresh=c.densify_size_thresh, n_split_samples=c.n_split_samples,
+            cull_alpha_thresh=c.cull_alpha_thresh, cull_scale_thresh=c.cull_scale_thresh,
+            cull_screen_size=c.cull_screen_size, split_screen_size=c.split_screen_size,
+            stop_screen_size_at=c.stop_screen_size_at,
+            continue_cull_post_densification=c.continue_cull_post_densification,
+            max_pause_after_reset=c.max_pause_after_reset, max_gaussians=c.max_gaussians,
+            num_train_images=self.num_train_images,
+        ))
+
+    def get_param_groups(self) -> dict[str, list[nn.Parameter]]:
+        groups = {name: [p] for name, p in self.gauss.items()}
+        groups["background"] = self.background.parameters_list()
+        return groups
+
+    # ------------------------------------------------------------------ rendering
+    @property
+    def current_sh_degree(self) -> int:
+        return min(int(self.step) // max(self.config.sh_degree_interval, 1), self.config.sh_degree)
+
+    def _render(self, camera: Cameras, training: bool) -> dict[str, Tensor]:
+        from nerf2gs_plugin.rendering import rasterize_gaussians
+
+        g = self.gauss
+        h, w = int(camera.height[0]), int(camera.width[0])
+        dev = g["means"].device
+        camera = camera.to(dev)
+        bg = self.background(camera, training)
+        if g["means"].shape[0] == 0:
+            zeros = torch.zeros(h, w, 1, device=dev)
+            return {"rgb": (zeros + bg).expand(h, w, 3), "depth": zeros, "accumulation": zeros}
+        colors = torch.cat([g["features_dc"][:, None, :], g["features_rest"]], dim=1)
+        render, alpha, meta = rasterize_gaussians(
+            g["means"], normalize_quats(g["quats"]), torch.exp(g["scales"]), torch.sigmoid(g["opacities"]), colors,
+            camera.viewmats(), camera.Ks(), w, h, near_plane=self.config.near_plane, far_plane=self.config.far_plane,
+            sh_degree=self.current_sh_degree, render_mode="RGB+ED", rasterize_mode=self.config.rasterize_mode,
+            backend=self.config.backend,
+        )
+        if training and meta["means2d"].requires_grad:
+            meta["means2d"].retain_grad()
+        self._meta = meta if training else None
+        alpha = alpha[0]
+        rgb = composite(render[0, ..., :3], alpha, bg).clamp(0.0, 1.0)
+        return {"rgb": rgb, "depth": render[0, ..., 3:4], "accumulation": alpha, "background": bg}
+
+    def get_outputs(self, inputs: Cameras) -> dict[str, Tensor]:
+        return self._render(inputs, training=self.training)
+
+    @torch.no_grad()
+    def render_camera(self, camera: Cameras) -> dict[str, Tensor]:
+        out = self._render(camera, training=False)
+        out.pop("background", None)
+        return out
+
+    # ------------------------------------------------------------------ losses
+    def get_metrics_dict(self, outputs: dict[str, Tensor], batch: dict[str, Any]) -> dict[str, Tensor]:
+        mse = ((outputs["rgb"].detach() - batch["image"].to(outputs["rgb"])) ** 2).mean()
+        return {"psnr": psnr_from_mse(mse), "gaussian_count": torch.tensor(float(self.num_primitives()))}
+
+    def get_loss_dict(self, outputs: dict[str, Tensor], batch: dict[str, Any], metrics_dict: dict[str, Tensor]) -> dict[str, Tensor]:
+        c = self.config
+        sky_bg = outputs.get("background") if c.background == "random" else None
+        losses = image_loss(outputs, batch, c.ssim_lambda, c.mask_transients, c.sky_alpha_weight, sky_bg)
+        if c.strategy == "mcmc":
+            g = self.gauss
+            losses["opacity_reg"] = c.opacity_reg * torch.sigmoid(g["opacities"]).abs().mean()
+            losses["scale_reg"] = c.scale_reg * torch.exp(g["scales"]).abs().mean()
+        return losses
+
+    # ------------------------------------------------------------------ training callbacks
+    def get_training_callbacks(self, attrs: TrainingCallbackAttributes) -> list[TrainingCallback]:
+        optimizers = attrs.optimizers
+
+        def set_step(step: int) -> None:
+            self.step.fill_(step)
+
+        def after_backward(step: int) -> None:
+            if isinstance(self.strategy, DefaultStrategy) and self._meta is not None:
+                self.strategy.update_stats(self.num_primitives(), self._meta)
+
+        def after_step(step: int) -> None:
+            self._meta = None
+            if isinstance(self.strategy, MCMCStrategy):
+                lr = optimizers.configs["means"].lr_at(step) if "means" in optimizers.configs else 1.6e-4
+                self.strategy.refine(step, self.gauss, optimizers, lr)
+            else:
+                self.strategy.refine(step, self.gauss, optimizers)
+
+        return [
+            TrainingCallback([Loc.BEFORE_STEP], set_step),
+            TrainingCallback([Loc.AFTER_BACKWARD], after_backward),
+            TrainingCallback([Loc.AFTER_STEP], after_step),
+        ]
+
+    # ------------------------------------------------------------------ bookkeeping
+    def num_primitives(self) -> int:
+        return int(self.gauss["means"].shape[0])
+
+    def load_model_state(self, state: dict[str, Tensor]) -> None:
+        """Resize the Gaussian parameters to the checkpoint's count, then load."""
+        for name in list(self.gauss.keys()):
+            saved = state.get(f"gauss.{name}")
+            if saved is not None and saved.shape != self.gauss[name].shape:
+                self.gauss[name] = nn.Parameter(torch.zeros(saved.shape, dtype=saved.dtype, device=self.gauss[name].device))
+        self.load_state_dict(state)
+        self.strategy = self._make_strategy()
+
+    def export_gaussians(self) -> dict[str, Tensor]:
+        """The standard 3DGS quantities for :func:`write_gaussian_ply`."""
+        g = {k: v.detach() for k, v in self.gauss.items()}
+        return {
+            "means": g["means"], "log_scales": g["scales"], "quats": normalize_quats(g["quats"]),
+            "opacity_logits": g["opacities"], "features_dc": g["features_dc"], "features_rest": g["features_rest"],
+        }

@@ -1,0 +1,140 @@
+"""Pieces every splatting method here shares: the background (sky) model, the image loss
+(``(1-l) L1 + l (1-SSIM)`` weighted by the batch weight, optional transient masking, sky alpha
+loss) and camera helpers."""
+
+from __future__ import annotations
+
+from typing import Any, Callable, Literal
+
+import torch
+from torch import Tensor, nn
+
+from nerf2gs_plugin.cameras import Cameras
+from nerf2gs_plugin.methods.gaussian_utils import num_sh_bases, sh_basis
+
+BackgroundMode = Literal["sky", "random", "learned", "black", "white"]
+
+
+def _kornia_ssim(pred: Tensor, gt: Tensor) -> Tensor:
+    import kornia.metrics
+
+    return kornia.metrics.ssim(pred.permute(2, 0, 1)[None], gt.permute(2, 0, 1)[None], 11).mean()
+
+
+_SSIM_IMPL: list = []  # resolved once: the project's SSIM (with its layout) or kornia's
+
+
+def _resolve_ssim() -> Callable[[Tensor, Tensor], Tensor]:
+    """Use ``nerf2gs_plugin.eval.metrics.ssim`` when it exists and agrees with the 11x11 Gaussian
+    SSIM on a probe pair, in whichever layout it takes ([H,W,3] or [1,3,H,W]); else kornia's."""
+    try:
+        from nerf2gs_plugin.eval.metrics import ssim as project_ssim
+    except ImportError:
+        return _kornia_ssim
+    g = torch.Generator().manual_seed(0)
+    a = torch.rand(24, 32, 3, generator=g)
+    b = (a + 0.1 * torch.rand(24, 32, 3, generator=g)).clamp(0, 1)
+    ref = float(_kornia_ssim(a, b))
+    layouts = (lambda x: x, lambda x: x.permute(2, 0, 1)[None])
+    for to in layouts:
+        try:
+            val = float(torch.as_tensor(project_ssim(to(a), to(b))).mean())
+        except Exception:  # noqa: BLE001 - a layout it does not take
+            continue
+        if abs(val - ref) < 2e-2:
+            return lambda p, q, f=project_ssim, t=to: torch.as_tensor(f(t(p), t(q))).mean()
+    return _kornia_ssim
+
+
+def ssim(pred: Tensor, gt: Tensor) -> Tensor:
+    """Mean 11x11 Gaussian SSIM of two ``[H,W,3]`` images (differentiable)."""
+    if not _SSIM_IMPL:
+        _SSIM_IMPL.append(_resolve_ssim())
+    return _SSIM_IMPL[0](pred, gt)
+
+
+def camera_directions(camera: Cameras) -> Tensor:
+    """Unit world ray directions ``[H, W, 3]`` of a one-camera :class:`Cameras`."""
+    h, w = int(camera.height[0]), int(camera.width[0])
+    return camera.generate_rays(0).directions.reshape(h, w, 3)
+
+
+class Background(nn.Module):
+    """What shows where the Gaussians leave transmittance.
+
+    * ``sky`` (default): a learned environment colour as a function of the view direction
+      (degree-``sh_degree`` SH through a sigmoid), so sky pixels are explained without Gaussians
+      and do not seed floaters.
+    * ``random``: a random colour per training step (Gaussians must be opaque to be seen; black at eval).
+    * ``learned``: one learned colour; ``black`` / ``white``: fixed.
+    """
+
+    def __init__(self, mode: BackgroundMode = "sky", sh_degree: int = 3) -> None:
+        super().__init__()
+        self.mode = mode
+        self.sh_degree = sh_degree
+        if mode == "sky":
+            coeffs = torch.zeros(num_sh_bases(sh_degree), 3)
+            self.coeffs = nn.Parameter(coeffs)
+        elif mode == "learned":
+            self.color = nn.Parameter(torch.zeros(3))
+
+    def parameters_list(self) -> list[nn.Parameter]:
+        return list(self.parameters())
+
+    def forward(self, camera: Cameras, training: bool) -> Tensor:
+        """Background ``[H, W, 3]`` or ``[3]`` (broadcastable) on the camera's device."""
+        dev = camera.device
+        if self.mode == "sky":
+            d = camera_directions(camera)
+            return torch.sigmoid(sh_basis(self.sh_degree, d) @ self.coeffs)
+        if self.mode == "learned":
+            return torch.sigmoid(self.color)
+        if self.mode == "random":
+            return torch.rand(3, device=dev) if training else torch.zeros(3, device=dev)
+        if self.mode == "white":
+            return torch.ones(3, device=dev)
+        return torch.zeros(3, device=dev)
+
+
+def image_loss(
+    outputs: dict[str, Tensor],
+    batch: dict[str, Any],
+    ssim_lambda: float,
+    mask_transients: bool = False,
+    sky_alpha_weight: float = 0.0,
+    sky_background: Tensor | None = None,
+) -> dict[str, Tensor]:
+    """The 3DGS photometric loss, times ``batch["weight"]``.
+
+    With ``mask_transients`` the transient-mask pixels of the prediction are replaced by the
+    (constant) target, so they contribute neither L1 nor SSIM gradient. With a sky mask and
+    ``sky_alpha_weight > 0`` the accumulation on sky pixels is pushed to 0 (the background
+    explains them). With ``sky_background`` (the random background of a step) the target's sky
+    pixels become that colour, i.e. the sky is treated as transparent (nerfstudio's alpha images).
+    """
+    pred, gt = outputs["rgb"], batch["image"].to(outputs["rgb"])
+    if sky_background is not None and batch.get("sky_mask") is not None:
+        gt = torch.where(batch["sky_mask"].to(pred.device), sky_background.to(gt).expand_as(gt), gt)
+    weight = torch.as_tensor(batch.get("weight", 1.0), dtype=pred.dtype, device=pred.device)
+    if mask_transients and batch.get("transient_mask") is not None:
+        m = batch["transient_mask"].to(pred.device)
+        pred = torch.where(m, gt, pred)
+    l1 = (pred - gt).abs().mean()
+    loss = (1 - ssim_lambda) * l1
+    if ssim_lambda > 0:
+        loss = loss + ssim_lambda * (1 - ssim(pred, gt))
+    out = {"main_loss": weight * loss}
+    sky = batch.get("sky_mask")
+    if sky_alpha_weight > 0 and sky is not None and "accumulation" in outputs:
+        sky = sky.to(pred.device)
+        if bool(sky.any()):
+            acc = outputs["accumulation"]
+            out["sky_alpha_loss"] = weight * sky_alpha_weight * acc[sky].mean()
+    return out
+
+
+def composite(rgb: Tensor, alpha: Tensor, background: Tensor) -> Tensor:
+    """``rgb`` was rendered on black: add the background where transmittance remains."""
+    return rgb + (1.0 - alpha) * background
+

@@ -1,0 +1,332 @@
+"""Densification strategies shared by Splatfacto and 2DGS.
+
+Both operate on an ``nn.ParameterDict`` whose tensors all have the primitive count ``N`` as their
+first dimension, with keys ``means [N,3]``, ``scales [N,S]`` (log; S = 3 for 3D Gaussians, 2 for
+surfels), ``quats [N,4]`` (wxyz) and ``opacities [N]`` (logit); every key is also the name of
+its optimizer group, so :meth:`Optimizers.replace_param` keeps the Adam moments in step.
+
+* :class:`DefaultStrategy` - the 3DGS/splatfacto recipe: accumulate the screen-space gradient of
+  the projected means; clone small / split large Gaussians whose average gradient is high; prune
+  by opacity and size; reset opacities periodically, pausing refinement after a reset for
+  ``min(num_images, cap)`` steps (nerfstudio pauses for ``num_images`` steps, which silently stops
+  refinement on large image sets).
+* :class:`MCMCStrategy` - 3DGS as MCMC (Kheradmand et al. 2024): dead Gaussians are relocated
+  onto live ones, new ones are added up to a hard budget ``cap_max``, and position noise scaled
+  by the covariance explores the scene.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Optional
+
+import torch
+from torch import Tensor, nn
+
+from nerf2gs_plugin.methods.gaussian_utils import logit, quat_to_rotmat
+
+
+# ---------------------------------------------------------------------------------------- edits
+def _set(params: nn.ParameterDict, optimizers: Any, name: str, value: Tensor, keep: Optional[Tensor], n_new: int) -> None:
+    new = nn.Parameter(value.detach().contiguous(), requires_grad=params[name].requires_grad)
+    params[name] = new
+    if optimizers is not None and name in optimizers:
+        optimizers.replace_param(name, new, keep=keep, n_new=n_new)
+
+
+def append_rows(params: nn.ParameterDict, optimizers: Any, new_rows: dict[str, Tensor], keep: Optional[Tensor] = None) -> None:
+    """Keep the rows ``keep`` (bool mask or index; all when None) and append ``new_rows``."""
+    for name in list(params.keys()):
+        old = params[name].detach()
+        kept = old if keep is None else old[keep]
+        add = new_rows[name].to(old)
+        _set(params, optimizers, name, torch.cat([kept, add]), keep, add.shape[0])
+
+
+def keep_rows(params: nn.ParameterDict, optimizers: Any, keep: Tensor) -> None:
+    for name in list(params.keys()):
+        _set(params, optimizers, name, params[name].detach()[keep], keep, 0)
+
+
+def zero_state_rows(params: nn.ParameterDict, optimizers: Any, rows: Tensor, names: Optional[list[str]] = None) -> None:
+    """Zero the Adam moments of ``rows`` (after relocating or resetting primitives)."""
+    if optimizers is None:
+        return
+    for name in names or list(params.keys()):
+        if name not in optimizers:
+            continue
+        state = optimizers[name].state.get(params[name])
+        if state:
+            for key in ("exp_avg", "exp_avg_sq"):
+                if key in state:
+                    state[key][rows] = 0
+
+
+def _scales3(log_scales: Tensor) -> Tensor:
+    """Linear 3-axis scales; surfels (2 axes) get a zero normal axis."""
+    s = torch.exp(log_scales)
+    if s.shape[1] == 2:
+        s = torch.cat([s, torch.zeros_like(s[:, :1])], dim=1)
+    return s
+
+
+# ---------------------------------------------------------------------------------------- default
+@dataclass
+class DefaultStrategyConfig:
+    warmup_length: int = 500
+    refine_every: int = 100
+    reset_alpha_every: int = 3000
+    stop_split_at: int = 15000
+    densify_grad_thresh: float = 0.0008
+    densify_size_thresh: float = 0.01
+    n_split_samples: int = 2
+    cull_alpha_thresh: float = 0.1
+    cull_scale_thresh: float = 0.5
+    cull_screen_size: float = 0.15
+    split_screen_size: float = 0.05
+    stop_screen_size_at: int = 4000
+    continue_cull_post_densification: bool = True
+    max_pause_after_reset: int = 1000
+    max_gaussians: int = 0
+    scene_scale: float = 1.0
+    num_train_images: int = 1
+
+
+class DefaultStrategy:
+    """Clone / split / prune / opacity-reset; statistics come from ``meta["means2d"].grad``."""
+
+    def __init__(self, cfg: DefaultStrategyConfig) -> None:
+        self.cfg = cfg
+        self.grad_accum: Optional[Tensor] = None  # [N] sum of NDC-space gradient norms
+        self.count: Optional[Tensor] = None  # [N] times visible
+        self.max_radii: Optional[Tensor] = None  # [N] max radius / max(W, H)
+
+    @property
+    def pause_after_reset(self) -> int:
+        """Steps without refinement after an opacity reset: nerfstudio's ``num_images + refine_every``,
+        capped so that it stays below the reset interval whatever the image count."""
+        c = self.cfg
+        pause = min(c.num_train_images, c.max_pause_after_reset) + c.refine_every
+        return min(pause, max(c.reset_alpha_every // 2, 0))
+
+    def _reset_stats(self, n: int, device: torch.device) -> None:
+        self.grad_accum = torch.zeros(n, device=device)
+        self.count = torch.zeros(n, device=device)
+        self.max_radii = torch.zeros(n, device=device)
+
+    @torch.no_grad()
+    def update_stats(self, n: int, meta: dict[str, Any]) -> None:
+        """After backward: accumulate the projected-mean gradient of the visible primitives."""
+        means2d = meta.get("means2d")
+        if means2d is None or means2d.grad is None:
+            return
+        if self.grad_accum is None or self.grad_accum.shape[0] != n:
+            self._reset_stats(n, means2d.device)
+        w, h = float(meta["width"]), float(meta["height"])
+        g = means2d.grad.detach().clone()  # [C, N, 2] pixels -> NDC units (as gsplat)
+        g[..., 0] *= w / 2.0
+        g[..., 1] *= h / 2.0
+        radii = meta["radii"]
+        if radii.ndim == 3:  # [C, N, 2] per-axis radii
+            radii = radii.amax(-1)
+        vis = radii > 0  # [C, N]
+        norms = g.norm(dim=-1)
+        self.grad_accum += (norms * vis).sum(0)
+        self.count += vis.sum(0).float()
+        self.max_radii = torch.maximum(self.max_radii, (radii.float() / max(w, h)).amax(0))
+
+    def _in_pause(self, step: int) -> bool:
+        c = self.cfg
+        return c.reset_alpha_every > 0 and step >= c.reset_alpha_every and step % c.reset_alpha_every < self.pause_after_reset
+
+    @torch.no_grad()
+    def refine(self, step: int, params: nn.ParameterDict, optimizers: Any) -> dict[str, int]:
+        """After the optimizer step: grow/prune on refinement steps, reset opacities. Returns counts."""
+        c = self.cfg
+        out = {"cloned": 0, "split": 0, "pruned": 0}
+        if step < c.warmup_length or step % c.refine_every != 0 or step == 0:
+            return out
+        if step < c.stop_split_at:
+            if not self._in_pause(step) and self.count is not None and self.count.shape[0] == params["means"].shape[0]:
+                out.update(self.grow(step, params, optimizers))
+                out["pruned"] = self.prune(step, params, optimizers)
+            if c.reset_alpha_every > 0 and step % c.reset_alpha_every == 0:
+                self.reset_opacities(params, optimizers)
+        elif c.continue_cull_post_densification:
+            out["pruned"] = self.prune(step, params, optimizers)
+        self._reset_stats(params["means"].shape[0], params["means"].device)
+        return out
+
+    def grow(self, step: int, params: nn.ParameterDict, optimizers: Any) -> dict[str, int]:
+        c = self.cfg
+        n = params["means"].shape[0]
+        avg = self.grad_accum / self.count.clamp_min(1)
+        high = (avg > c.densify_grad_thresh) & (self.count > 0)
+        max_scale = torch.exp(params["scales"]).amax(-1)
+        small = max_scale <= c.densify_size_thresh * c.scene_scale
+        clone = high & small
+        split = high & ~small
+        if step < c.stop_screen_size_at:
+            split |= self.max_radii > c.split_screen_size
+        if c.max_gaussians > 0:  # soft budget: only the highest-gradient candidates, then nothing
+            room = max(c.max_gaussians - n, 0)
+            clone, split = _limit(clone, split, avg, room, c.n_split_samples)
+        n_clone, n_split = int(clone.sum()), int(split.sum())
+        if n_clone:
+            append_rows(params, optimizers, {k: v.detach()[clone] for k, v in params.items()})
+            split = torch.cat([split, torch.zeros(n_clone, dtype=torch.bool, device=split.device)])
+        if n_split:
+            append_rows(params, optimizers, self._split_rows(params, split), keep=~split)
+        return {"cloned": n_clone, "split": n_split}
+
+    def _split_rows(self, params: nn.ParameterDict, split: Tensor) -> dict[str, Tensor]:
+        """Each selected Gaussian -> ``n_split_samples`` samples from itself, scales / 1.6."""
+        k = self.cfg.n_split_samples
+        rows = {name: v.detach()[split].repeat_interleave(k, dim=0) for name, v in params.items()}
+        s3 = _scales3(rows["scales"])
+        R = quat_to_rotmat(rows["quats"])
+        offs = torch.einsum("nij,nj->ni", R, s3 * torch.randn_like(s3))
+        rows["means"] = rows["means"] + offs
+        rows["scales"] = rows["scales"] - math.log(1.6)
+        return rows
+
+    def prune(self, step: int, params: nn.ParameterDict, optimizers: Any) -> int:
+        c = self.cfg
+        cull = torch.sigmoid(params["opacities"]) < c.cull_alpha_thresh
+        if c.reset_alpha_every > 0 and step > c.reset_alpha_every:
+            cull |= torch.exp(params["scales"]).amax(-1) > c.cull_scale_thresh * c.scene_scale
+            if step < c.stop_screen_size_at and self.max_radii is not None and self.max_radii.shape[0] == cull.shape[0]:
+                cull |= self.max_radii > c.cull_screen_size
+        if bool(cull.all()):  # never empty the scene
+            cull[torch.sigmoid(params["opacities"]).argmax()] = False
+        n = int(cull.sum())
+        if n:
+            keep_rows(params, optimizers, ~cull)
+        return n
+
+    def reset_opacities(self, params: nn.ParameterDict, optimizers: Any) -> None:
+        """Clamp opacities to ``2 * cull_alpha_thresh`` and clear their Adam moments."""
+        cap = float(logit(min(self.cfg.cull_alpha_thresh * 2.0, 0.99)))
+        params["opacities"].data.clamp_(max=cap)
+        zero_state_rows(params, optimizers, slice(None), ["opacities"])
+
+
+def _limit(clone: Tensor, split: Tensor, score: Tensor, room: int, k: int) -> tuple[Tensor, Tensor]:
+    """Keep the highest-score candidates whose growth (1 per clone, k-1 per split) fits ``room``."""
+    cand = clone | split
+    cost = clone.float() + split.float() * max(k - 1, 1)
+    if float(cost.sum()) <= room:
+        return clone, split
+    order = torch.argsort(torch.where(cand, score, torch.full_like(score, -1.0)), descending=True)
+    fits = torch.cumsum(cost[order], 0) <= room
+    chosen = torch.zeros_like(cand)
+    chosen[order[fits]] = True
+    return clone & chosen, split & chosen
+
+
+# ---------------------------------------------------------------------------------------- MCMC
+@dataclass
+class MCMCStrategyConfig:
+    cap_max: int = 100_000
+    noise_lr: float = 5e5
+    refine_start_iter: int = 500
+    refine_stop_iter: int = 25_000
+    refine_every: int = 100
+    min_opacity: float = 0.005
+    grow_factor: float = 0.05
+
+
+_N_MAX = 51
+
+
+def _binoms(device: torch.device) -> Tensor:
+    b = torch.zeros(_N_MAX, _N_MAX)
+    for n in range(_N_MAX):
+        for k in range(n + 1):
+            b[n, k] = math.comb(n, k)
+    return b.to(device)
+
+
+def relocation_values(opacities: Tensor, scales: Tensor, ratios: Tensor) -> tuple[Tensor, Tensor]:
+    """Opacity and scale of a Gaussian split into ``ratios`` copies so that the sum of the
+    copies renders like the original (3DGS-MCMC, Eq. 9). ``opacities [M]`` in (0,1),
+    ``scales [M,S]`` linear, ``ratios [M]`` >= 1."""
+    n = ratios.clamp(1, _N_MAX).long()
+    new_o = 1.0 - (1.0 - opacities).clamp_min(1e-12) ** (1.0 / n.float())
+    B = _binoms(opacities.device)  # [i-1, k]
+    k = torch.arange(_N_MAX, device=opacities.device)
+    coef = B * ((-1.0) ** k.float() / torch.sqrt(k.float() + 1))[None, :]  # [I, K]
+    powers = new_o[:, None] ** (k[None, :] + 1).float()  # [M, K]
+    per_i = powers @ coef.T  # [M, I]: sum over k for each i (B is zero for k > i-1)
+    i_mask = (torch.arange(1, _N_MAX + 1, device=opacities.device)[None, :] <= n[:, None]).float()
+    denom = (per_i * i_mask).sum(-1)
+    new_s = (opacities / denom.clamp_min(1e-12))[:, None] * scales
+    return new_o, new_s
+
+
+class MCMCStrategy:
+    def __init__(self, cfg: MCMCStrategyConfig) -> None:
+        self.cfg = cfg
+
+    def _sample(self, probs: Tensor, n: int) -> Tensor:
+        return torch.multinomial(probs / probs.sum(), n, replacement=True)
+
+    def _relocate_to(self, params: nn.ParameterDict, sampled: Tensor) -> None:
+        """Share the opacity/scale of each ``sampled`` source among its new copies."""
+        ratios = torch.bincount(sampled, minlength=params["means"].shape[0])[sampled] + 1
+        o = torch.sigmoid(params["opacities"].data[sampled])
+        new_o, new_s = relocation_values(o, torch.exp(params["scales"].data[sampled]), ratios)
+        new_o = new_o.clamp(self.cfg.min_opacity, 1 - 1e-6)
+        params["opacities"].data[sampled] = torch.log(new_o / (1 - new_o))
+        params["scales"].data[sampled] = torch.log(new_s.clamp_min(1e-12))
+
+    @torch.no_grad()
+    def relocate(self, params: nn.ParameterDict, optimizers: Any) -> int:
+        op = torch.sigmoid(params["opacities"])
+        dead = op <= self.cfg.min_opacity
+        n_dead = int(dead.sum())
+        if n_dead == 0 or n_dead == op.shape[0]:
+            return 0
+        alive_idx = (~dead).nonzero().squeeze(1)
+        sampled = alive_idx[self._sample(op[alive_idx], n_dead)]
+        self._relocate_to(params, sampled)
+        dead_idx = dead.nonzero().squeeze(1)
+        for name in params.keys():
+            params[name].data[dead_idx] = params[name].data[sampled]
+        zero_state_rows(params, optimizers, torch.cat([sampled, dead_idx]))
+        return n_dead
+
+    @torch.no_grad()
+    def add(self, params: nn.ParameterDict, optimizers: Any) -> int:
+        n = params["means"].shape[0]
+        target = min(self.cfg.cap_max, int(math.ceil((1.0 + self.cfg.grow_factor) * n)))
+        n_add = max(0, target - n)
+        if n_add == 0:
+            return 0
+        op = torch.sigmoid(params["opacities"])
+        sampled = self._sample(op.clamp_min(1e-12), n_add)
+        self._relocate_to(params, sampled)
+        zero_state_rows(params, optimizers, sampled)
+        append_rows(params, optimizers, {k: v.detach()[sampled] for k, v in params.items()})
+        return n_add
+
+    @torch.no_grad()
+    def inject_noise(self, params: nn.ParameterDict, lr_means: float) -> None:
+        """Covariance-shaped position noise, strong for transparent Gaussians only."""
+        op = torch.sigmoid(params["opacities"])
+        s3 = _scales3(params["scales"]).clamp_min(1e-8)
+        R = quat_to_rotmat(params["quats"])
+        gate = torch.sigmoid(100.0 * ((1.0 - op) - 0.995))  # ~1 when opacity < 0.005
+        z = torch.randn_like(params["means"]) * (gate * lr_means * self.cfg.noise_lr)[:, None]
+        noise = torch.einsum("nij,nj->ni", R, (s3 * s3) * torch.einsum("nji,nj->ni", R, z))
+        params["means"].data += noise
+
+    def refine(self, step: int, params: nn.ParameterDict, optimizers: Any, lr_means: float) -> dict[str, int]:
+        c = self.cfg
+        out = {"relocated": 0, "added": 0}
+        if c.refine_start_iter < step < c.refine_stop_iter and step % c.refine_every == 0:
+            out["relocated"] = self.relocate(params, optimizers)
+            out["added"] = self.add(params, optimizers)
+        self.inject_noise(params, lr_means)
+        return out

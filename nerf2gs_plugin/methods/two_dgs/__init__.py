@@ -1,0 +1,1 @@
+"""2DGS: surfel splatting with depth distortion and normal consistency losses."""

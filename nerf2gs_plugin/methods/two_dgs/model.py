@@ -1,0 +1,115 @@
+"""2D Gaussian splatting (Huang et al., SIGGRAPH 2024): oriented planar surfels.
+
+A surfel has a centre, a rotation whose first two columns are its tangent axes and whose third is
+its normal, two scales (``scales [N,2]`` log) and an opacity; it is rendered by exact ray-splat
+intersection with the screen-space low-pass fallback (the rasterizer's ``rasterize_surfels``).
+On top of the photometric loss: depth distortion (from ``dist_start``) and normal consistency
+between the rendered normals and the normals of the rendered depth (from ``normal_start``).
+Densification reuses the 3DGS strategy (clone / split in the tangent plane / prune / reset).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import torch
+from torch import Tensor, nn
+
+from nerf2gs_plugin.cameras import Cameras
+from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
+from nerf2gs_plugin.methods.gaussian_utils import normalize_quats
+from nerf2gs_plugin.methods.splatfacto.model import SplatfactoModel, SplatfactoModelConfig
+from nerf2gs_plugin.methods.splatfacto.shared import composite
+
+ZERO_LOG_SCALE = math.log(1e-7)  # the "zero" third axis of a surfel when exported as a 3D Gaussian
+
+
+@dataclass
+class TwoDGSModelConfig(SplatfactoModelConfig):
+    _target: type = field(default_factory=lambda: TwoDGSModel)
+    depth_mode: Literal["median", "expected"] = "median"
+    """Depth output: the median (2DGS default for meshing) or the expected depth."""
+    normal_lambda: float = 0.05
+    normal_start: int = 700
+    """Step from which the normal consistency loss is on (2DGS: 7000 of 30000)."""
+    dist_lambda: float = 0.01
+    dist_start: int = 300
+    """Step from which the depth distortion loss is on (2DGS: 3000 of 30000)."""
+    normals_frame: Literal["camera", "world"] = "camera"
+    """Frame of the rasterizer's rendered normals (converted to world for the viewer)."""
+
+
+class TwoDGSModel(SplatfactoModel):
+    config: TwoDGSModelConfig
+
+    def populate_modules(self, train_data: DataparserOutputs) -> None:
+        super().populate_modules(train_data)
+        # surfels: two tangent scales (the 3DGS init repeats one kNN scale on every axis)
+        self.gauss["scales"] = nn.Parameter(self.gauss["scales"].detach()[:, :2].contiguous())
+
+    def _render(self, camera: Cameras, training: bool) -> dict[str, Tensor]:
+        from nerf2gs_plugin.rendering import rasterize_surfels
+
+        g = self.gauss
+        h, w = int(camera.height[0]), int(camera.width[0])
+        dev = g["means"].device
+        camera = camera.to(dev)
+        bg = self.background(camera, training)
+        if g["means"].shape[0] == 0:
+            zeros = torch.zeros(h, w, 1, device=dev)
+            return {"rgb": (zeros + bg).expand(h, w, 3), "depth": zeros, "accumulation": zeros,
+                    "normals": torch.zeros(h, w, 3, device=dev)}
+        colors = torch.cat([g["features_dc"][:, None, :], g["features_rest"]], dim=1)
+        s2 = torch.exp(g["scales"])
+        scales = torch.cat([s2, torch.zeros_like(s2[:, :1])], dim=1)  # [N,3], zero normal axis
+        viewmats = camera.viewmats()
+        render, alpha, normals, surf_normals, distort, median, meta = rasterize_surfels(
+            g["means"], normalize_quats(g["quats"]), scales, torch.sigmoid(g["opacities"]), colors,
+            viewmats, camera.Ks(), w, h, near_plane=self.config.near_plane, far_plane=self.config.far_plane,
+            sh_degree=self.current_sh_degree, render_mode="RGB+ED", backend=self.config.backend,
+        )
+        grad_key = "gradient_2dgs" if meta.get("gradient_2dgs") is not None else "means2d"
+        if training and meta[grad_key].requires_grad:
+            meta[grad_key].retain_grad()
+            self._meta = {**meta, "means2d": meta[grad_key]}
+        else:
+            self._meta = None
+        alpha = alpha[0]
+        rgb = composite(render[0, ..., :3], alpha, bg).clamp(0.0, 1.0)
+        depth = median[0] if self.config.depth_mode == "median" else render[0, ..., 3:4]
+        out = {"rgb": rgb, "depth": depth, "accumulation": alpha, "background": bg,
+               "rendered_normals": normals[0], "surf_normals": surf_normals[0], "distortion": distort[0]}
+        out["normals"] = self._world_normals(normals[0].detach(), viewmats[0])
+        return out
+
+    def _world_normals(self, n: Tensor, viewmat: Tensor) -> Tensor:
+        """Unit normals in the world frame ``[H,W,3]`` for the viewer."""
+        if self.config.normals_frame == "camera":
+            n = n @ viewmat[:3, :3]  # R_c2w @ n  ==  n^T R_w2c
+        return torch.nn.functional.normalize(n, dim=-1)
+
+    @torch.no_grad()
+    def render_camera(self, camera: Cameras) -> dict[str, Tensor]:
+        out = self._render(camera, training=False)
+        return {k: out[k] for k in ("rgb", "depth", "accumulation", "normals")}
+
+    def get_loss_dict(self, outputs: dict[str, Tensor], batch: dict[str, Any], metrics_dict: dict[str, Tensor]) -> dict[str, Tensor]:
+        losses = super().get_loss_dict(outputs, batch, metrics_dict)
+        step = int(self.step)
+        c = self.config
+        weight = torch.as_tensor(batch.get("weight", 1.0), dtype=outputs["rgb"].dtype, device=outputs["rgb"].device)
+        if c.normal_lambda > 0 and step >= c.normal_start:
+            n = outputs["rendered_normals"]
+            sn = outputs["surf_normals"] * outputs["accumulation"].detach()
+            losses["normal_loss"] = weight * c.normal_lambda * (1.0 - (n * sn).sum(-1)).mean()
+        if c.dist_lambda > 0 and step >= c.dist_start:
+            losses["distortion_loss"] = weight * c.dist_lambda * outputs["distortion"].mean()
+        return losses
+
+    def export_gaussians(self) -> dict[str, Tensor]:
+        out = super().export_gaussians()
+        s = out["log_scales"]
+        out["log_scales"] = torch.cat([s, torch.full_like(s[:, :1], ZERO_LOG_SCALE)], dim=1)
+        return out
