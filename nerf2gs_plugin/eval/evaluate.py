@@ -18,26 +18,35 @@ def _mean_std(values: list[float]) -> tuple[Optional[float], Optional[float]]:
     return float(statistics.fmean(values)), float(statistics.pstdev(values)) if len(values) > 1 else 0.0
 
 
+def timed_render(model, camera) -> tuple[dict, float]:
+    """``model.render_camera(camera)`` and its wall time (synchronised on CUDA)."""
+    cuda = camera.device.type == "cuda"
+    if cuda:
+        torch.cuda.synchronize()
+    t0 = time.perf_counter()
+    out = model.render_camera(camera)
+    if cuda:
+        torch.cuda.synchronize()
+    return out, time.perf_counter() - t0
+
+
 def measure_fps(model, camera, repeats: int = 5, warmup: int = 1) -> float:
     """Median render rate of one camera, warm-up excluded."""
     for _ in range(warmup):
         model.render_camera(camera)
-    times = []
-    for _ in range(repeats):
-        if camera.device.type == "cuda":
-            torch.cuda.synchronize()
-        t0 = time.perf_counter()
-        model.render_camera(camera)
-        if camera.device.type == "cuda":
-            torch.cuda.synchronize()
-        times.append(time.perf_counter() - t0)
+    times = [timed_render(model, camera)[1] for _ in range(max(1, repeats))]
     return 1.0 / statistics.median(times)
 
 
 @torch.no_grad()
 def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images: Optional[int] = None,
                  fps_repeats: int = 5, render_dir: Optional[Path] = None, lpips_model=None) -> dict:
-    """nerfstudio ``ns-eval``-style results for every requested split (all the data has by default)."""
+    """nerfstudio ``ns-eval``-style results for every requested split (all the data has by default).
+
+    Per split: PSNR/SSIM/LPIPS mean and std (LPIPS ``None`` when its weights are missing) and the
+    median render FPS of its images (the run's first render excluded as warm-up); top level: the
+    median FPS of repeated renders of one camera, model size (primitives, parameters, MB of state
+    and of the checkpoint file) and the training time recorded in the checkpoint."""
     from nerf2gs_plugin.eval.figures import save_eval_grid
     from nerf2gs_plugin.eval.metrics import LPIPS, psnr, ssim
 
@@ -45,16 +54,25 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
     model = run.model
     model.eval()
     names = splits or dm.eval_split_names()
+    if not names:
+        from nerf2gs_plugin.errors import DataError
+
+        raise DataError("the dataset has no eval splits (eval_splits in transforms.json or a split file)", dm.data)
     lpips_model = lpips_model if lpips_model is not None else LPIPS.load_default(device=model.device)
     results: dict[str, dict] = {}
-    fps = None
+    fps, fps_resolution = None, None
+    warm = False
     for name in names:
         rows = {"psnr": [], "ssim": [], "lpips": []}
-        shown = []
+        shown, times, resolution = [], [], None
         for i, (camera, batch) in enumerate(dm.eval_images(name)):
             if max_images is not None and i >= max_images:
                 break
-            out = model.render_camera(camera)
+            out, seconds = timed_render(model, camera)
+            if warm:  # the very first render of the run (allocations, JIT, caches) is not timed
+                times.append(seconds)
+            warm = True
+            resolution = [int(camera.height[0]), int(camera.width[0])]
             pred, gt = out["rgb"].clamp(0, 1), batch["image"]
             rows["psnr"].append(float(psnr(pred, gt)))
             rows["ssim"].append(float(ssim(pred, gt)))
@@ -65,7 +83,9 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
         if fps is None:
             camera, _ = next(iter(dm.eval_images(name)))
             fps = measure_fps(model, camera, repeats=fps_repeats)
-        entry: dict = {"num_images": len(rows["psnr"])}
+            fps_resolution = [int(camera.height[0]), int(camera.width[0])]
+        entry: dict = {"num_images": len(rows["psnr"]), "resolution": resolution,
+                       "fps": 1.0 / statistics.median(times) if times else None}
         for metric, values in rows.items():
             mean, std = _mean_std(values)
             entry[metric], entry[f"{metric}_std"] = mean, std
@@ -79,7 +99,8 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
         "step": run.step,
         "results": results,
         "fps": fps,
-        "size": model.size_report(),
+        "fps_resolution": fps_resolution,
+        "size": {**model.size_report(), "checkpoint_megabytes": Path(run.checkpoint).stat().st_size / 2**20},
         "train_seconds": run.train_seconds,
         "lpips_available": lpips_model is not None,
         "device": str(model.device),

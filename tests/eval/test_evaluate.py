@@ -1,0 +1,84 @@
+"""ns2gs-eval on a tiny run of the example plugin method: JSON schema, grids, LPIPS present and
+missing, bad input."""
+
+import dataclasses
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from nerf2gs_plugin.engine.reference import load_run
+from nerf2gs_plugin.engine.trainer import Trainer
+from nerf2gs_plugin.eval import lpips as lpips_mod
+from nerf2gs_plugin.eval.evaluate import evaluate_run
+from nerf2gs_plugin.eval.metrics import LPIPS
+from nerf2gs_plugin.registry import get_method
+
+BIN = Path(sys.executable).parent
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tiny_scene, tmp_path_factory):
+    cfg = get_method("voxel-grid").config
+    cfg = dataclasses.replace(cfg, data=tiny_scene, output_dir=tmp_path_factory.mktemp("runs"), max_num_iterations=30,
+                              steps_per_save=30, steps_per_eval_image=0, progress=False, timestamp="run")
+    trainer = Trainer(cfg)
+    trainer.setup()
+    return trainer.train()
+
+
+def _check_schema(res: dict, splits: list[str], lpips: bool) -> None:
+    assert {"experiment_name", "method_name", "checkpoint", "results", "fps", "size", "train_seconds"} <= set(res)
+    assert res["method_name"] == "voxel-grid" and res["checkpoint"].endswith(".ckpt") and Path(res["checkpoint"]).is_file()
+    assert list(res["results"]) == splits
+    for split in splits:
+        r = res["results"][split]
+        assert r["num_images"] == 2 and r["resolution"] == [24, 32]
+        assert 5 < r["psnr"] < 60 and 0 <= r["psnr_std"] < 20
+        assert -1 <= r["ssim"] <= 1 and r["ssim_std"] >= 0
+        if lpips:
+            assert 0 < r["lpips"] < 1.5 and r["lpips_std"] >= 0
+        else:
+            assert r["lpips"] is None and r["lpips_std"] is None  # missing, never a number
+    assert res["lpips_available"] is lpips
+    assert res["fps"] > 0 and math.isfinite(res["fps"]) and res["fps_resolution"] == [24, 32]
+    size = res["size"]
+    assert size["parameters"] > 48**3 * 4 - 1 and size["megabytes"] > 1.0 and size["checkpoint_megabytes"] > 1.0
+    assert res["train_seconds"] > 0
+
+
+def test_evaluate_run_schema_grids_and_lpips(tiny_run, tmp_path):
+    run = load_run(tiny_run)
+    res = evaluate_run(run, render_dir=tmp_path / "grids", fps_repeats=2)
+    _check_schema(res, ["street", "bev_1"], lpips=LPIPS.available())
+    assert res["experiment_name"] == Path(run.config.data).name
+    for split in ("street", "bev_1"):
+        png = tmp_path / "grids" / f"{split}.png"
+        assert png.is_file() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    json.dumps(res, allow_nan=False)  # strict JSON: no NaN/inf anywhere
+    # the render is not the ground truth: worse than a perfect score, and PSNR agrees with a direct computation
+    assert res["results"]["street"]["psnr"] < 60 and res["results"]["street"]["ssim"] < 0.999
+
+
+def test_cli_writes_json_and_reports_missing_lpips(tiny_run, tmp_path, monkeypatch, capsys):
+    from nerf2gs_plugin.cli import eval as eval_cli
+
+    monkeypatch.delenv(lpips_mod.ENV_VAR, raising=False)
+    monkeypatch.setattr(lpips_mod.importlib.util, "find_spec", lambda name: None)
+    out = tmp_path / "out.json"
+    monkeypatch.setattr(sys, "argv", ["ns2gs-eval", str(tiny_run), "--split", "bev_1", "--output", str(out),
+                                      "--render-dir", str(tmp_path / "r")])
+    eval_cli.main()
+    res = json.loads(out.read_text())
+    _check_schema(res, ["bev_1"], lpips=False)
+    assert (tmp_path / "r" / "bev_1.png").is_file() and not (tmp_path / "r" / "street.png").exists()
+    text = capsys.readouterr().out
+    assert "n/a" in text and "LPIPS n/a" in text
+
+
+def test_cli_bad_split_is_one_line(tiny_run):
+    p = subprocess.run([str(BIN / "ns2gs-eval"), str(tiny_run), "--split", "street,nope"], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2 and "no eval split 'nope'" in p.stderr and "street, bev_1" in p.stderr and "Traceback" not in p.stderr
