@@ -15,7 +15,7 @@ def train(config: TrainerConfig) -> None:
     trainer = Trainer(config)
     trainer.setup()
     if config.viewer:
-        from viewer.server import attach_training_viewer
+        from nerf2gs_plugin.viewer.server import attach_training_viewer
 
         attach_training_viewer(trainer)
     try:

@@ -1,0 +1,150 @@
+"""What the viewer draws besides the render: output colouring, camera frustums and thumbnails,
+and the bird's-eye additional views of an augmented run (read from the augment cache manifest)."""
+
+from __future__ import annotations
+
+import functools
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from nerf2gs_plugin.cameras import Cameras
+
+# Colour code of the paper's Fig. 1: red input views, green additional views; eval views as in its
+# dataset figure (yellow bird's-eye evaluation views).
+INPUT_VIEW_COLOR = (220, 50, 40)
+EXTRA_VIEW_COLOR = (40, 175, 70)
+EVAL_COLORS = {"street": (60, 130, 235), "bev_1": (235, 200, 30), "bev_2": (245, 140, 20)}
+OTHER_EVAL_COLOR = (150, 150, 160)
+RENDER_MODES = ("rgb", "depth", "accumulation", "normals")
+
+
+def available_modes(outputs: dict[str, Tensor]) -> list[str]:
+    """The render modes a method's ``render_camera`` output supports, in menu order."""
+    return [m for m in RENDER_MODES if m in outputs]
+
+
+@functools.lru_cache(maxsize=1)
+def _turbo_lut() -> np.ndarray:
+    import matplotlib
+
+    return (matplotlib.colormaps["turbo"](np.linspace(0.0, 1.0, 256))[:, :3] * 255 + 0.5).astype(np.uint8)
+
+
+def _to_uint8(img: Tensor) -> np.ndarray:
+    return (img.detach().float().clamp(0, 1).cpu().numpy() * 255 + 0.5).astype(np.uint8)
+
+
+def colorize(outputs: dict[str, Tensor], mode: str) -> np.ndarray:
+    """One render output as a ``uint8 [H, W, 3]`` image: depth through the turbo colour map
+    (2-98 percentile range of covered pixels), accumulation in grey, normals as ``(n + 1) / 2``."""
+    if mode not in outputs:
+        raise KeyError(f"render mode '{mode}' not in the outputs ({', '.join(outputs)})")
+    acc = outputs.get("accumulation")
+    covered = (acc[..., 0] > 0.5) if acc is not None else None
+    if mode == "rgb":
+        return _to_uint8(outputs["rgb"][..., :3])
+    if mode == "accumulation":
+        return _to_uint8(outputs["accumulation"][..., :1].expand(*outputs["accumulation"].shape[:2], 3))
+    if mode == "normals":
+        n = outputs["normals"][..., :3].float()
+        img = (n * 0.5 + 0.5).clamp(0, 1)
+        if covered is not None:
+            img = torch.where(covered[..., None], img, torch.zeros_like(img))
+        return _to_uint8(img)
+    d = outputs["depth"][..., 0].detach().float().cpu()
+    valid = torch.isfinite(d) & (d > 0)
+    if covered is not None:
+        valid &= covered.cpu()
+    if not bool(valid.any()):
+        return np.zeros((*d.shape, 3), np.uint8)
+    vals = d[valid]
+    if vals.numel() > 100_000:
+        vals = vals[torch.randperm(vals.numel(), generator=torch.Generator().manual_seed(0))[:100_000]]
+    lo, hi = torch.quantile(vals, torch.tensor([0.02, 0.98])).tolist()
+    t = ((d - lo) / max(hi - lo, 1e-8)).clamp(0, 1)
+    idx = (t * 255).round().long().numpy()
+    img = _turbo_lut()[idx]
+    img[~valid.numpy()] = 0
+    return img
+
+
+def thumbnail(image: Tensor, max_side: int) -> np.ndarray:
+    """``[H, W, 3]`` float image -> ``uint8`` with its long side at most ``max_side`` (area filter)."""
+    h, w = image.shape[:2]
+    s = min(1.0, max_side / max(h, w))
+    if s < 1.0:
+        size = (max(1, round(h * s)), max(1, round(w * s)))
+        image = F.interpolate(image.permute(2, 0, 1)[None].float(), size=size, mode="area")[0].permute(1, 2, 0)
+    return _to_uint8(image)
+
+
+def frustum_scale(centers: Tensor) -> float:
+    """A frustum size that neither hides nor clutters: a third of the median nearest-neighbour
+    spacing of the cameras, between 1% and 5% of their extent."""
+    c = centers.detach().float().cpu()
+    if len(c) < 2:
+        return 0.1
+    d = torch.cdist(c, c)
+    d.fill_diagonal_(float("inf"))
+    nn = d.min(dim=1).values
+    extent = float((c.max(0).values - c.min(0).values).norm())
+    return max(min(float(nn[torch.isfinite(nn)].median()) / 3.0, 0.05 * extent), 0.01 * extent, 1e-3)
+
+
+@dataclass
+class ExtraViews:
+    """The bird's-eye additional views of an augmented run."""
+
+    cameras: Cameras
+    thumbnails: list[Optional[np.ndarray]]
+    source: str  # the manifest they were read from, or how they were computed
+
+
+def find_extra_views(config, train_data, train_cameras: Cameras, thumb_side: int = 96) -> Optional[ExtraViews]:
+    """The additional views a run was trained with (``None`` for a run without ``--augment-from``).
+
+    Read from the reference run's augment cache manifest whose dataset and geometry (``delta_h``,
+    ``theta_pitch``, ``every_n``) match the run's config, with the rendered views as thumbnails;
+    when the cache is gone, recomputed from the config exactly as the augmentation does.
+    """
+    from nerf2gs_plugin.datamanagers.augmented import _load_png, bev_cameras
+    from nerf2gs_plugin.engine.checkpoints import dataset_fingerprint, resolve_checkpoint
+    from nerf2gs_plugin.errors import UserError
+
+    aug = config.augment
+    if config.augment_from is None or not aug.extra_views:
+        return None
+    every_n = max(int(aug.every_n), 1)
+    sub = train_cameras[torch.arange(0, len(train_cameras), every_n)]
+    try:
+        ref_dir, _ = resolve_checkpoint(Path(config.augment_from))
+    except UserError:
+        ref_dir = None
+    if ref_dir is not None:
+        fingerprint = dataset_fingerprint(train_data.image_filenames)
+        manifests = sorted(Path(ref_dir).glob("augment_cache/*/manifest.json"), key=lambda p: p.stat().st_mtime, reverse=True)
+        for path in manifests:
+            try:
+                doc = json.loads(path.read_text())
+                cfg = doc["config"]
+                poses = torch.tensor(doc["extra_camera_to_worlds"], dtype=torch.float32)
+            except (OSError, ValueError, KeyError, TypeError):
+                continue
+            same = (doc.get("dataset") == fingerprint and float(cfg.get("delta_h", -1)) == float(aug.delta_h)
+                    and float(cfg.get("theta_pitch", -1)) == float(aug.theta_pitch) and int(cfg.get("every_n", 1)) == every_n)
+            if not same or poses.ndim != 3 or len(poses) != len(sub):
+                continue
+            thumbs: list[Optional[np.ndarray]] = []
+            for j in range(len(poses)):
+                png = path.parent / "extra" / f"{j:05d}.png"
+                thumbs.append(thumbnail(_load_png(png), thumb_side) if png.is_file() else None)
+            return ExtraViews(sub.with_poses(poses.to(sub.device)), thumbs, str(path))
+    cams = bev_cameras(train_cameras, train_data.up, train_data.metres_to_world(aug.delta_h), aug.theta_pitch, every_n)
+    return ExtraViews(cams, [None] * len(cams), "recomputed from the run's --augment config (no cache manifest found)")
