@@ -1,0 +1,174 @@
+"""The 3DGS rasterization entry: :func:`rasterize_gaussians` (gsplat-style), three backends behind it.
+
+Pipeline (``cpu`` and ``torch`` backends): EWA projection and SH colours in torch (autograd) ->
+tile binning (vectorised torch, no gradients) -> per-tile front-to-back alpha compositing, either
+by the C++/OpenMP kernel (``csrc/rasterize_gaussians.cpp``, forward and backward wrapped in an
+autograd Function) or by the pure-torch reference (:mod:`.composite_torch`). On CUDA with gsplat
+installed the whole call goes to ``gsplat.rasterization`` and its outputs are mapped to the same
+shapes and meta keys.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Optional
+
+import torch
+from torch import Tensor
+
+from nerf2gs_plugin.errors import ConfigError
+from nerf2gs_plugin.rendering.backend import load_extension, resolve_backend
+from nerf2gs_plugin.rendering.composite_torch import composite_torch
+from nerf2gs_plugin.rendering.projection import camera_centers, project_gaussians
+from nerf2gs_plugin.rendering.sh import eval_sh
+from nerf2gs_plugin.rendering.tiles import bin_gaussians
+
+EXT_NAME = "nerf2gs_rasterize_gaussians"
+EXT_SOURCES = ["rasterize_gaussians.cpp"]
+RENDER_MODES = ("RGB", "D", "ED", "RGB+D", "RGB+ED")
+RASTERIZE_MODES = ("classic", "antialiased")
+
+
+def load_kernel() -> Optional[Any]:
+    """The compiled compositing kernel (built on first use), or None when it cannot be built."""
+    return load_extension(EXT_NAME, EXT_SOURCES)
+
+
+class _CompositeCPU(torch.autograd.Function):
+    """C++ tile compositing; gradients wrt means2d, conics, colours/features and opacities."""
+
+    @staticmethod
+    def forward(ctx, means2d, conics, colors, opacities, offsets, ids, n_cams, width, height, tile_size):  # type: ignore[override]
+        ext = load_kernel()
+        render, alpha, last, median = ext.forward(means2d, conics, colors, opacities, offsets, ids, n_cams, height, width, tile_size)
+        ctx.save_for_backward(means2d, conics, colors, opacities, offsets, ids, alpha, last)
+        ctx.dims = (n_cams, height, width, tile_size)
+        ctx.mark_non_differentiable(median)
+        return render, alpha, median
+
+    @staticmethod
+    def backward(ctx, v_render, v_alpha, _v_median):  # type: ignore[override]
+        means2d, conics, colors, opacities, offsets, ids, alpha, last = ctx.saved_tensors
+        v_m, v_c, v_col, v_o = load_kernel().backward(
+            means2d, conics, colors, opacities, offsets, ids, alpha, last,
+            v_render.contiguous(), v_alpha.contiguous(), *ctx.dims,
+        )
+        return v_m, v_c, v_col, v_o, None, None, None, None, None, None
+
+
+def composite(
+    means2d: Tensor, conics: Tensor, colors: Tensor, opacities: Tensor, tile_offsets: Tensor, flat_ids: Tensor,
+    n_cams: int, width: int, height: int, tile_size: int, backend: str,
+) -> tuple[Tensor, Tensor, Tensor]:
+    """Composite flattened pairs (``[CN, 2]``, ``[CN, 3]``, ``[CN, D]``, ``[CN]``) with ``backend``
+    ``"cpu"`` or ``"torch"`` -> render ``[C,H,W,D]``, alpha ``[C,H,W]``, median ids ``[C,H,W]``."""
+    if backend == "cpu":
+        return _CompositeCPU.apply(means2d.contiguous(), conics.contiguous(), colors.contiguous(), opacities.contiguous(),
+                                   tile_offsets, flat_ids, n_cams, width, height, tile_size)
+    return composite_torch(means2d, conics, colors, opacities, tile_offsets, flat_ids, n_cams, width, height, tile_size)
+
+
+def rasterize_gaussians(
+    means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, colors: Tensor,
+    viewmats: Tensor, Ks: Tensor, width: int, height: int,
+    near_plane: float = 0.01, far_plane: float = 1e10, sh_degree: Optional[int] = None,
+    backgrounds: Optional[Tensor] = None, render_mode: str = "RGB", rasterize_mode: str = "classic",
+    backend: str = "auto", tile_size: int = 16, return_median: bool = False,
+) -> tuple[Tensor, Tensor, dict[str, Any]]:
+    """Render ``N`` 3D Gaussians into ``C`` pinhole cameras (differentiable).
+
+    Args:
+        means: ``[N, 3]`` world positions.
+        quats: ``[N, 4]`` rotations, wxyz, normalised.
+        scales: ``[N, 3]`` standard deviations along the rotated axes (activated, > 0).
+        opacities: ``[N]`` in [0, 1].
+        colors: with ``sh_degree`` set, SH coefficients ``[N, K, 3]`` (``K >= (sh_degree+1)^2``,
+            only the first ``(sh_degree+1)^2`` used); else plain features ``[N, D]`` or ``[C, N, D]``.
+        viewmats: ``[C, 4, 4]`` world-to-camera, OpenCV axes (x right, y down, z forward).
+        Ks: ``[C, 3, 3]`` intrinsics.
+        width, height: image size in pixels.
+        near_plane, far_plane: camera-space z range; Gaussians outside contribute nothing.
+        sh_degree: SH degree to evaluate (0-3), or None for plain features.
+        backgrounds: ``[C, D]`` colour composited behind (colour channels only).
+        render_mode: ``"RGB"`` (features), ``"D"`` (accumulated depth sum w z), ``"ED"`` (expected
+            depth sum w z / alpha), ``"RGB+D"``, ``"RGB+ED"`` (depth as the last channel).
+        rasterize_mode: ``"classic"`` or ``"antialiased"`` (opacities times the eps2d compensation).
+        backend: ``"auto"``, ``"cpu"``, ``"torch"`` or ``"gsplat"`` (see :mod:`.backend`).
+        tile_size: tile edge in pixels.
+        return_median: also return ``meta["median_depth"]`` ``[C, H, W, 1]``: the depth of the last
+            Gaussian composited while the transmittance was above 0.5 (0 where none).
+    Returns:
+        render ``[C, H, W, D]`` (``D+1`` for ``RGB+D``/``RGB+ED``, 1 for ``D``/``ED``), alpha
+        ``[C, H, W, 1]``, and meta with ``means2d [C, N, 2]`` (pixels; a non-leaf tensor in the graph:
+        ``retain_grad()`` it for densification), ``radii [C, N]`` int32 (0 = not visible),
+        ``depths [C, N]``, ``conics [C, N, 3]``, ``opacities [C, N]`` (as composited),
+        ``tile_offsets``, ``flat_ids``, ``width``, ``height``, ``tile_size``, ``n_cameras``,
+        ``backend`` (the one that ran) and, if asked, ``median_depth``.
+    """
+    if render_mode not in RENDER_MODES:
+        raise ConfigError(f"unknown render_mode {render_mode!r}; choose one of {', '.join(RENDER_MODES)}")
+    if rasterize_mode not in RASTERIZE_MODES:
+        raise ConfigError(f"unknown rasterize_mode {rasterize_mode!r}; choose one of {', '.join(RASTERIZE_MODES)}")
+    n, n_cams = means.shape[0], viewmats.shape[0]
+    if quats.shape != (n, 4) or scales.shape != (n, 3) or opacities.shape != (n,) or Ks.shape != (n_cams, 3, 3):
+        raise ValueError(f"shape mismatch: means {tuple(means.shape)}, quats {tuple(quats.shape)}, scales "
+                         f"{tuple(scales.shape)}, opacities {tuple(opacities.shape)}, Ks {tuple(Ks.shape)}")
+    chosen = resolve_backend(backend, means.device.type, EXT_NAME, EXT_SOURCES)
+    if chosen == "gsplat":
+        from nerf2gs_plugin.rendering.gsplat_backend import rasterize_gsplat  # noqa: PLC0415
+
+        return rasterize_gsplat(means, quats, scales, opacities, colors, viewmats, Ks, width, height, near_plane,
+                                far_plane, sh_degree, backgrounds, render_mode, rasterize_mode, tile_size, return_median)
+
+    proj = project_gaussians(means, quats, scales, viewmats, Ks, width, height, near_plane, far_plane)
+    opac = opacities[None].expand(n_cams, n)
+    if rasterize_mode == "antialiased":
+        opac = opac * proj.compensations
+
+    feats = _features(colors, sh_degree, means, viewmats, n_cams, render_mode)  # [C, N, D'] or None
+    depth_ch = proj.depths[..., None]
+    if render_mode in ("D", "ED"):
+        feats = depth_ch
+    elif render_mode in ("RGB+D", "RGB+ED"):
+        feats = torch.cat([feats, depth_ch], dim=-1)
+    n_color = feats.shape[-1] - (1 if render_mode != "RGB" else 0)
+
+    offsets, ids = bin_gaussians(proj.means2d.detach(), proj.cov2d.detach(), opac.detach(), proj.depths.detach(),
+                                 proj.radii, width, height, tile_size)
+    render, alpha, median_ids = composite(
+        proj.means2d.reshape(-1, 2), proj.conics.reshape(-1, 3), feats.reshape(n_cams * n, feats.shape[-1]), opac.reshape(-1),
+        offsets, ids, n_cams, width, height, tile_size, chosen,
+    )
+    alpha = alpha[..., None]  # [C, H, W, 1]
+    if render_mode in ("ED", "RGB+ED"):
+        render = torch.cat([render[..., :-1], render[..., -1:] / alpha.clamp_min(1e-10)], dim=-1)
+    if backgrounds is not None and n_color > 0:
+        bg = backgrounds.reshape(n_cams, 1, 1, -1)
+        if bg.shape[-1] != n_color:
+            raise ValueError(f"backgrounds have {bg.shape[-1]} channels, the render has {n_color}")
+        render = torch.cat([render[..., :n_color] + (1.0 - alpha) * bg, render[..., n_color:]], dim=-1)
+    meta: dict[str, Any] = {
+        "means2d": proj.means2d, "radii": proj.radii, "depths": proj.depths, "conics": proj.conics,
+        "opacities": opac, "tile_offsets": offsets, "flat_ids": ids, "width": width, "height": height,
+        "tile_size": tile_size, "n_cameras": n_cams, "backend": chosen,
+    }
+    if return_median:
+        flat_depth = torch.cat([proj.depths.reshape(-1), proj.depths.new_zeros(1)])  # index -1 -> 0
+        meta["median_depth"] = flat_depth[median_ids][..., None]
+    return render, alpha, meta
+
+
+def _features(colors: Tensor, sh_degree: Optional[int], means: Tensor, viewmats: Tensor, n_cams: int, render_mode: str) -> Tensor:
+    """Per camera and Gaussian features ``[C, N, D]``: SH evaluated along mean - camera centre, or as given."""
+    n = means.shape[0]
+    if render_mode in ("D", "ED"):
+        return means.new_zeros(n_cams, n, 0)
+    if sh_degree is not None:
+        if colors.dim() != 3 or colors.shape[0] != n or colors.shape[-1] != 3:
+            raise ValueError(f"SH colours must be [N, K, 3], got {tuple(colors.shape)}")
+        dirs = means[None] - camera_centers(viewmats)[:, None]  # [C, N, 3]
+        return eval_sh(sh_degree, colors, dirs)
+    if colors.dim() == 2 and colors.shape[0] == n:
+        return colors[None].expand(n_cams, n, colors.shape[-1])
+    if colors.dim() == 3 and colors.shape[:2] == (n_cams, n):
+        return colors
+    raise ValueError(f"colours must be [N, D] or [C, N, D] (or [N, K, 3] with sh_degree), got {tuple(colors.shape)}")
