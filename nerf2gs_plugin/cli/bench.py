@@ -1,4 +1,4 @@
-"""ns2gs-bench quick | paper-table | ablation | raster | field
+"""ns2gs-bench quick | paper-table | ablation | speed-quality | stability | model-size | raster | field
 
 Results (JSON + Markdown + PNG, with the machine) go to benchmarks/results/; trained runs are kept
 under benchmarks/runs/ and reused when nothing that matters changed.
@@ -92,6 +92,61 @@ class Ablation:
         run_named_bench("ablation", plan, data, self.runs, self.out, f"Ablation, synthetic street ({self.scale} scale)", compare=compare)
 
 
+@dataclass
+class SpeedQuality:
+    """Render FPS (log) and training time against BEV PSNR for every run in the paper-table and
+    ablation results, Pareto fronts marked. Reads results; trains nothing."""
+
+    results: Path = RESULTS
+    """Where paper_table.json / ablation.json are."""
+    sources: tuple[str, ...] = ()
+    """Results files to read (default: paper_table and ablation, else quick)."""
+    out: Path = RESULTS
+
+    def main(self) -> None:
+        from nerf2gs_plugin.eval.bench_speed_quality import run
+
+        run(self.results, self.out, self.sources or None)
+
+
+@dataclass
+class Stability:
+    """Each method under stress: 3 seeds, pose noise (0.5 deg / 5 cm), half the views, twice the
+    transients, no masks, random init; failures (NaN, divergence, PSNR collapse) counted."""
+
+    data: Optional[Path] = None
+    scale: Literal["quick", "default"] = "quick"
+    methods: tuple[str, ...] = ("streetnerf", "splatfacto", "scaffold-gs", "2dgs")
+    out: Path = RESULTS
+    runs: Path = RUNS
+
+    def main(self) -> None:
+        from nerf2gs_plugin.eval.bench_stability import run, stability_plan
+
+        data = ensure_street(self.data, self.runs)
+        run(stability_plan(self.scale, self.methods), data, self.runs, self.out, self.scale, synthetic=self.data is None)
+
+
+@dataclass
+class ModelSize:
+    """Quality against primitives for each splatting method (densification budget and threshold
+    swept); the smallest model within 0.5 dB of the best."""
+
+    data: Optional[Path] = None
+    scale: Literal["quick", "default"] = "quick"
+    methods: tuple[str, ...] = ("splatfacto", "scaffold-gs", "2dgs")
+    augment: bool = False
+    """Train every run on StreetNeRF's views (--augment-from)."""
+    out: Path = RESULTS
+    runs: Path = RUNS
+
+    def main(self) -> None:
+        from nerf2gs_plugin.eval.bench_size import run, size_plan
+
+        data = ensure_street(self.data, self.runs)
+        run(size_plan(self.scale, self.methods, self.augment), data, self.runs, self.out, self.scale)
+
+
 def bench_enhancer(data: Path, runs_root: Path, scale: str) -> str:
     """Train (once) the built-in enhancer on this dataset; returns the --augment.enhancer spec."""
     from nerf2gs_plugin.enhance.bench import ensure_bench_enhancer
@@ -127,7 +182,8 @@ class Field:
 
 def main() -> None:
     cmd = tyro.extras.subcommand_cli_from_dict(
-        {"quick": Quick(), "paper-table": PaperTable(), "ablation": Ablation(), "raster": Raster(), "field": Field()},
+        {"quick": Quick, "paper-table": PaperTable, "ablation": Ablation, "speed-quality": SpeedQuality,
+         "stability": Stability, "model-size": ModelSize, "raster": Raster, "field": Field},
         description=__doc__,
     )
     cmd.main()

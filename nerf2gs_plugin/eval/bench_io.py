@@ -1,0 +1,141 @@
+"""What the stability, model-size and speed-quality benches share: a run-and-evaluate step that
+records failures instead of aborting the bench, a log file per bench, and the JSON + Markdown
+output with the machine line."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+from nerf2gs_plugin.engine.config import atomic_write_text
+from nerf2gs_plugin.eval.bench_runs import RunSpec, run_key, train_or_reuse
+from nerf2gs_plugin.eval.machine import machine_info, machine_line
+
+EVAL_SPLITS = ("street", "bev_1", "bev_2")
+
+
+def fmt(value: Optional[float], digits: int = 2) -> str:
+    """A table cell: 'n/a' for missing or non-finite values, never a made-up number."""
+    if value is None or not isinstance(value, (int, float)) or not math.isfinite(value):
+        return "n/a"
+    return f"{value:.{digits}f}"
+
+
+def mean_psnr(result: dict, splits: tuple[str, ...]) -> Optional[float]:
+    """Mean PSNR over those of ``splits`` the result has (None when it has none)."""
+    vals = [result.get("results", {}).get(s, {}).get("psnr") for s in splits]
+    vals = [v for v in vals if isinstance(v, (int, float))]
+    return sum(vals) / len(vals) if vals else None
+
+
+def write_bench_files(out_dir: Path, name: str, title: str, payload: dict, md_body: str,
+                      machine: Optional[dict] = None) -> str:
+    """``<name>.json`` (payload + machine) and ``<name>.md`` (title, machine line, body)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    info = machine or machine_info()
+    md = f"# {title}\n\nMachine: {machine_line(info)}\n\n{md_body.rstrip()}\n"
+    atomic_write_text(out_dir / f"{name}.json", json.dumps({"title": title, "machine": info, **payload}, indent=1, default=str))
+    atomic_write_text(out_dir / f"{name}.md", md)
+    return md
+
+
+class BenchLog:
+    """Prints and appends to ``<runs_root>/logs/<bench>.log`` (kept across runs of the bench)."""
+
+    def __init__(self, runs_root: Path, bench: str, echo: Callable[[str], None] = print) -> None:
+        self.path = Path(runs_root) / "logs" / f"{bench}.log"
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.echo = echo
+
+    def __call__(self, line: str) -> None:
+        with open(self.path, "a") as f:
+            f.write(f"{time.strftime('%Y-%m-%d %H:%M:%S')} {line}\n")
+        self.echo(line)
+
+
+@dataclass
+class Outcome:
+    """One run of a bench: its eval result, or the error that stopped it."""
+
+    label: str
+    result: Optional[dict] = None
+    error: Optional[str] = None
+    run_dir: Optional[str] = None
+
+
+class BenchRunner:
+    """Train-or-reuse then evaluate (cached in ``bench_eval.json``, as the paper-table bench does);
+    a user error (NaN/inf divergence, bad data) or a runtime error becomes an :class:`Outcome`
+    with ``error`` set, and the bench goes on."""
+
+    def __init__(self, runs_root: Path, log: Callable[[str], None] = print, device: str = "auto") -> None:
+        from nerf2gs_plugin.engine.trainer import pick_device
+
+        self.runs_root = Path(runs_root)
+        self.log = log
+        self.device = pick_device(device)
+        self._lpips: Any = None
+        self._fingerprints: dict[str, str] = {}
+
+    def fingerprint(self, data: Path) -> str:
+        from nerf2gs_plugin.data import parse_dataset
+        from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
+
+        key = str(Path(data).resolve())
+        if key not in self._fingerprints:
+            self._fingerprints[key] = dataset_fingerprint(parse_dataset(data, "train").image_filenames)
+        return self._fingerprints[key]
+
+    def lpips(self):
+        if self._lpips is None:
+            from nerf2gs_plugin.eval.metrics import LPIPS
+
+            self._lpips = LPIPS.load_default(device=self.device) or False
+        return self._lpips or None
+
+    def run(self, spec: RunSpec, data: Path, reference: Optional[tuple[Path, str]] = None) -> Outcome:
+        from nerf2gs_plugin.engine.reference import load_run
+        from nerf2gs_plugin.errors import UserError
+        from nerf2gs_plugin.eval.evaluate import evaluate_run
+
+        key = run_key(self.fingerprint(data), spec, reference[1] if reference else None)
+        marker = self.runs_root / "failures" / f"{Path(data).name}-{spec.method}-{key}.json"
+        if marker.is_file():  # a failed run fails again the same way: do not retrain it on every rerun
+            error = json.loads(marker.read_text())["error"]
+            self.log(f"[bench] {spec.label}: known failure ({error}); delete {marker} to retry")
+            return Outcome(spec.label, error=error)
+        try:
+            run_dir, _ = train_or_reuse(spec, data, self.runs_root, self.fingerprint(data), reference=reference,
+                                        progress=False, log=self.log)
+            eval_path = run_dir / "bench_eval.json"
+            if eval_path.is_file():
+                res = json.loads(eval_path.read_text())
+            else:
+                run = load_run(run_dir, device=self.device)
+                names = [s for s in EVAL_SPLITS if s in run.pipeline.datamanager.eval_split_names()] or None
+                res = evaluate_run(run, names, render_dir=run_dir / "eval_renders", lpips_model=self.lpips())
+                atomic_write_text(eval_path, json.dumps(res, indent=1))
+        except (UserError, RuntimeError, ValueError, FloatingPointError) as e:
+            msg = str(e).splitlines()[0][:300] if str(e) else type(e).__name__
+            error = f"{type(e).__name__}: {msg}"
+            self.log(f"[bench] {spec.label} FAILED: {error}")
+            marker.parent.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(marker, json.dumps({"label": spec.label, "error": error}))
+            return Outcome(spec.label, error=error)
+        res.update(label=spec.label, target=spec.method, run_dir=str(run_dir))
+        return Outcome(spec.label, result=res, run_dir=str(run_dir))
+
+
+def progress_log(progress, log_file: BenchLog) -> Callable[[str], None]:
+    """Log lines printed above a running rich progress bar."""
+
+    def echo(line: str) -> None:
+        progress.console.print(line, markup=False, highlight=False)
+
+    log_file.echo = echo
+    return log_file

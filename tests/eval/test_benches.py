@@ -1,0 +1,160 @@
+"""speed-quality, stability and model-size benches: the pure parts (Pareto fronts, plans,
+outcome classification, picks, tables) and tiny end-to-end runs on the example plugin method."""
+
+import json
+import math
+
+import pytest
+
+from nerf2gs_plugin.engine.config import apply_plain
+from nerf2gs_plugin.errors import ConfigError, DataError
+from nerf2gs_plugin.eval import bench_size, bench_speed_quality, bench_stability
+from nerf2gs_plugin.eval.bench_runs import RunSpec
+from nerf2gs_plugin.eval.bench_size import size_plan, smallest_within
+from nerf2gs_plugin.eval.bench_speed_quality import collect_points, pareto_front
+from nerf2gs_plugin.eval.bench_stability import StressCase, classify, stability_plan, summarize
+from nerf2gs_plugin.eval.perturb import Perturbation
+from nerf2gs_plugin.registry import get_method
+
+
+def test_pareto_front():
+    xs = [1.0, 2.0, 3.0, 2.5, 0.5, float("nan")]
+    ys = [20.0, 19.0, 15.0, 14.0, 21.0, 30.0]
+    assert pareto_front(xs, ys) == [4, 0, 1, 2]  # (2.5, 14) is dominated by (3, 15); NaN never on it
+    # lower x better (training time): only points nothing faster-and-better beats
+    assert pareto_front([10.0, 20.0, 30.0, 5.0], [20.0, 25.0, 24.0, 10.0], x_higher=False) == [3, 0, 1]
+    assert pareto_front([1.0, 1.0], [5.0, 5.0]) == [0, 1]  # ties dominate nobody
+    assert pareto_front([], []) == []
+
+
+def _result(label, target, fps, bev, street, secs, prims, run_dir):
+    return {"label": label, "target": target, "fps": fps, "train_seconds": secs, "size": {"primitives": prims}, "run_dir": run_dir,
+            "results": {"street": {"psnr": street}, "bev_1": {"psnr": bev - 0.5}, "bev_2": {"psnr": bev + 0.5}}}
+
+
+def test_speed_quality_reads_results_and_writes_outputs(tmp_path):
+    res = tmp_path / "results"
+    res.mkdir()
+    with pytest.raises(DataError, match="run `ns2gs-bench paper-table` first"):
+        collect_points(res)
+    table = {"StreetNeRF": _result("StreetNeRF", "streetnerf", 0.1, 22.0, 23.0, 900, 0, "/r/nerf"),
+             "splatfacto": _result("splatfacto", "splatfacto", 40.0, 17.0, 22.0, 300, 20000, "/r/sf"),
+             "splatfacto + NeRF views": _result("splatfacto + NeRF views", "splatfacto", 35.0, 21.0, 22.5, 350, 30000, "/r/sfa")}
+    ablation = {"StreetNeRF": table["StreetNeRF"], "StreetNeRF w/o sky": _result("StreetNeRF w/o sky", "streetnerf", 0.1, 20.0, 21.0, 800, 0, "/r/ns")}
+    (res / "paper_table.json").write_text(json.dumps({"machine": {"cpu": "x", "cores": 2, "torch": "t"}, "results": table}))
+    (res / "ablation.json").write_text(json.dumps({"machine": {"cpu": "x", "cores": 2, "torch": "t"}, "results": ablation}))
+    points, machines = collect_points(res)
+    assert [p["label"] for p in points] == ["StreetNeRF", "splatfacto", "splatfacto + NeRF views", "StreetNeRF w/o sky"]
+    assert points[0]["source"] == "paper_table, ablation" and points[0]["bev_psnr"] == pytest.approx(22.0)
+    payload = bench_speed_quality.run(res, tmp_path / "out")
+    assert payload["front_fps"] == ["StreetNeRF", "splatfacto + NeRF views", "splatfacto"]
+    assert payload["front_train_time"] == ["splatfacto", "splatfacto + NeRF views", "StreetNeRF"]
+    md = (tmp_path / "out" / "speed_quality.md").read_text()
+    assert "Machine: x, 2 cores" in md and "| StreetNeRF w/o sky | ablation | 0.10 | 20.00 |" in md
+    assert (tmp_path / "out" / "speed_quality.png").read_bytes()[:4] == b"\x89PNG"
+    (res / "bad.json").write_text("{}")
+    with pytest.raises(DataError, match="not a bench results file"):
+        collect_points(res, ["bad"])
+
+
+def test_stability_plan_is_complete_and_valid():
+    plan = stability_plan("quick")
+    methods = ("streetnerf", "splatfacto", "scaffold-gs", "2dgs")
+    assert len(plan) == len(methods) * 8
+    variants = [c.variant for c in plan if c.method == "splatfacto"]
+    assert variants == ["seed 0", "seed 1", "seed 2", "pose noise 0.5deg/5cm", "half views", "2x transients", "no masks", "random init"]
+    pose = next(c for c in plan if c.variant.startswith("pose"))
+    assert pose.perturbation.rotation_deg == 0.5 and pose.perturbation.translation_m == 0.05
+    assert next(c for c in plan if c.variant == "2x transients").transients_factor == 2
+    assert next(c for c in plan if c.variant == "random init").perturbation == Perturbation(drop_points=True)
+    for case in plan:  # every override is a real config field of its method
+        cfg = apply_plain(get_method(case.method).config, case.overrides)
+        assert cfg.seed == case.seed
+
+
+def test_classify_and_summary_count_failures():
+    good = {"results": {"street": {"psnr": 20.0, "ssim": 0.7}}}
+    assert classify(good, None, 12.0, 20.0) == "ok"
+    assert classify(good, None, 21.0, 20.0) == "collapse"
+    assert classify({"results": {"street": {"psnr": float("nan"), "ssim": 0.1}}}, None, 12.0, 20.0) == "nan"
+    assert classify(None, "TrainingDiverged: training diverged at step 5: non-finite loss", None, None) == "diverged"
+    assert classify(None, "RuntimeError: out of memory", None, None) == "error"
+    assert classify(None, "unsupported: needs the synthetic street", None, None) == "unsupported"
+    rows = [{"method": "m", "variant": f"seed {i}", "status": "ok", "street_psnr": 20.0 + i, "bev_psnr": 15.0} for i in range(3)]
+    rows += [{"method": "m", "variant": "pose", "status": "diverged", "error": "TrainingDiverged: x"},
+             {"method": "m", "variant": "more", "status": "unsupported", "error": "unsupported: y"}]
+    s = summarize(rows)["m"]
+    assert s["failures"] == 1 and s["diverged"] == 1 and s["unsupported"] == 1 and s["cases"] == 5
+    assert s["seed_street_mean"] == pytest.approx(21.0) and s["seed_street_std"] == pytest.approx(math.sqrt(2 / 3))
+    md = bench_stability.markdown(rows, summarize(rows))
+    assert "**DIVERGED**" in md and "| m | 21.00 +- 0.82 (n=3) | 15.00 +- 0.00 (n=3) | 1/4 | 1 | 0 | 0 | 0 | 1 |" in md
+
+
+def test_size_plan_and_smallest_within():
+    plan = size_plan("default")
+    labels = [s.label for s in plan]
+    assert len(labels) == len(set(labels))
+    assert "splatfacto max_gaussians=5000" in labels and "scaffold-gs max_anchors=2000" in labels and "2dgs densify_grad_thresh=0.0016" in labels
+    for spec in plan:
+        apply_plain(get_method(spec.method).config, spec.overrides)  # valid fields and types
+    aug = size_plan("quick", ("splatfacto",), augment=True)
+    assert aug[0].method == "streetnerf" and all(s.augment_from == "StreetNeRF" for s in aug[1:])
+    with pytest.raises(ConfigError, match="no sweep for method 'nope'"):
+        size_plan("quick", ("nope",))
+    rows = [{"label": "a", "method": "m", "quality": 20.0, "primitives": 60000},
+            {"label": "b", "method": "m", "quality": 19.6, "primitives": 15000},
+            {"label": "c", "method": "m", "quality": 19.4, "primitives": 5000},
+            {"label": "d", "method": "m", "error": "boom"}]
+    pick = smallest_within(rows)["m"]
+    assert pick["best"] == "a" and pick["smallest"] == "b" and pick["reduction"] == pytest.approx(4.0)
+
+
+def test_stability_and_size_end_to_end_on_plugin_method(tiny_scene, tmp_path, monkeypatch):
+    """Tiny voxel-grid runs: an ok case, a view subset, an unsupported stress and a forced NaN
+    divergence, all reported; a rerun reuses everything; then a size sweep over the grid resolution."""
+    from ns2gs_example_method import VoxelGridModel
+
+    from nerf2gs_plugin.eval import lpips as lpips_mod
+
+    monkeypatch.setattr(lpips_mod.importlib.util, "find_spec", lambda name: None)  # keep it fast: LPIPS n/a
+    monkeypatch.delenv(lpips_mod.ENV_VAR, raising=False)
+    orig = VoxelGridModel.get_loss_dict
+
+    def poisoned(self, outputs, batch, metrics):  # resolution 9 marks the run that diverges after its first checkpoint
+        losses = orig(self, outputs, batch, metrics)
+        self.calls = getattr(self, "calls", 0) + 1
+        return {k: v * float("nan") for k, v in losses.items()} if self.config.resolution == 9 and self.calls > 8 else losses
+
+    monkeypatch.setattr(VoxelGridModel, "get_loss_dict", poisoned)
+    base = {"max_num_iterations": 12, "steps_per_save": 6, "steps_per_eval_image": 0, "seed": 0}
+    grid = lambda r: {**base, "pipeline": {"model": {"resolution": r, "num_samples": 8}}}  # noqa: E731
+    plan = [StressCase("voxel-grid", "seed 0", 0, None, 1, grid(16)),
+            StressCase("voxel-grid", "half views", 0, Perturbation(keep_every=2), 1, grid(16)),
+            StressCase("voxel-grid", "2x transients", 0, None, 2, grid(16)),
+            StressCase("voxel-grid", "poisoned", 0, None, 1, grid(9))]
+    out, runs = tmp_path / "results", tmp_path / "runs"
+    payload = bench_stability.run(plan, tiny_scene, runs, out, "test", synthetic=False)
+    status = {r["variant"]: r["status"] for r in payload["rows"]}
+    assert status == {"seed 0": "ok", "half views": "ok", "2x transients": "unsupported", "poisoned": "diverged"}
+    assert "last good checkpoint" in payload["rows"][3]["error"] and "step-000000005.ckpt" in payload["rows"][3]["error"]
+    assert payload["summary"]["voxel-grid"]["failures"] == 1 and payload["summary"]["voxel-grid"]["unsupported"] == 1
+    ok = payload["rows"][0]
+    assert ok["final_psnr"] > ok["initial_psnr"] and ok["street_psnr"] > 5
+    assert "-every2-" in payload["rows"][1]["data"]
+    md = (out / "stability.md").read_text()
+    assert "Machine:" in md and "**DIVERGED**" in md and "| 1/3 |" in md and (out / "stability.png").is_file()
+    assert json.loads((out / "stability.json").read_text())["summary"]["voxel-grid"]["diverged"] == 1
+    log = runs / "logs" / "stability.log"
+    assert log.read_text().count("[stability]") == 4
+    again = bench_stability.run(plan, tiny_scene, runs, out, "test", synthetic=False)  # reuses runs and the known failure
+    assert [r["status"] for r in again["rows"]] == [r["status"] for r in payload["rows"]]
+    assert "known failure" in log.read_text() and log.read_text().count("[bench] train ") == 3
+
+    sizes = [RunSpec(f"voxel-grid r={r}", "voxel-grid", grid(r)) for r in (8, 16)]  # r=16 is reused
+    res = bench_size.run(sizes, tiny_scene, runs, out, "test")
+    assert [r["primitives"] for r in res["rows"]] == [8**3, 16**3]
+    size_log = (runs / "logs" / "model_size.log").read_text()
+    assert size_log.count("[bench] train ") == 1 and size_log.count("[bench] reuse ") == 1
+    pick = res["picks"]["voxel-grid"]
+    assert pick["smallest_primitives"] <= pick["best_primitives"]
+    assert (out / "model_size.png").is_file() and "smallest within 0.5 dB" in (out / "model_size.md").read_text()
