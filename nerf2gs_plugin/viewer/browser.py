@@ -63,6 +63,31 @@ def headless_page(url: str, width: int = 1280, height: int = 800, timeout: float
             browser.close()
 
 
+def grab(page) -> "np.ndarray":
+    """The page as an RGB ``uint8`` array."""
+    import cv2
+    import numpy as np
+
+    png = page.screenshot()
+    return cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)[..., ::-1].copy()
+
+
+def wait_until_still(page, timeout: float = 30.0, interval: float = 0.5, tol: float = 0.5) -> "np.ndarray":
+    """Screenshots until two in a row agree (viser fades new scene content in over a while,
+    much longer on software WebGL); returns the last one."""
+    import numpy as np
+
+    deadline = time.monotonic() + timeout
+    prev = grab(page)
+    while time.monotonic() < deadline:
+        time.sleep(interval)
+        cur = grab(page)
+        if np.abs(cur.astype(np.int16) - prev.astype(np.int16)).mean() < tol:
+            return cur
+        prev = cur
+    return prev
+
+
 def screenshot_viewer(viewer, path: Path, width: int = 1280, height: int = 800, timeout: float = 120.0, settle: float = 1.5) -> Path:
     """Open the viewer in a headless browser, wait for a full-resolution frame, save a PNG."""
     path = Path(path)
@@ -72,5 +97,6 @@ def screenshot_viewer(viewer, path: Path, width: int = 1280, height: int = 800, 
         if not viewer.wait_for_frames(1, timeout, full=True):
             raise UserError(f"the viewer rendered no full-resolution frame within {timeout:.0f} s")
         time.sleep(settle)  # let the browser decode and draw the last frame
+        wait_until_still(page, timeout=timeout / 2)
         page.screenshot(path=str(path))
     return path

@@ -48,6 +48,7 @@ class ClientRenderer:
         self.on_frame = on_frame
         self.frames = 0
         self.last: Optional[FrameInfo] = None
+        self.last_image: Optional[np.ndarray] = None
         self.fps = 0.0
         self._cond = threading.Condition()
         self._version = 0
@@ -157,6 +158,7 @@ class ClientRenderer:
             self._last_scale = scale
             self.frames += 1
             self.last = info
+            self.last_image = image
             self.fps = 1.0 / max(seconds, 1e-6)
             if not moving and scale >= 1.0 and self._version == version:
                 self._full_done = True
