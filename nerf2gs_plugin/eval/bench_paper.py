@@ -4,12 +4,12 @@ speed-quality charts, and the 10-minute `quick` version the README demo runs."""
 from __future__ import annotations
 
 import json
-import math
 import time
 from pathlib import Path
 from typing import Any, Callable, Optional
 
 from nerf2gs_plugin.engine.config import atomic_write_text
+from nerf2gs_plugin.eval.bench_io import fmt
 from nerf2gs_plugin.eval.bench_runs import RunSpec, train_or_reuse
 from nerf2gs_plugin.eval.machine import machine_info, machine_line
 
@@ -17,26 +17,53 @@ SPLITS = ("street", "bev_1", "bev_2")
 METRICS = (("psnr", "PSNR", True), ("ssim", "SSIM", True), ("lpips", "LPIPS", False))
 TARGETS = ("splatfacto", "scaffold-gs", "2dgs")
 
-# Per-scale overrides of each method's registered default config.
-SCALE_OVERRIDES: dict[str, dict[str, dict[str, Any]]] = {
-    "quick": {
-        "streetnerf": {"max_num_iterations": 1500, "steps_per_eval_image": 0},
-        "splatfacto": {"max_num_iterations": 800, "steps_per_eval_image": 0},
-        "scaffold-gs": {"max_num_iterations": 800, "steps_per_eval_image": 0},
-        "2dgs": {"max_num_iterations": 800, "steps_per_eval_image": 0},
-    },
-    "default": {m: {"steps_per_eval_image": 0} for m in ("streetnerf", *TARGETS)},
+# Step budgets per scale ("default" = the method's registered config). A shorter run rescales the
+# method's schedules with it (see step_overrides), so it is a faithful short run, not a truncated one.
+SCALE_STEPS: dict[str, dict[str, int]] = {
+    "quick": {"streetnerf": 1500, "splatfacto": 800, "scaffold-gs": 800, "2dgs": 800},
+    "default": {},
 }
 
 
+def _diff(before: Any, after: Any) -> Any:
+    """The parts of plain config ``after`` that differ from ``before`` (nested dicts recursed)."""
+    if isinstance(before, dict) and isinstance(after, dict):
+        out = {k: _diff(before.get(k), v) for k, v in after.items() if before.get(k) != v}
+        return out
+    return after
+
+
+def _merge(base: dict, extra: dict) -> dict:
+    """Recursive dict merge (``extra`` wins); inputs are not modified."""
+    out = json.loads(json.dumps(base))
+    for k, v in extra.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def step_overrides(method: str, steps: int) -> dict:
+    """Plain overrides for ``steps`` iterations with the method's schedules (densification,
+    SH degree, learning-rate decay, ...) rescaled by its config module's ``with_steps``; a
+    method without one (a third-party plugin) just gets ``max_num_iterations``."""
+    import importlib
+
+    from nerf2gs_plugin.engine.config import to_plain
+    from nerf2gs_plugin.registry import get_method
+
+    cfg = get_method(method).config
+    package = type(cfg.pipeline.model).__module__.rsplit(".", 1)[0]
+    try:
+        with_steps = importlib.import_module(f"{package}.config").with_steps
+    except (ImportError, AttributeError):
+        return {"max_num_iterations": steps}
+    return json.loads(json.dumps(_diff(to_plain(cfg), to_plain(with_steps(cfg, steps))), default=str))
+
+
 def _overrides(scale: str, method: str, extra: Optional[dict] = None) -> dict:
-    base = json.loads(json.dumps(SCALE_OVERRIDES.get(scale, {}).get(method, {})))
-    for k, v in (extra or {}).items():
-        if isinstance(v, dict) and isinstance(base.get(k), dict):
-            base[k].update(v)
-        else:
-            base[k] = v
-    return base
+    """Overrides of ``method``'s registered config for a bench at ``scale`` (plus ``extra``)."""
+    steps = SCALE_STEPS.get(scale, {}).get(method)
+    base = step_overrides(method, steps) if steps else {}
+    return _merge({**base, "steps_per_eval_image": 0}, extra or {})
 
 
 def paper_table_plan(scale: str, targets=TARGETS, enhancer: Optional[str] = None) -> list[RunSpec]:
@@ -93,7 +120,8 @@ def run_plan(plan: list[RunSpec], data: Path, runs_root: Path, log: Callable[[st
             res = json.loads(eval_path.read_text())
         else:
             run = load_run(run_dir, device=device)
-            res = evaluate_run(run, list(SPLITS), render_dir=run_dir / "eval_renders", lpips_model=lpips_model)
+            names = [s for s in SPLITS if s in run.pipeline.datamanager.eval_split_names()] or None
+            res = evaluate_run(run, names, render_dir=run_dir / "eval_renders", lpips_model=lpips_model)
             atomic_write_text(eval_path, json.dumps(res, indent=1))
         res["run_dir"] = str(run_dir)
         res["label"] = spec.label
@@ -138,7 +166,7 @@ def markdown_table(results: dict[str, dict], groups: dict[str, list[str]], title
                 rank = ranks.get((r["label"], metric, s))
                 cells.append(f"**{txt}**" if rank == 1 else f"_{txt}_" if rank == 2 else txt)
         size = r["size"]
-        cells += [f"{r['fps']:.2f}", str(size["primitives"]), f"{size['megabytes']:.1f}", f"{r['train_seconds']:.0f}"]
+        cells += [fmt(r.get("fps")), str(size["primitives"]), fmt(size.get("checkpoint_megabytes", size["megabytes"]), 1), fmt(r.get("train_seconds"), 0)]
         lines.append("| " + " | ".join(cells) + " |")
     lines += ["", "Bold: best, italic: second best within each target method (rows sharing a target)."]
     return "\n".join(lines)
@@ -159,7 +187,7 @@ def rich_table(results: dict[str, dict], title: str):
         ps = [_value(r, "psnr", s) for s in SPLITS]
         ss = [_value(r, "ssim", s) for s in SPLITS]
         table.add_row(r["label"], *[f"{v:.2f}" if v is not None else "n/a" for v in ps],
-                      *[f"{v:.3f}" if v is not None else "n/a" for v in ss], f"{r['fps']:.2f}", str(r["size"]["primitives"]))
+                      *[f"{v:.3f}" if v is not None else "n/a" for v in ss], fmt(r.get("fps")), str(r["size"]["primitives"]))
     return table
 
 
@@ -172,48 +200,11 @@ def target_groups(results: dict[str, dict]) -> dict[str, list[str]]:
 
 
 # ----------------------------------------------------------------------------- charts
-def _bev_psnr(r: dict) -> float:
-    vals = [_value(r, "psnr", s) for s in ("bev_1", "bev_2")]
-    vals = [v for v in vals if v is not None]
-    return sum(vals) / len(vals) if vals else float("nan")
-
-
-def pareto_front(points: list[tuple[float, float]]) -> list[int]:
-    """Indices of points not dominated in (x up, y up)."""
-    front = []
-    for i, (x, y) in enumerate(points):
-        if not any((x2 >= x and y2 >= y) and (x2 > x or y2 > y) for j, (x2, y2) in enumerate(points) if j != i):
-            front.append(i)
-    return sorted(front, key=lambda i: points[i][0])
-
-
 def speed_quality_chart(results: dict[str, dict], path: Path, title: str) -> None:
-    from nerf2gs_plugin.eval.figures import _mpl, save_figure
+    """FPS and training time against BEV PSNR for this bench's runs, Pareto fronts marked."""
+    from nerf2gs_plugin.eval.bench_speed_quality import chart, points_from_results
 
-    plt = _mpl()
-    rows = [r for r in results.values() if r.get("fps")]
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4.6))
-    for ax, xkey, xlabel, logx in ((axes[0], "fps", "render FPS (log)", True), (axes[1], "train_seconds", "training wall time, s (log)", True)):
-        pts = [(max(r[xkey], 1e-6) if xkey == "fps" else -max(r[xkey], 1e-6), _bev_psnr(r)) for r in rows]
-        for r, (x, y) in zip(rows, pts):
-            xv = abs(x)
-            ax.scatter([xv], [y], s=40)
-            ax.annotate(r["label"], (xv, y), fontsize=7, xytext=(4, 3), textcoords="offset points")
-        front = pareto_front([(x, y) for x, y in pts if not math.isnan(y)])
-        if front:
-            fx = [abs(pts[i][0]) for i in front]
-            fy = [pts[i][1] for i in front]
-            order = sorted(range(len(fx)), key=lambda k: fx[k])
-            ax.plot([fx[k] for k in order], [fy[k] for k in order], "k--", lw=1, label="Pareto front")
-            ax.legend(fontsize=8)
-        if logx:
-            ax.set_xscale("log")
-        ax.set_xlabel(xlabel)
-        ax.set_ylabel("bird's-eye PSNR (mean of bev_1, bev_2), dB")
-        ax.grid(alpha=0.3)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    save_figure(fig, path)
+    chart(points_from_results(results, Path(path).stem), path, title)
 
 
 def psnr_bar_chart(results: dict[str, dict], path: Path, title: str) -> None:
@@ -278,7 +269,7 @@ def ratios_md(results: dict[str, dict], pairs: list[tuple[str, str]]) -> str:
     for a, b in pairs:
         if a in results and b in results:
             d = [(_value(results[a], "psnr", s) or 0) - (_value(results[b], "psnr", s) or 0) for s in SPLITS]
-            fr = results[a]["fps"] / results[b]["fps"] if results[b]["fps"] else float("nan")
+            fr = results[a]["fps"] / results[b]["fps"] if results[a].get("fps") and results[b].get("fps") else float("nan")
             lines.append(f"| {a} vs {b} | {d[0]:+.2f} | {d[1]:+.2f} | {d[2]:+.2f} | {fr:.2f}x |")
     return "\n".join(lines)
 

@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from nerf2gs_plugin.engine.config import atomic_write_text
-from nerf2gs_plugin.eval.bench_io import BenchLog, BenchRunner, Outcome, fmt, mean_psnr, progress_log, write_bench_files
+from nerf2gs_plugin.eval.bench_io import BenchLog, BenchRunner, fmt, mean_psnr, progress_log, write_bench_files
 from nerf2gs_plugin.eval.bench_runs import RunSpec
 from nerf2gs_plugin.eval.perturb import Perturbation, perturbed_copy
 

@@ -158,3 +158,19 @@ def test_stability_and_size_end_to_end_on_plugin_method(tiny_scene, tmp_path, mo
     pick = res["picks"]["voxel-grid"]
     assert pick["smallest_primitives"] <= pick["best_primitives"]
     assert (out / "model_size.png").is_file() and "smallest within 0.5 dB" in (out / "model_size.md").read_text()
+
+
+def test_quick_scale_rescales_schedules_and_merges_extras(tmp_path):
+    from nerf2gs_plugin.eval.bench_paper import _overrides, ablation_plan, speed_quality_chart
+
+    sf = apply_plain(get_method("splatfacto").config, _overrides("quick", "splatfacto"))
+    default = get_method("splatfacto").config
+    assert sf.max_num_iterations == 800 and sf.optimizers["means"].max_steps == 800
+    assert sf.pipeline.model.stop_split_at < sf.max_num_iterations < default.pipeline.model.stop_split_at
+    nerf = next(s for s in ablation_plan("quick") if s.label == "StreetNeRF w/o sky")
+    cfg = apply_plain(get_method("streetnerf").config, nerf.overrides)
+    assert cfg.pipeline.model.sky is False and cfg.max_num_iterations == 1500 and cfg.optimizers["fields"].max_steps == 1500
+    assert _overrides("default", "2dgs") == {"steps_per_eval_image": 0}
+    res = {"a": _result("a", "splatfacto", 30.0, 18.0, 20.0, 100, 1000, "/a"), "b": _result("b", "streetnerf", 0.2, 20.0, 21.0, 500, 0, "/b")}
+    speed_quality_chart(res, tmp_path / "x_speed_quality.png", "t")
+    assert (tmp_path / "x_speed_quality.png").read_bytes()[:4] == b"\x89PNG"
