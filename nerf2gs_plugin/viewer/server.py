@@ -79,6 +79,8 @@ class Viewer:
         self._tasks: "queue.Queue[Callable[[], None]]" = queue.Queue()
         self._side_by_side: dict[int, Any] = {}
         cfg = self.config
+        if cfg.max_side < 16 or cfg.target_fps <= 0:
+            raise ConfigError(f"viewer needs max_side >= 16 and target_fps > 0 (got {cfg.max_side}, {cfg.target_fps})")
         check_port_free(cfg.host, cfg.port)
         self.server = viser.ViserServer(host=cfg.host, port=cfg.port, label=f"nerf2gs · {method_name}", verbose=False)
         if self.server.get_port() != cfg.port:
@@ -141,7 +143,8 @@ class Viewer:
             self._stats = gui.add_markdown(self.stats_markdown())
         with gui.add_folder("Render"):
             self._mode_gui = gui.add_dropdown("Mode", tuple(self.modes), initial_value=self.modes[0])
-            self._res_gui = gui.add_slider("Max resolution", min=64, max=2048, step=32, initial_value=self.config.max_side)
+            self._res_gui = gui.add_slider("Max resolution", min=16, max=max(2048, self.config.max_side), step=16,
+                                          initial_value=self.config.max_side)
             self._fps_gui = gui.add_slider("Target FPS", min=1, max=60, step=1, initial_value=int(self.config.target_fps))
         self.mode = self.modes[0]
 
