@@ -1,0 +1,154 @@
+"""ns2gs-enhance train | apply | eval: the enhancer of additional views.
+
+``train`` fits our built-in enhancer (a small residual U-Net, not Difix) on a dataset's own images
+and exports it to ONNX; ``apply`` runs any enhancer (built-in or ``onnx:PATH``) on image files;
+``eval`` measures PSNR before/after enhancement on held-out views: the renders of a reference run
+(``--reference``) or synthetically degraded held-out images.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import tyro
+
+from nerf2gs_plugin.cli.common import run_cli
+from nerf2gs_plugin.enhance.train import EnhancerTrainConfig
+
+
+def _spec(model: str) -> str:
+    """A bare path means ``onnx:PATH``."""
+    return model if model.split(":", 1)[0] in ("none", "builtin", "onnx") else f"onnx:{model}"
+
+
+@dataclass
+class Train(EnhancerTrainConfig):
+    """Train the built-in enhancer on DATA's training images; writes OUT (.onnx) and a report."""
+
+    def main(self) -> None:
+        from nerf2gs_plugin.enhance.train import report_path, train_enhancer
+
+        report = train_enhancer(self)
+        print(f"enhancer saved to {report.out} ({report.seconds:.0f} s, {report.steps} steps, "
+              f"L1 {report.losses[0]:.4f} -> {report.losses[-1]:.4f})")
+        if report.heldout:
+            h = report.heldout
+            print(f"held-out {'/'.join(h['splits'])} ({h['images']} images, synthetic degradations): "
+                  f"PSNR {h['psnr_degraded']:.2f} -> {h['psnr_enhanced']:.2f} dB")
+        print(f"report: {report_path(Path(report.out))}")
+
+
+@dataclass
+class Apply:
+    """Enhance image files: --model MODEL --input a.png b.png --output DIR."""
+
+    model: str
+    """builtin | builtin:PATH | onnx:PATH | PATH.onnx"""
+    input: tuple[Path, ...]
+    output: Path
+    """Output folder (or a file name when there is one input)."""
+    reference: Optional[Path] = None
+    """Reference view given to models that take one."""
+    tile_size: Optional[int] = None
+
+    def main(self) -> None:
+        from nerf2gs_plugin.data.images import load_image, write_image_atomic
+        from nerf2gs_plugin.enhance import OnnxModelEnhancer, make_enhancer
+        from nerf2gs_plugin.errors import DataError
+
+        spec = _spec(self.model)
+        enh = OnnxModelEnhancer(Path(spec.split(":", 1)[1]), tile_size=self.tile_size) if self.tile_size and spec.startswith("onnx:") else make_enhancer(spec)
+        ref = load_image(self.reference) if self.reference is not None else None
+        to_file = len(self.input) == 1 and self.output.suffix.lower() in (".png", ".jpg", ".jpeg")
+        for p in self.input:
+            if not Path(p).is_file():
+                raise DataError("input image does not exist", p)
+            out = self.output if to_file else self.output / Path(p).name
+            write_image_atomic(out, enh.enhance(load_image(p), reference=ref))
+            print(f"{p} -> {out}")
+
+
+@dataclass
+class Eval:
+    """PSNR before/after enhancement on held-out views (renders of --reference, else degraded images)."""
+
+    model: str
+    data: Path
+    reference: Optional[Path] = None
+    """A trained run: its renders of the held-out cameras are enhanced and compared with ground truth."""
+    splits: tuple[str, ...] = ()
+    """Held-out splits (default: all eval splits of the dataset)."""
+    max_images: Optional[int] = None
+    out: Optional[Path] = None
+    """Also write the numbers as JSON here."""
+
+    def main(self) -> None:
+        result = evaluate_enhancer(_spec(self.model), self.data, self.reference, self.splits, self.max_images)
+        for split, r in result["splits"].items():
+            print(f"{split:>8}: {r['images']:3d} images  PSNR {r['psnr_before']:.2f} -> {r['psnr_after']:.2f} dB")
+        if self.out is not None:
+            from nerf2gs_plugin.engine.config import atomic_write_text
+
+            atomic_write_text(self.out, json.dumps(result, indent=1))
+
+
+def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: tuple[str, ...] = (), max_images: Optional[int] = None) -> dict:
+    """Per split: mean PSNR of the held-out inputs (reference renders or degraded images) and of their enhancement."""
+    import torch
+
+    from nerf2gs_plugin.data import list_splits
+    from nerf2gs_plugin.enhance import make_enhancer
+    from nerf2gs_plugin.enhance.degrade import KINDS
+    from nerf2gs_plugin.enhance.train import heldout_psnr, load_split_images, psnr
+
+    enh = make_enhancer(spec)
+    names = list(splits) or [s for s in list_splits(data) if s != "train"]
+    result: dict = {"model": spec, "data": str(data), "reference": str(reference) if reference else None, "splits": {}}
+    if reference is None:
+        train_imgs, train_c = load_split_images(data, "train")
+        for s in names:
+            imgs, cents = load_split_images(data, s)
+            imgs, cents = imgs[:max_images], cents[:max_images]
+            refs = [train_imgs[int(k)] for k in torch.cdist(cents, train_c).argmin(1)]
+            r = heldout_psnr(enh.enhance, imgs, KINDS, 1.0, 0, refs)
+            result["splits"][s] = {"images": r["images"], "psnr_before": r["psnr_degraded"], "psnr_after": r["psnr_enhanced"]}
+        return result
+    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.progress import make_progress
+
+    run = load_run(reference, data=data)
+    dm = run.pipeline.datamanager
+    train = dm.train_images
+    train_c = train.cameras.camera_to_worlds[:, :3, 3]
+    with make_progress() as bar, torch.no_grad():
+        for s in names:
+            _, imgs = dm.eval_split(s)
+            n = len(imgs) if max_images is None else min(len(imgs), max_images)
+            task = bar.add_task(f"enhance {s}", total=n, stats="")
+            before, after = [], []
+            for i in range(n):
+                gt = imgs.image(i).cpu()
+                render = run.model.render_camera(imgs.cameras[i])["rgb"].detach().cpu()
+                k = int(torch.cdist(imgs.cameras.camera_to_worlds[i : i + 1, :3, 3], train_c).argmin())
+                out = enh.enhance(render, reference=train.image(k).cpu())
+                before.append(psnr(render, gt))
+                after.append(psnr(out, gt))
+                bar.update(task, advance=1, stats=f"{before[-1]:.2f} -> {after[-1]:.2f}")
+            result["splits"][s] = {"images": n, "psnr_before": sum(before) / max(n, 1), "psnr_after": sum(after) / max(n, 1)}
+    return result
+
+
+def main() -> None:
+    cmd = tyro.extras.subcommand_cli_from_dict({"train": Train, "apply": Apply, "eval": Eval}, description=__doc__)
+    cmd.main()
+
+
+def entrypoint() -> None:
+    run_cli(main)
+
+
+if __name__ == "__main__":
+    entrypoint()

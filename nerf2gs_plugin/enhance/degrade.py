@@ -1,0 +1,117 @@
+"""Synthetic degradations that look like NeRF novel-view artifacts, for training pairs
+(degraded, ground truth) made from the training images themselves: blur, downsample-upsample,
+noise, smeared streaks (stretched texture, like floaters and under-constrained ground),
+dark/foggy holes, colour shifts. Vectorised over pixels; the loop runs over batch samples."""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+KINDS = ("blur", "resample", "noise", "smear", "holes", "color")
+
+
+def _u(gen: torch.Generator, lo: float, hi: float) -> float:
+    return lo + (hi - lo) * float(torch.rand((), generator=gen))
+
+
+def _ri(gen: torch.Generator, lo: int, hi: int) -> int:
+    """Integer in [lo, hi] inclusive."""
+    return int(torch.randint(lo, max(hi, lo) + 1, (), generator=gen))
+
+
+def gaussian_blur(x: Tensor, sigma: float) -> Tensor:
+    """Separable Gaussian blur of ``[B, C, H, W]`` with reflect padding."""
+    if sigma <= 0:
+        return x
+    r = max(1, int(math.ceil(3 * sigma)))
+    r = min(r, x.shape[-1] - 1, x.shape[-2] - 1)
+    if r < 1:
+        return x
+    t = torch.arange(-r, r + 1, dtype=x.dtype, device=x.device)
+    k = torch.exp(-0.5 * (t / sigma) ** 2)
+    k = k / k.sum()
+    c = x.shape[1]
+    x = F.pad(x, (r, r, r, r), mode="reflect")
+    x = F.conv2d(x, k.view(1, 1, 1, -1).expand(c, 1, 1, -1), groups=c)
+    return F.conv2d(x, k.view(1, 1, -1, 1).expand(c, 1, -1, 1), groups=c)
+
+
+def _resample(y: Tensor, f: float) -> Tensor:
+    h, w = y.shape[-2:]
+    small = F.interpolate(y, size=(max(2, round(h / f)), max(2, round(w / f))), mode="bilinear", align_corners=False, antialias=True)
+    return F.interpolate(small, size=(h, w), mode="bilinear", align_corners=False)
+
+
+def _rect(gen: torch.Generator, h: int, w: int, lo: float, hi: float) -> tuple[int, int, int, int]:
+    rh, rw = max(2, int(h * _u(gen, lo, hi))), max(2, int(w * _u(gen, lo, hi)))
+    y0, x0 = _ri(gen, 0, h - rh), _ri(gen, 0, w - rw)
+    return y0, x0, rh, rw
+
+
+def _smear(y: Tensor, gen: torch.Generator) -> Tensor:
+    """A patch whose content is one row (or column) stretched across it, blended in."""
+    h, w = y.shape[-2:]
+    y0, x0, rh, rw = _rect(gen, h, w, 0.2, 0.5)
+    patch = y[..., y0 : y0 + rh, x0 : x0 + rw]
+    if float(torch.rand((), generator=gen)) < 0.5:
+        r = _ri(gen, 0, rh - 1)
+        streak = patch[..., r : r + 1, :].expand_as(patch)
+    else:
+        c = _ri(gen, 0, rw - 1)
+        streak = patch[..., :, c : c + 1].expand_as(patch)
+    a = _u(gen, 0.5, 1.0)
+    ramp_y = torch.minimum(torch.arange(rh) + 1, rh - torch.arange(rh)).float() / max(rh / 4, 1)
+    ramp_x = torch.minimum(torch.arange(rw) + 1, rw - torch.arange(rw)).float() / max(rw / 4, 1)
+    alpha = (a * ramp_y.clamp(max=1)[:, None] * ramp_x.clamp(max=1)[None, :]).to(y)
+    y = y.clone()
+    y[..., y0 : y0 + rh, x0 : x0 + rw] = patch * (1 - alpha) + streak * alpha
+    return y
+
+
+def _hole(y: Tensor, gen: torch.Generator) -> Tensor:
+    """A dark hole (as Gaussian splats leave on the road) or a foggy blob (NeRF floater)."""
+    h, w = y.shape[-2:]
+    y0, x0, rh, rw = _rect(gen, h, w, 0.1, 0.35)
+    y = y.clone()
+    region = y[..., y0 : y0 + rh, x0 : x0 + rw]
+    if float(torch.rand((), generator=gen)) < 0.5:
+        fill = torch.full_like(region, _u(gen, 0.0, 0.12))
+    else:
+        fill = gaussian_blur(region, max(rh, rw) / 3).mean((-2, -1), keepdim=True).expand_as(region) * 0.5 + 0.5 * _u(gen, 0.4, 0.9)
+    a = _u(gen, 0.6, 1.0)
+    y[..., y0 : y0 + rh, x0 : x0 + rw] = region * (1 - a) + fill * a
+    return y
+
+
+def degrade(x: Tensor, gen: torch.Generator, kinds: Sequence[str] = KINDS, strength: float = 1.0) -> Tensor:
+    """A random mix of ``kinds`` applied to each image of ``x`` ``[B, 3, H, W]`` (0..1)."""
+    unknown = set(kinds) - set(KINDS)
+    if unknown:
+        raise ValueError(f"unknown degradations {sorted(unknown)}; known: {', '.join(KINDS)}")
+    out = []
+    always = len(kinds) == 1  # a single kind is always applied (simple, learnable test setting)
+    for b in range(x.shape[0]):  # over samples only; each op is vectorised over pixels
+        y = x[b : b + 1]
+        p = lambda q: always or float(torch.rand((), generator=gen)) < q  # noqa: E731
+        if "blur" in kinds and p(0.5):
+            y = gaussian_blur(y, _u(gen, 0.6, 2.0) * strength)
+        if "resample" in kinds and p(0.35):
+            y = _resample(y, 1 + _u(gen, 0.5, 2.5) * strength)
+        if "smear" in kinds and p(0.35):
+            y = _smear(y, gen)
+        if "holes" in kinds and p(0.25):
+            y = _hole(y, gen)
+        if "color" in kinds and p(0.35):
+            gain = 1 + torch.empty(1, 3, 1, 1).uniform_(-0.08, 0.08, generator=gen) * strength
+            bias = torch.empty(1, 3, 1, 1).uniform_(-0.03, 0.03, generator=gen) * strength
+            y = y * gain.to(y) + bias.to(y)
+        if "noise" in kinds and p(0.5):
+            sigma = _u(gen, 0.01, 0.05) * strength
+            y = y + sigma * torch.randn(y.shape, generator=gen).to(y)
+        out.append(y)
+    return torch.cat(out).clamp(0, 1)
