@@ -1,0 +1,72 @@
+"""The enhancer inside the augmentation (enhanced bird's-eye views, cache keyed by model content)
+and the trainer's reference-render pairs from a real (tiny, partially trained) run."""
+
+import dataclasses
+
+import torch
+
+from nerf2gs_plugin.datamanagers.augmented import AugmentConfig, augment_datamanager
+from nerf2gs_plugin.datamanagers.full_image import FullImageDataManagerConfig
+from nerf2gs_plugin.enhance.train import EnhancerTrainConfig, reference_pairs, train_enhancer
+
+
+class GreyRenderer:
+    def __init__(self):
+        self.calls = 0
+
+    def __call__(self, camera):
+        self.calls += 1
+        h, w = int(camera.height[0]), int(camera.width[0])
+        return {"rgb": torch.full((h, w, 3), 0.3)}
+
+
+def _dm(data):
+    return FullImageDataManagerConfig().setup(data=data, device="cpu")
+
+
+def test_enhanced_views_are_cached_per_model_content(tiny_scene, tmp_path):
+    import onnx
+    from onnx import helper
+
+    # an ONNX model written by hand: y = 1 - x (so the enhanced views are visibly different)
+    node = helper.make_node("Sub", ["one", "image"], ["out"])
+    graph = helper.make_graph([node], "invert", [helper.make_tensor_value_info("image", onnx.TensorProto.FLOAT, ["b", 3, "h", "w"])],
+                              [helper.make_tensor_value_info("out", onnx.TensorProto.FLOAT, ["b", 3, "h", "w"])],
+                              [helper.make_tensor("one", onnx.TensorProto.FLOAT, [], [1.0])])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    path = tmp_path / "invert.onnx"
+    onnx.save(model, str(path))
+    cfg = AugmentConfig(composites=False, delta_h=3.0, enhancer=f"onnx:{path}")
+    r1 = GreyRenderer()
+    views = augment_datamanager(_dm(tiny_scene), r1, "ref:x", tmp_path, cfg)
+    assert r1.calls > 0 and len(views.extra) == len(views.extra_raw)
+    for j in range(len(views.extra)):
+        assert (views.extra.image(j) - (1 - views.extra_raw[j])).abs().max() < 1.5 / 255
+    r2 = GreyRenderer()
+    assert augment_datamanager(_dm(tiny_scene), r2, "ref:x", tmp_path, cfg).reused and r2.calls == 0
+    # same path, new content: the cache key changes and the views are rendered again
+    model.graph.initializer[0].float_data[:] = [0.5]
+    onnx.save(model, str(path))
+    r3 = GreyRenderer()
+    again = augment_datamanager(_dm(tiny_scene), r3, "ref:x", tmp_path, cfg)
+    assert r3.calls > 0 and not again.reused and again.cache_dir != views.cache_dir
+
+
+def test_reference_pairs_from_a_partially_trained_run(tiny_scene, tmp_path):
+    from nerf2gs_plugin.engine.trainer import Trainer
+    from nerf2gs_plugin.registry import get_method
+
+    cfg = dataclasses.replace(get_method("voxel-grid").config, data=tiny_scene, output_dir=tmp_path, max_num_iterations=5,
+                              steps_per_eval_image=0, progress=False, timestamp="ref")
+    t = Trainer(cfg)
+    t.setup()
+    run = t.train()
+    pairs = reference_pairs([run], tiny_scene, max_renders=3, gen=torch.Generator().manual_seed(0), progress=False)
+    assert len(pairs) == 3
+    for render, gt, mask, i in pairs:
+        assert render.shape == gt.shape == (3, 24, 32) and mask.shape == (1, 24, 32)
+        assert (render - gt).abs().mean() > 0.01  # an early reference is visibly off: a real degraded input
+        assert (mask == 0).any() == (i % 2 == 0)  # transient pixels (even images in the tiny scene) leave the loss
+    report = train_enhancer(EnhancerTrainConfig(data=tiny_scene, out=tmp_path / "e.onnx", reference=(run,), steps=4, batch_size=4,
+                                                crop=16, max_renders=4, progress=False, eval_splits=("street",)))
+    assert report.config["reference"] == [str(run)] and len(report.losses) >= 2
