@@ -70,3 +70,10 @@ def test_reference_pairs_from_a_partially_trained_run(tiny_scene, tmp_path):
     report = train_enhancer(EnhancerTrainConfig(data=tiny_scene, out=tmp_path / "e.onnx", reference=(run,), steps=4, batch_size=4,
                                                 crop=16, max_renders=4, progress=False, eval_splits=("street",)))
     assert report.config["reference"] == [str(run)] and len(report.losses) >= 2
+    # ns2gs-enhance eval --reference: the run's renders of held-out cameras, before/after enhancement
+    from nerf2gs_plugin.cli.enhance import evaluate_enhancer
+
+    res = evaluate_enhancer(f"onnx:{tmp_path / 'e.onnx'}", tiny_scene, run, ("street", "bev_1"))
+    assert set(res["splits"]) == {"street", "bev_1"}
+    for r in res["splits"].values():
+        assert r["images"] == 2 and 0 < r["psnr_before"] < 60 and 0 < r["psnr_after"] < 60
