@@ -1,0 +1,68 @@
+"""ns2gs-data synth-street | preview | export-augmented | preview-augmented
+
+  ns2gs-data synth-street data/street [--seed 0 --width 200 --height 112 --num-train 60 ...]
+  ns2gs-data preview data/street [--out preview.png]
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional, Sequence
+
+import tyro
+
+from nerf2gs_plugin.cli.common import run_cli
+from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig
+
+
+@dataclass
+class SynthStreet(SynthStreetConfig):
+    """Generate the synthetic street dataset: images, exact sky/ground/transient masks, depth,
+    sparse points, and the street / bev_1 / bev_2 eval splits."""
+
+    def main(self) -> None:
+        from nerf2gs_plugin.data.synthetic_street import generate_street, summary_lines
+
+        for line in summary_lines(generate_street(self)):
+            print(line)
+
+
+@dataclass
+class Preview:
+    """PNG contact sheet of a dataset: images with their masks per split, and a top-down plot of
+    the training and eval cameras over the sparse points."""
+
+    data: tyro.conf.Positional[Path]
+    """Dataset folder (transforms.json or a COLMAP model)."""
+    out: Optional[Path] = None
+    """Output PNG (default: DATA/preview.png)."""
+    rows: int = 3
+    """Images shown per split."""
+
+    def main(self) -> None:
+        from nerf2gs_plugin.data.preview import write_preview
+
+        print(f"wrote {write_preview(self.data, self.out or Path(self.data) / 'preview.png', self.rows)}")
+
+
+def _subcommands() -> dict[str, type]:
+    subs: dict[str, type] = {"synth-street": SynthStreet, "preview": Preview}
+    from nerf2gs_plugin.cli.augmented_data import AUGMENTED_SUBCOMMANDS
+
+    subs.update(AUGMENTED_SUBCOMMANDS)
+    return subs
+
+
+def main(args: Optional[Sequence[str]] = None) -> None:
+    """Parse ``args`` (default: sys.argv) and run the chosen subcommand."""
+    cmd = tyro.extras.subcommand_cli_from_dict(_subcommands(), prog="ns2gs-data", args=args)
+    cmd.main()
+
+
+def entrypoint() -> None:
+    run_cli(main)
+
+
+if __name__ == "__main__":
+    entrypoint()
