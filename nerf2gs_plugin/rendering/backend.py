@@ -8,11 +8,12 @@ extension is compiled on first use with ``torch.utils.cpp_extension.load`` into
 
 from __future__ import annotations
 
+import hashlib
 import os
 import threading
 import warnings
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Optional, Sequence
 
 from nerf2gs_plugin.errors import ConfigError
 
@@ -35,11 +36,13 @@ def extension_cache_dir() -> Path:
     return Path(_get_build_directory("", verbose=False)).parent
 
 
-def load_extension(name: str, sources: list[str]) -> Optional[Any]:
+def load_extension(name: str, sources: list[str], headers: Sequence[str] = ()) -> Optional[Any]:
     """Compile (first use) or load (cached) the C++ extension ``name`` built from ``csrc/<sources>``.
 
-    Returns None when it cannot be built (no compiler, ...); the reason is kept for
-    :func:`extension_error`. Thread-safe; tries once per process.
+    The build name carries a hash of the sources and ``headers`` (also under ``csrc/``), so an
+    edited kernel is rebuilt and never mistaken for a stale cached one. Returns None when it
+    cannot be built (no compiler, ...); the reason is kept for :func:`extension_error`.
+    Thread-safe; tries once per process.
     """
     if name in _EXTS or name in _FAILED:
         return _EXTS.get(name)
@@ -52,10 +55,14 @@ def load_extension(name: str, sources: list[str]) -> Optional[Any]:
             build = os.environ.get("TORCH_EXTENSIONS_DIR")
             if build:
                 Path(build).mkdir(parents=True, exist_ok=True)
+            digest = hashlib.sha1()
+            for f in [*sources, *headers]:
+                digest.update((CSRC / f).read_bytes())
             _EXTS[name] = load(
-                name=name,
+                name=f"{name}_{digest.hexdigest()[:10]}",
                 sources=[str(CSRC / s) for s in sources],
                 extra_cflags=["-O3", "-fopenmp", "-march=native", "-fno-math-errno"],
+                extra_include_paths=[str(CSRC)],
                 extra_ldflags=["-fopenmp"],
                 verbose=False,
             )
@@ -90,7 +97,7 @@ def warn_once(key: str, message: str) -> None:
         warnings.warn(message, RuntimeWarning, stacklevel=3)
 
 
-def resolve_backend(backend: str, device_type: str, ext_name: str, sources: list[str]) -> str:
+def resolve_backend(backend: str, device_type: str, ext_name: str, sources: list[str], headers: Sequence[str] = ()) -> str:
     """Turn a requested backend into the one that runs: ``"gsplat"``, ``"cpu"`` or ``"torch"``.
 
     ``"auto"``: gsplat on CUDA when importable; the extension on CPU when it builds; else torch
@@ -109,7 +116,7 @@ def resolve_backend(backend: str, device_type: str, ext_name: str, sources: list
         return "torch"
     if backend == "gsplat":
         warn_once("gsplat-cpu", "the gsplat backend needs CUDA tensors; using the CPU path")
-    if load_extension(ext_name, sources) is not None:
+    if load_extension(ext_name, sources, headers) is not None:
         return "cpu"
     warn_once(ext_name, f"rasterizer C++ extension unavailable, using the slow torch reference ({extension_error(ext_name)})")
     return "torch"

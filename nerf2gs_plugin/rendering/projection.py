@@ -71,9 +71,11 @@ def project_gaussians(
     misses the image) get radius 0.
     """
     pts = world_to_camera(means, viewmats)  # [C, N, 3]
-    cov = covariance_3d(quats, scales) if covars is None else covars  # [N, 3, 3]
     r = viewmats[:, :3, :3]
-    cov_c = r[:, None] @ cov[None] @ r[:, None].transpose(-1, -2)  # [C, N, 3, 3]
+    if covars is None:  # cov_cam = M M^T with M = R_v R_q S  [C, N, 3, 3]
+        m = torch.einsum("cij,njk->cnik", r, quat_to_rotmat(quats) * scales[..., None, :])
+    else:  # given (possibly singular) world covariances [N, 3, 3]
+        cov_c = torch.einsum("cij,njk,clk->cnil", r, covars, r)
 
     fx, fy = Ks[:, 0, 0, None], Ks[:, 1, 1, None]  # [C, 1]
     cx, cy = Ks[:, 0, 2, None], Ks[:, 1, 2, None]
@@ -85,10 +87,20 @@ def project_gaussians(
     lim_yp, lim_yn = (height - cy) / fy + 0.3 * tan_fovy, cy / fy + 0.3 * tan_fovy
     tx = zs * torch.minimum(lim_xp, torch.maximum(-lim_xn, x / zs))
     ty = zs * torch.minimum(lim_yp, torch.maximum(-lim_yn, y / zs))
-    zero = torch.zeros_like(zs)
-    j = torch.stack([fx / zs, zero, -fx * tx / (zs * zs), zero, fy / zs, -fy * ty / (zs * zs)], dim=-1)
-    j = j.reshape(*zs.shape, 2, 3)
-    cov2d = j @ cov_c @ j.transpose(-1, -2)  # [C, N, 2, 2]
+    # rows of J M with the perspective Jacobian J = [[fx/z, 0, -fx tx/z^2], [0, fy/z, -fy ty/z^2]]
+    iz = 1.0 / zs
+    if covars is None:
+        m0, m1, m2 = m.unbind(-2)
+        u = (fx * iz)[..., None] * m0 - (fx * tx * iz * iz)[..., None] * m2  # [C, N, 3]
+        v = (fy * iz)[..., None] * m1 - (fy * ty * iz * iz)[..., None] * m2
+        cxx, cxy, cyy = (u * u).sum(-1), (u * v).sum(-1), (v * v).sum(-1)
+    else:
+        zero = torch.zeros_like(zs)
+        j0 = torch.stack([fx * iz, zero, -fx * tx * iz * iz], -1)  # [C, N, 3]
+        j1 = torch.stack([zero, fy * iz, -fy * ty * iz * iz], -1)
+        cj0, cj1 = (cov_c @ j0[..., None])[..., 0], (cov_c @ j1[..., None])[..., 0]
+        cxx, cxy, cyy = (j0 * cj0).sum(-1), (j0 * cj1).sum(-1), (j1 * cj1).sum(-1)
+    cov2d = torch.stack([cxx, cxy, cxy, cyy], -1).reshape(*zs.shape, 2, 2)
 
     a, b, c = cov2d[..., 0, 0], cov2d[..., 0, 1], cov2d[..., 1, 1]
     det_orig = a * c - b * b

@@ -24,13 +24,14 @@ from nerf2gs_plugin.rendering.tiles import bin_gaussians
 
 EXT_NAME = "nerf2gs_rasterize_gaussians"
 EXT_SOURCES = ["rasterize_gaussians.cpp"]
+EXT_HEADERS = ["gaussians_core.h"]
 RENDER_MODES = ("RGB", "D", "ED", "RGB+D", "RGB+ED")
 RASTERIZE_MODES = ("classic", "antialiased")
 
 
 def load_kernel() -> Optional[Any]:
     """The compiled compositing kernel (built on first use), or None when it cannot be built."""
-    return load_extension(EXT_NAME, EXT_SOURCES)
+    return load_extension(EXT_NAME, EXT_SOURCES, EXT_HEADERS)
 
 
 class _CompositeCPU(torch.autograd.Function):
@@ -112,7 +113,7 @@ def rasterize_gaussians(
     if quats.shape != (n, 4) or scales.shape != (n, 3) or opacities.shape != (n,) or Ks.shape != (n_cams, 3, 3):
         raise ValueError(f"shape mismatch: means {tuple(means.shape)}, quats {tuple(quats.shape)}, scales "
                          f"{tuple(scales.shape)}, opacities {tuple(opacities.shape)}, Ks {tuple(Ks.shape)}")
-    chosen = resolve_backend(backend, means.device.type, EXT_NAME, EXT_SOURCES)
+    chosen = resolve_backend(backend, means.device.type, EXT_NAME, EXT_SOURCES, EXT_HEADERS)
     if chosen == "gsplat":
         from nerf2gs_plugin.rendering.gsplat_backend import rasterize_gsplat  # noqa: PLC0415
 
@@ -132,8 +133,9 @@ def rasterize_gaussians(
         feats = torch.cat([feats, depth_ch], dim=-1)
     n_color = feats.shape[-1] - (1 if render_mode != "RGB" else 0)
 
-    offsets, ids = bin_gaussians(proj.means2d.detach(), proj.cov2d.detach(), opac.detach(), proj.depths.detach(),
-                                 proj.radii, width, height, tile_size)
+    binning = load_kernel().bin_gaussians if chosen == "cpu" else bin_gaussians
+    offsets, ids = binning(proj.means2d.detach().contiguous(), proj.cov2d.detach().contiguous(), opac.detach().contiguous(),
+                           proj.depths.detach().contiguous(), proj.radii.contiguous(), width, height, tile_size)
     render, alpha, median_ids = composite(
         proj.means2d.reshape(-1, 2), proj.conics.reshape(-1, 3), feats.reshape(n_cams * n, feats.shape[-1]), opac.reshape(-1),
         offsets, ids, n_cams, width, height, tile_size, chosen,

@@ -1,7 +1,7 @@
 """Tile binning: which projected Gaussians touch which screen tile, front to back (vectorised torch).
 
 Every (camera, Gaussian) pair with a non-zero radius is listed in each tile that its
-``alpha >= 1/255`` ellipse (capped at 3 sigma) can reach; each tile's list is sorted by depth.
+``alpha >= 1/255`` ellipse (capped at 3 sigma) can reach; each tile's list is sorted by depth (stable: ties keep pair order, as in the C++ binning).
 The result is a CSR layout shared by every compositing backend:
 ``tile_offsets [C*TY*TX + 1]`` (int64) and ``flat_ids [M]`` (int64 indices into the flattened
 ``C*N`` pairs), where tile ``t = (c * TY + ty) * TX + tx``.
@@ -64,7 +64,7 @@ def bin_gaussians(
     cam = torch.div(pair, n, rounding_mode="floor")
     tile = (cam * ty_n + ty) * tx_n + tx
     rank = torch.empty(n_cams * n, dtype=torch.long, device=dev)
-    rank[torch.argsort(depths.reshape(-1))] = torch.arange(n_cams * n, device=dev)
+    rank[torch.argsort(depths.reshape(-1), stable=True)] = torch.arange(n_cams * n, device=dev)
     key = tile * (n_cams * n) + rank[pair]
     order = torch.argsort(key)
     flat_ids = pair[order]

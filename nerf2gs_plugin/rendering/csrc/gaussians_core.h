@@ -1,0 +1,259 @@
+// Tile compositing of projected 3D Gaussians, forward and backward, on raw pointers (no torch
+// types here, so the kernel can be compiled and inspected on its own). See rasterize_gaussians.cpp.
+//
+// Semantics (as gsplat / 3DGS): alpha = min(0.99, o * exp(-sigma)); pairs with alpha < 1/255 or
+// sigma < 0 are skipped; compositing stops before the Gaussian that would bring the transmittance
+// to <= 1e-4. The backward walks each tile back to front and rebuilds the transmittance by
+// division (alpha <= 0.99 keeps that stable).
+//
+// Pixels of a tile are the innermost loop so that it vectorises (AVX-512 with -march=native); a
+// Gaussian only visits the tile rows its alpha >= 1/255 ellipse can reach. OpenMP parallelises over
+// tiles; gradients go to per-thread buffers (no atomics).
+#pragma once
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <vector>
+
+namespace gs3d {
+
+constexpr float kAlphaMin = 1.0f / 255.0f;
+constexpr float kAlphaMax = 0.99f;
+constexpr float kTMin = 1e-4f;
+
+// exp(x) for x <= 0: 2^n * 2^f with |f| <= 0.5 and a degree-6 Taylor polynomial (relative error
+// ~1e-7), branch-free so that GCC vectorises it (libm's expf would not be, without -ffast-math).
+template <typename T>
+inline T exp_neg(T x) { return std::exp(x); }
+
+template <>
+inline float exp_neg<float>(float x) {
+  x = x < -87.0f ? -87.0f : x;
+  const float t = x * 1.4426950408889634f;
+  const float n = std::nearbyint(t);
+  const float f = (t - n) * 0.6931471805599453f;
+  const float p = 1.0f + f * (1.0f + f * (0.5f + f * (0.16666667f + f * (0.041666668f + f * (0.008333334f + f * 0.0013888889f)))));
+  const int32_t bits = (static_cast<int32_t>(n) + 127) << 23;
+  float s;
+  std::memcpy(&s, &bits, sizeof(float));
+  return p * s;
+}
+
+struct Dims {
+  int64_t n_cams, height, width, D;
+  int ts;
+  int tiles_x() const { return static_cast<int>((width + ts - 1) / ts); }
+  int tiles_y() const { return static_cast<int>((height + ts - 1) / ts); }
+  int64_t n_tiles() const { return n_cams * tiles_x() * tiles_y(); }
+};
+
+struct Tile {
+  int cam, x0, y0;
+};
+
+inline Tile tile_of(int64_t t, const Dims& d) {
+  const int per_cam = d.tiles_x() * d.tiles_y();
+  const int local = static_cast<int>(t % per_cam);
+  return {static_cast<int>(t / per_cam), (local % d.tiles_x()) * d.ts, (local / d.tiles_x()) * d.ts};
+}
+
+// Rows [r0, r1) of the tile that a Gaussian's alpha >= 1/255 ellipse can reach (1 px margin).
+template <typename T>
+inline void row_range(T my, T ca, T cb, T cc, T op, int y0, int ts, int& r0, int& r1) {
+  const T det = ca * cc - cb * cb;
+  const T s = std::log(std::max(op * T(255), T(1)));
+  const T cov_yy = det > 0 ? ca / det : T(0);
+  const T ey = std::sqrt(std::max(T(2) * s * cov_yy, T(0))) + T(1);
+  r0 = static_cast<int>(std::max(T(0), std::floor(my - ey - T(0.5) - y0)));
+  r1 = static_cast<int>(std::min(T(ts), std::floor(my + ey - T(0.5) - y0) + T(1)));
+}
+
+// out [C,H,W,D], out_a [C,H,W], out_last / out_med [C,H,W] (list index of the last composited
+// pair / pair id of the median Gaussian, -1 for none).
+template <typename T>
+void forward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
+                   const Dims d, int n_threads, T* out, T* out_a, int64_t* out_last, int64_t* out_med) {
+  const int ts = d.ts, P = ts * ts;
+  const int64_t D = d.D;
+#pragma omp parallel num_threads(n_threads)
+  {
+    std::vector<T> px(P), py(P), Tr(P), act(P), acc(P * D), w(P);
+    std::vector<int32_t> lst(P), med(P);
+#pragma omp for schedule(dynamic, 1)
+    for (int64_t t = 0; t < d.n_tiles(); ++t) {
+      const Tile g = tile_of(t, d);
+      for (int p = 0; p < P; ++p) {
+        const int x = g.x0 + p % ts, y = g.y0 + p / ts;
+        px[p] = T(x) + T(0.5);
+        py[p] = T(y) + T(0.5);
+        Tr[p] = T(1);
+        act[p] = (x < d.width && y < d.height) ? T(1) : T(0);
+        lst[p] = -1;
+        med[p] = -1;
+      }
+      std::fill(acc.begin(), acc.end(), T(0));
+      const int64_t k0 = off[t];
+      const int32_t n_list = static_cast<int32_t>(off[t + 1] - k0);
+      for (int32_t kk = 0; kk < n_list; ++kk) {
+        if ((kk & 15) == 15) {
+          T any = 0;
+#pragma omp simd reduction(max : any)
+          for (int p = 0; p < P; ++p) any = std::max(any, act[p]);
+          if (any == 0) break;
+        }
+        const int64_t id = ids[k0 + kk];
+        const T mx = m2[2 * id], my = m2[2 * id + 1];
+        const T ca = cn[3 * id], cb = cn[3 * id + 1], cc = cn[3 * id + 2];
+        const T op = opa[id];
+        int r0, r1;
+        row_range<T>(my, ca, cb, cc, op, g.y0, ts, r0, r1);
+        if (r0 >= r1) continue;
+        const int p0 = r0 * ts, p1 = r1 * ts;
+        const int32_t id32 = static_cast<int32_t>(id);
+        int32_t any_w = 0;
+#pragma omp simd reduction(| : any_w)
+        for (int p = p0; p < p1; ++p) {
+          const T dx = mx - px[p], dy = my - py[p];
+          const T sigma = T(0.5) * (ca * dx * dx + cc * dy * dy) + cb * dx * dy;
+          T a = op * exp_neg<T>(-sigma);
+          a = a > T(kAlphaMax) ? T(kAlphaMax) : a;
+          const T tr = Tr[p];
+          const bool valid = act[p] > 0 && sigma >= 0 && a >= T(kAlphaMin);
+          const T nt = tr * (T(1) - a);
+          const bool term = valid && nt <= T(kTMin);
+          const bool contrib = valid && !term;
+          w[p] = contrib ? a * tr : T(0);
+          any_w |= contrib ? 1 : 0;
+          med[p] = (contrib && tr > T(0.5)) ? id32 : med[p];
+          Tr[p] = contrib ? nt : tr;
+          act[p] = term ? T(0) : act[p];
+          lst[p] = contrib ? kk : lst[p];
+        }
+        if (!any_w) continue;
+        for (int64_t ch = 0; ch < D; ++ch) {
+          const T c = col[id * D + ch];
+          T* ac = acc.data() + ch * P;
+#pragma omp simd
+          for (int p = p0; p < p1; ++p) ac[p] += w[p] * c;
+        }
+      }
+      for (int p = 0; p < P; ++p) {
+        const int x = g.x0 + p % ts, y = g.y0 + p / ts;
+        if (x >= d.width || y >= d.height) continue;
+        const int64_t pix = (static_cast<int64_t>(g.cam) * d.height + y) * d.width + x;
+        for (int64_t ch = 0; ch < D; ++ch) out[pix * D + ch] = acc[ch * P + p];
+        out_a[pix] = T(1) - Tr[p];
+        out_last[pix] = lst[p] >= 0 ? k0 + lst[p] : -1;
+        out_med[pix] = med[p];
+      }
+    }
+  }
+}
+
+// grads: [n_threads][CN][6 + D] zero-initialised; per pair (means2d x, y, conic a, b, c, opacity,
+// features...). The caller sums over threads.
+template <typename T>
+void backward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
+                    const T* al, const int64_t* lastp, const T* vr, const T* va, const Dims d, int64_t CN,
+                    int n_threads, T* grads) {
+  const int ts = d.ts, P = ts * ts;
+  const int64_t D = d.D, G = 6 + D;
+#pragma omp parallel num_threads(n_threads)
+  {
+    T* my_gr = grads + static_cast<int64_t>(omp_get_thread_num()) * CN * G;
+    std::vector<T> px(P), py(P), Tr(P), Tfin(P), vout(P * D), buf(P * D), vap(P), fac(P), rap(P), Tb(P), vacc(P);
+    std::vector<int32_t> lst(P);
+    std::vector<T> vcol(D);
+#pragma omp for schedule(dynamic, 1)
+    for (int64_t t = 0; t < d.n_tiles(); ++t) {
+      const Tile g = tile_of(t, d);
+      const int64_t k0 = off[t];
+      int32_t kmax = -1;
+      for (int p = 0; p < P; ++p) {
+        const int x = g.x0 + p % ts, y = g.y0 + p / ts;
+        px[p] = T(x) + T(0.5);
+        py[p] = T(y) + T(0.5);
+        const bool in = x < d.width && y < d.height;
+        const int64_t pix = in ? (static_cast<int64_t>(g.cam) * d.height + y) * d.width + x : 0;
+        lst[p] = (in && lastp[pix] >= 0) ? static_cast<int32_t>(lastp[pix] - k0) : -1;
+        Tfin[p] = in ? T(1) - al[pix] : T(0);
+        Tr[p] = Tfin[p];
+        vap[p] = in ? va[pix] : T(0);
+        for (int64_t ch = 0; ch < D; ++ch) {
+          vout[ch * P + p] = in ? vr[pix * D + ch] : T(0);
+          buf[ch * P + p] = 0;
+        }
+        kmax = std::max(kmax, lst[p]);
+      }
+      for (int32_t kk = kmax; kk >= 0; --kk) {
+        const int64_t id = ids[k0 + kk];
+        const T mx = m2[2 * id], my = m2[2 * id + 1];
+        const T ca = cn[3 * id], cb = cn[3 * id + 1], cc = cn[3 * id + 2];
+        const T op = opa[id];
+        int r0, r1;
+        row_range<T>(my, ca, cb, cc, op, g.y0, ts, r0, r1);
+        if (r0 >= r1) continue;
+        const int p0 = r0 * ts, p1 = r1 * ts;
+        int32_t any = 0;
+#pragma omp simd reduction(| : any)
+        for (int p = p0; p < p1; ++p) {
+          const T dx = mx - px[p], dy = my - py[p];
+          const T sigma = T(0.5) * (ca * dx * dx + cc * dy * dy) + cb * dx * dy;
+          T a = op * exp_neg<T>(-sigma);
+          a = a > T(kAlphaMax) ? T(kAlphaMax) : a;
+          const bool valid = kk <= lst[p] && sigma >= 0 && a >= T(kAlphaMin);
+          const T ra = T(1) / (T(1) - a);
+          const T tb = Tr[p] * ra;
+          rap[p] = valid ? ra : T(0);
+          Tb[p] = valid ? tb : T(0);
+          fac[p] = valid ? a * tb : T(0);
+          vacc[p] = valid ? Tfin[p] * ra * vap[p] : T(0);
+          Tr[p] = valid ? tb : Tr[p];
+          any |= valid ? 1 : 0;
+        }
+        if (!any) continue;
+        for (int64_t ch = 0; ch < D; ++ch) {
+          const T c = col[id * D + ch];
+          T* vo = vout.data() + ch * P;
+          T* bf = buf.data() + ch * P;
+          T vc = 0;
+#pragma omp simd reduction(+ : vc)
+          for (int p = p0; p < p1; ++p) {
+            vc += fac[p] * vo[p];
+            vacc[p] += (c * Tb[p] - bf[p] * rap[p]) * vo[p];
+            bf[p] += c * fac[p];
+          }
+          vcol[ch] = vc;
+        }
+        T g_mx = 0, g_my = 0, g_a = 0, g_b = 0, g_c = 0, g_o = 0;
+#pragma omp simd reduction(+ : g_mx, g_my, g_a, g_b, g_c, g_o)
+        for (int p = p0; p < p1; ++p) {
+          const T dx = mx - px[p], dy = my - py[p];
+          const T sigma = T(0.5) * (ca * dx * dx + cc * dy * dy) + cb * dx * dy;
+          const T vis = exp_neg<T>(-sigma);
+          const T v_al = op * vis < T(kAlphaMax) ? vacc[p] : T(0);  // 0 where not composited
+          const T v_sig = -op * vis * v_al;
+          g_o += vis * v_al;
+          g_a += T(0.5) * v_sig * dx * dx;
+          g_b += v_sig * dx * dy;
+          g_c += T(0.5) * v_sig * dy * dy;
+          g_mx += v_sig * (ca * dx + cb * dy);
+          g_my += v_sig * (cb * dx + cc * dy);
+        }
+        T* o = my_gr + id * G;
+        o[0] += g_mx;
+        o[1] += g_my;
+        o[2] += g_a;
+        o[3] += g_b;
+        o[4] += g_c;
+        o[5] += g_o;
+        for (int64_t ch = 0; ch < D; ++ch) o[6 + ch] += vcol[ch];
+      }
+    }
+  }
+}
+
+}  // namespace gs3d
