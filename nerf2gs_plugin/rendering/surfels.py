@@ -19,9 +19,10 @@ import torch
 from torch import Tensor
 
 from nerf2gs_plugin.errors import ConfigError
-from nerf2gs_plugin.rendering.backend import BACKENDS, gsplat_available, warn_once
+from nerf2gs_plugin.rendering.backend import resolve_backend
 from nerf2gs_plugin.rendering.projection import camera_centers
 from nerf2gs_plugin.rendering.sh import eval_sh
+from nerf2gs_plugin.rendering.surfels_cpu import EXT_NAME, EXT_SOURCES, composite_surfels_cpu
 from nerf2gs_plugin.rendering.surfels_torch import (
     build_tile_lists,
     composite_surfels_torch,
@@ -30,30 +31,6 @@ from nerf2gs_plugin.rendering.surfels_torch import (
 )
 
 RENDER_MODES = ("RGB", "D", "ED", "RGB+D", "RGB+ED")
-
-
-def _choose_backend(backend: str, device: torch.device) -> str:
-    if backend not in BACKENDS:
-        raise ConfigError(f"unknown rasterization backend {backend!r}; choose one of {', '.join(BACKENDS)}")
-    if backend == "torch":
-        return "torch"
-    if device.type == "cuda":
-        if backend in ("auto", "gsplat") and gsplat_available():
-            return "gsplat"
-        if backend == "gsplat":
-            warn_once("gsplat-2dgs", "gsplat is not importable; rasterizing surfels with the torch reference on the GPU")
-        return "torch"
-    if backend == "gsplat":
-        warn_once("gsplat-2dgs-cpu", "the gsplat backend needs CUDA tensors; using the CPU path for surfels")
-    try:
-        from nerf2gs_plugin.rendering import surfels_cpu  # noqa: PLC0415
-    except ImportError:
-        surfels_cpu = None  # type: ignore[assignment]
-    if surfels_cpu is not None and surfels_cpu.available():
-        return "cpu"
-    warn_once("surfels-cpu", "surfel C++ kernel unavailable; using the torch reference for 2DGS"
-              + (f" ({surfels_cpu.error()})" if surfels_cpu is not None and surfels_cpu.error() else ""))
-    return "torch"
 
 
 def _check(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, colors: Tensor, viewmats: Tensor,
@@ -109,7 +86,7 @@ def rasterize_surfels(
     ``height``, ``tile_size``, ``n_cameras``, ``backend``.
     """
     _check(means, quats, scales, opacities, colors, viewmats, Ks, sh_degree, render_mode)
-    chosen = _choose_backend(backend, means.device)
+    chosen = resolve_backend(backend, means.device.type, EXT_NAME, EXT_SOURCES)
     if chosen == "gsplat":
         return _rasterize_gsplat(means, quats, scales, opacities, colors, viewmats, Ks, width, height, near_plane,
                                  far_plane, sh_degree, backgrounds, render_mode, tile_size)
@@ -125,8 +102,6 @@ def rasterize_surfels(
         t.requires_grad for t in (means, quats, scales, opacities, colors, viewmats))
     densify = torch.zeros(C, N, 2, device=means.device, dtype=means.dtype, requires_grad=True) if grad_on else None
     if chosen == "cpu":
-        from nerf2gs_plugin.rendering.surfels_cpu import composite_surfels_cpu  # noqa: PLC0415
-
         maps = composite_surfels_cpu(proj, lists, opacities, feats, width, height, near_plane, densify)
     else:
         maps = composite_surfels_torch(proj, lists, opacities, feats, width, height, near_plane, densify)

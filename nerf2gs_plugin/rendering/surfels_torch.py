@@ -227,9 +227,10 @@ def composite_surfels_torch(proj: SurfelProjection, lists: TileLists, opacities:
     ts, tw, th = lists.tile_size, lists.tiles_w, lists.tiles_h
     dev, dt = proj.T.device, proj.T.dtype
     T = proj.T.reshape(C * N, 3, 3)
+    adj = _adjugate(T)
     attr = {
-        "adj": _adjugate(T),
-        "det": torch.linalg.det(T),
+        "adj": adj,
+        "det": _det(T, adj),
         "means2d": proj.means2d.reshape(C * N, 2),
         "depths": proj.depths.reshape(C * N),
         "normals": proj.normals.reshape(C * N, 3),
@@ -277,6 +278,11 @@ def _adjugate(T: Tensor) -> Tensor:
     """Adjugate of ``[M,3,3]``: its columns are the cross products of T's rows (``T adj(T) = det I``)."""
     r0, r1, r2 = T[:, 0], T[:, 1], T[:, 2]
     return torch.stack([torch.cross(r1, r2, dim=-1), torch.cross(r2, r0, dim=-1), torch.cross(r0, r1, dim=-1)], dim=-1)
+
+
+def _det(T: Tensor, adj: Tensor) -> Tensor:
+    """``det(T)`` as ``row0 . (row1 x row2)`` (a polynomial: finite gradients for singular T)."""
+    return (T[:, 0] * adj[:, :, 0]).sum(-1)
 
 
 def depth_to_normals(depth: Tensor, Ks: Tensor) -> Tensor:

@@ -187,3 +187,55 @@ def test_bad_arguments():
         _render(*scene, sh_degree=3, backend="vulkan")
     with pytest.raises(ValueError):
         _render(*scene[:4], scene[4][:, :4], sh_degree=3)
+
+
+# ------------------------------------------------------------------ the C++ kernel vs the reference
+def _cpu_or_skip():
+    from nerf2gs_plugin.rendering import surfels_cpu
+
+    if not surfels_cpu.available():
+        pytest.skip(f"surfel C++ kernel not buildable here: {surfels_cpu.error()}")
+
+
+def _outputs_and_grads(scene, backend, sh_degree, dtype):
+    ins = [t.clone().requires_grad_() for t in scene]
+    V, K = _cam(dtype)
+    out = rasterize_surfels(*ins, V, K, W, H, sh_degree=sh_degree, backend=backend,
+                            backgrounds=torch.tensor([[0.1, 0.2, 0.3]], dtype=dtype))
+    assert out[6]["backend"] == backend
+    g = torch.Generator().manual_seed(7)
+    loss = sum((o * torch.rand(o.shape, generator=g, dtype=dtype)).sum() for o in out[:6])
+    loss.backward()
+    grads = [t.grad for t in ins] + [out[6]["gradient_2dgs"].grad]
+    return [o.detach() for o in out[:6]], grads
+
+
+@pytest.mark.parametrize("dtype,sh_degree", [(torch.float64, 3), (torch.float32, 0), (torch.float32, 2)])
+def test_cpu_kernel_matches_torch_reference(dtype, sh_degree):
+    _cpu_or_skip()
+    scene = _random_scene(60, seed=11 + sh_degree, dtype=dtype)
+    if sh_degree == 0:
+        scene = scene[:4] + (scene[4][:, :1].contiguous(),)
+    ref_out, ref_g = _outputs_and_grads(scene, "torch", sh_degree, dtype)
+    out, g = _outputs_and_grads(scene, "cpu", sh_degree, dtype)
+    rel = 1e-10 if dtype == torch.float64 else 1e-4
+    names = ["render", "alpha", "normals", "surf_normals", "distort", "median"]
+    for name, a, b in zip(names, ref_out, out):
+        # surf normals are finite differences of depth: float32 noise is amplified there
+        tol = rel * (30 if name == "surf_normals" and dtype == torch.float32 else 1)
+        assert float((a - b).abs().max()) <= tol * max(float(a.abs().max()), 1.0), name
+    for name, a, b in zip(["means", "quats", "scales", "opacities", "colors", "gradient_2dgs"], ref_g, g):
+        assert float(a.abs().max()) > 0, name
+        assert float((a - b).abs().max()) <= rel * float(a.abs().max()), name
+
+
+def test_missing_kernel_falls_back_to_torch_with_a_warning(monkeypatch):
+    from nerf2gs_plugin.rendering import backend as be
+    from nerf2gs_plugin.rendering import surfels_cpu
+
+    monkeypatch.setattr(be, "load_extension", lambda *a, **k: None)
+    monkeypatch.setattr(be, "_WARNED", set())
+    with pytest.warns(RuntimeWarning, match="torch reference"):
+        out = _render(*_random_scene(5, seed=0), sh_degree=3, backend="cpu")
+    assert out[6]["backend"] == "torch"
+    assert surfels_cpu.EXT_NAME in be._WARNED
