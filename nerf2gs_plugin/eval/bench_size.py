@@ -33,6 +33,8 @@ def size_plan(scale: str, methods=tuple(SWEEPS), augment: bool = False) -> list[
     """One run per swept value (duplicates of the default config run once)."""
     from nerf2gs_plugin.eval.bench_paper import _overrides
 
+    from nerf2gs_plugin.registry import get_method
+
     plan: list[RunSpec] = []
     if augment:
         plan.append(RunSpec("StreetNeRF", "streetnerf", _overrides(scale, "streetnerf")))
@@ -42,12 +44,15 @@ def size_plan(scale: str, methods=tuple(SWEEPS), augment: bool = False) -> list[
 
             raise ConfigError(f"model-size has no sweep for method '{m}' (has: {', '.join(SWEEPS)})")
         seen: set[tuple] = set()
+        model_defaults = get_method(m).config.pipeline.model
         for fld, quick, default in SWEEPS[m]:
             for value in quick if scale == "quick" else default:
                 if (fld, value) in seen:
                     continue
                 seen.add((fld, value))
-                ov = _overrides(scale, m, {"pipeline": {"model": {fld: value}}})
+                # the method's own value adds no override: that run is the paper-table baseline (same key)
+                extra = {} if getattr(model_defaults, fld) == value else {"pipeline": {"model": {fld: value}}}
+                ov = _overrides(scale, m, extra)
                 plan.append(RunSpec(f"{m} {fld}={value:g}", m, ov, augment_from="StreetNeRF" if augment else None))
     return plan
 

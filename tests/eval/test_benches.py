@@ -62,7 +62,13 @@ def test_stability_plan_is_complete_and_valid():
     methods = ("streetnerf", "splatfacto", "scaffold-gs", "2dgs")
     assert len(plan) == len(methods) * 8
     variants = [c.variant for c in plan if c.method == "splatfacto"]
-    assert variants == ["seed 0", "seed 1", "seed 2", "pose noise 0.5deg/5cm", "half views", "2x transients", "no masks", "random init"]
+    own = get_method("splatfacto").config.seed
+    assert variants == [f"seed {own}", f"seed {own + 1}", f"seed {own + 2}", "pose noise 0.5deg/5cm", "half views", "2x transients",
+                        "no masks", "random init"]
+    from nerf2gs_plugin.eval.bench_paper import paper_table_plan
+
+    baseline = next(s for s in paper_table_plan("quick") if s.label == "splatfacto")
+    assert plan[8].overrides == baseline.overrides  # the own-seed run is the paper-table run: trained once
     pose = next(c for c in plan if c.variant.startswith("pose"))
     assert pose.perturbation.rotation_deg == 0.5 and pose.perturbation.translation_m == 0.05
     assert next(c for c in plan if c.variant == "2x transients").transients_factor == 2
@@ -97,6 +103,8 @@ def test_size_plan_and_smallest_within():
     assert "splatfacto max_gaussians=5000" in labels and "scaffold-gs max_anchors=2000" in labels and "2dgs densify_grad_thresh=0.0016" in labels
     for spec in plan:
         apply_plain(get_method(spec.method).config, spec.overrides)  # valid fields and types
+    own = next(s for s in plan if s.label == "splatfacto max_gaussians=60000")  # the registered default
+    assert "pipeline" not in own.overrides
     aug = size_plan("quick", ("splatfacto",), augment=True)
     assert aug[0].method == "streetnerf" and all(s.augment_from == "StreetNeRF" for s in aug[1:])
     with pytest.raises(ConfigError, match="no sweep for method 'nope'"):
