@@ -98,7 +98,7 @@ class BenchRunner:
             self._lpips = LPIPS.load_default(device=self.device) or False
         return self._lpips or None
 
-    def run(self, spec: RunSpec, data: Path, reference: Optional[tuple[Path, str]] = None) -> Outcome:
+    def run(self, spec: RunSpec, data: Path, reference: Optional[tuple[Path, str]] = None, step_hook=None) -> Outcome:
         from nerf2gs_plugin.engine.reference import load_run
         from nerf2gs_plugin.errors import UserError
         from nerf2gs_plugin.eval.evaluate import evaluate_run
@@ -111,7 +111,7 @@ class BenchRunner:
             return Outcome(spec.label, error=error)
         try:
             run_dir, _ = train_or_reuse(spec, data, self.runs_root, self.fingerprint(data), reference=reference,
-                                        progress=False, log=self.log)
+                                        progress=False, log=self.log, step_hook=step_hook)
             eval_path = run_dir / "bench_eval.json"
             if eval_path.is_file():
                 res = json.loads(eval_path.read_text())
@@ -139,3 +139,31 @@ def progress_log(progress, log_file: BenchLog) -> Callable[[str], None]:
 
     log_file.echo = echo
     return log_file
+
+
+def planned_steps(method: str, overrides: dict) -> int:
+    """Training steps of a run: its method's config with the overrides applied."""
+    from nerf2gs_plugin.engine.config import apply_plain
+    from nerf2gs_plugin.registry import get_method
+
+    return int(apply_plain(get_method(method).config, overrides, where=f"bench run of {method}").max_num_iterations)
+
+
+class BenchProgress:
+    """One bar over a whole bench, counted in training steps (reused runs jump ahead at once);
+    the runs' own bars are off, and their step hook moves this one."""
+
+    def __init__(self, progress, name: str, steps: list[int]) -> None:
+        self.progress, self.steps = progress, list(steps)
+        self.task = progress.add_task(name, total=max(1, sum(self.steps)), stats="")
+        self.base = 0
+
+    def start(self, index: int, label: str) -> None:
+        self.base = sum(self.steps[:index])
+        self.progress.update(self.task, completed=self.base, stats=f"({index + 1}/{len(self.steps)}) {label}")
+
+    def hook(self, step: int) -> None:
+        self.progress.update(self.task, completed=self.base + step + 1)
+
+    def finish(self, index: int) -> None:
+        self.progress.update(self.task, completed=sum(self.steps[: index + 1]))

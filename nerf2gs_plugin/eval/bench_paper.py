@@ -93,40 +93,48 @@ def ablation_plan(scale: str, enhancer: Optional[str] = None) -> list[RunSpec]:
     return plan
 
 
-def run_plan(plan: list[RunSpec], data: Path, runs_root: Path, log: Callable[[str], None] = print) -> dict[str, dict]:
-    """Train (or reuse) and evaluate every run of a plan, in order; returns label -> eval result."""
-    from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
+def run_plan(plan: list[RunSpec], data: Path, runs_root: Path, log: Optional[Callable[[str], None]] = None,
+             name: str = "bench") -> dict[str, dict]:
+    """Train (or reuse) and evaluate every run of a plan, in order; returns label -> eval result.
+    One progress bar over the whole plan (in training steps); log lines also go to
+    ``<runs_root>/logs/<name>.log``."""
     from nerf2gs_plugin.engine.reference import load_run
     from nerf2gs_plugin.engine.trainer import pick_device
+    from nerf2gs_plugin.errors import ConfigError
+    from nerf2gs_plugin.eval.bench_io import BenchLog, BenchProgress, BenchRunner, planned_steps, progress_log
     from nerf2gs_plugin.eval.evaluate import evaluate_run
     from nerf2gs_plugin.eval.metrics import LPIPS
+    from nerf2gs_plugin.progress import make_progress
 
     device = pick_device("auto")
-    from nerf2gs_plugin.data import parse_dataset
-
-    dataset = dataset_fingerprint(parse_dataset(data, "train").image_filenames)
     done: dict[str, tuple[Path, str]] = {}
     results: dict[str, dict] = {}
     lpips_model = LPIPS.load_default(device=device)
-    for i, spec in enumerate(plan):
-        log(f"[bench] ({i + 1}/{len(plan)}) {spec.label}")
-        ref = done[spec.augment_from] if spec.augment_from else None
-        if spec.augment_from and ref is None:
-            raise KeyError(f"run '{spec.label}' augments from '{spec.augment_from}', which is not earlier in the plan")
-        run_dir, key = train_or_reuse(spec, data, runs_root, dataset, reference=ref, log=log)
-        done[spec.label] = (run_dir, key)
-        eval_path = run_dir / "bench_eval.json"
-        if eval_path.is_file():
-            res = json.loads(eval_path.read_text())
-        else:
-            run = load_run(run_dir, device=device)
-            names = [s for s in SPLITS if s in run.pipeline.datamanager.eval_split_names()] or None
-            res = evaluate_run(run, names, render_dir=run_dir / "eval_renders", lpips_model=lpips_model)
-            atomic_write_text(eval_path, json.dumps(res, indent=1))
-        res["run_dir"] = str(run_dir)
-        res["label"] = spec.label
-        res["target"] = spec.method
-        results[spec.label] = res
+    with make_progress() as progress:
+        bar = BenchProgress(progress, name, [planned_steps(s.method, s.overrides) for s in plan])
+        log = log or progress_log(progress, BenchLog(runs_root, name))
+        dataset = BenchRunner(runs_root, log=log).fingerprint(data)
+        for i, spec in enumerate(plan):
+            bar.start(i, spec.label)
+            log(f"[bench] ({i + 1}/{len(plan)}) {spec.label}")
+            ref = done.get(spec.augment_from) if spec.augment_from else None
+            if spec.augment_from and ref is None:
+                raise ConfigError(f"run '{spec.label}' augments from '{spec.augment_from}', which is not earlier in the plan")
+            run_dir, key = train_or_reuse(spec, data, runs_root, dataset, reference=ref, progress=False, log=log, step_hook=bar.hook)
+            done[spec.label] = (run_dir, key)
+            eval_path = run_dir / "bench_eval.json"
+            if eval_path.is_file():
+                res = json.loads(eval_path.read_text())
+            else:
+                run = load_run(run_dir, device=device)
+                names = [s for s in SPLITS if s in run.pipeline.datamanager.eval_split_names()] or None
+                res = evaluate_run(run, names, render_dir=run_dir / "eval_renders", lpips_model=lpips_model)
+                atomic_write_text(eval_path, json.dumps(res, indent=1))
+            res["run_dir"] = str(run_dir)
+            res["label"] = spec.label
+            res["target"] = spec.method
+            results[spec.label] = res
+            bar.finish(i)
     return results
 
 
@@ -279,7 +287,7 @@ def run_named_bench(name: str, plan: list[RunSpec], data: Path, runs_root: Path,
     from rich.console import Console
 
     t0 = time.time()
-    results = run_plan(plan, data, runs_root)
+    results = run_plan(plan, data, runs_root, name=name)
     md = write_results(out_dir, name, results, title, extra_md="Differences, same bench run:\n\n" + ratios_md(results, compare)
                        + f"\n\nBench wall time: {time.time() - t0:.0f} s (training reused where cached).\n")
     speed_quality_chart(results, Path(out_dir) / f"{name}_speed_quality.png", title)

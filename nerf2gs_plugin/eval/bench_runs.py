@@ -36,8 +36,9 @@ def run_key(dataset: str, spec: RunSpec, reference_key: Optional[str]) -> str:
 
 
 def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, reference: Optional[tuple[Path, str]] = None,
-                   progress: bool = True, log=print) -> tuple[Path, str]:
-    """Returns (run_dir, key). A finished run with the same key is reused; a partial one resumes."""
+                   progress: bool = True, log=print, step_hook=None) -> tuple[Path, str]:
+    """Returns (run_dir, key). A finished run with the same key is reused; a partial one resumes.
+    ``step_hook(step)`` is called after every training step (a bench-wide progress bar)."""
     from nerf2gs_plugin.registry import get_method
 
     key = run_key(dataset, spec, reference[1] if reference else None)
@@ -59,6 +60,8 @@ def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, ref
         log(f"[bench] train {spec.label} ({spec.method}, {cfg.max_num_iterations} steps)")
     trainer = Trainer(cfg)
     trainer.setup()
+    if step_hook is not None:
+        trainer.step_hooks.append(step_hook)
     trainer.train()
     atomic_write_text(run_dir / "bench_run.json", json.dumps({"label": spec.label, **dataclasses.asdict(spec), "key": key}, indent=1, default=str))
     return run_dir, key

@@ -13,7 +13,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Optional
 
-from nerf2gs_plugin.eval.bench_io import EVAL_SPLITS, BenchLog, BenchRunner, fmt, mean_psnr, progress_log, write_bench_files
+from nerf2gs_plugin.eval.bench_io import (EVAL_SPLITS, BenchLog, BenchProgress, BenchRunner, fmt, mean_psnr, planned_steps,
+                                         progress_log, write_bench_files)
 from nerf2gs_plugin.eval.bench_runs import RunSpec
 
 TOLERANCE_DB = 0.5
@@ -137,20 +138,20 @@ def run(plan: list[RunSpec], data: Path, runs_root: Path, out_dir: Path, scale: 
 
     rows, done = [], {}
     with make_progress() as progress:
-        task = progress.add_task("model-size", total=len(plan), stats="")
+        bar = BenchProgress(progress, "model-size", [planned_steps(s.method, s.overrides) for s in plan])
         runner = BenchRunner(runs_root, log=progress_log(progress, BenchLog(runs_root, "model_size")))
-        for spec in plan:
-            progress.update(task, stats=spec.label)
+        for i, spec in enumerate(plan):
+            bar.start(i, spec.label)
             ref = done.get(spec.augment_from) if spec.augment_from else None
             if spec.augment_from and ref is None:
                 rows.append(row_from(spec.label, spec.method, None, f"reference '{spec.augment_from}' failed"))
             else:
-                out = runner.run(spec, data, reference=ref)
+                out = runner.run(spec, data, reference=ref, step_hook=bar.hook)
                 if out.result is not None:
                     done[spec.label] = (Path(out.run_dir), Path(out.run_dir).name)
                 if spec.method != "streetnerf":
                     rows.append(row_from(spec.label, spec.method, out.result, out.error))
-            progress.update(task, advance=1)
+            bar.finish(i)
     best = smallest_within(rows)
     title = f"Model size against quality, {Path(data).name} ({scale} scale)"
     payload = {"scale": scale, "data": str(data), "tolerance_db": TOLERANCE_DB, "rows": rows, "picks": best}

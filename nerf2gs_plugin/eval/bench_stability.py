@@ -22,7 +22,8 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from nerf2gs_plugin.engine.config import atomic_write_text
-from nerf2gs_plugin.eval.bench_io import BenchLog, BenchRunner, fmt, mean_psnr, progress_log, write_bench_files
+from nerf2gs_plugin.eval.bench_io import (BenchLog, BenchProgress, BenchRunner, fmt, mean_psnr, planned_steps, progress_log,
+                                         write_bench_files)
 from nerf2gs_plugin.eval.bench_runs import RunSpec
 from nerf2gs_plugin.eval.perturb import Perturbation, perturbed_copy
 
@@ -142,7 +143,7 @@ def case_dataset(case: StressCase, data: Path, runs_root: Path, synthetic: bool)
     return perturbed_copy(data, Path(runs_root) / "data", case.perturbation)
 
 
-def run_case(case: StressCase, data: Path, runner: BenchRunner, synthetic: bool) -> dict:
+def run_case(case: StressCase, data: Path, runner: BenchRunner, synthetic: bool, step_hook=None) -> dict:
     """Train/evaluate one case (reusing earlier work) and classify it."""
     from nerf2gs_plugin.engine.reference import load_run
     from nerf2gs_plugin.errors import UserError
@@ -153,7 +154,7 @@ def run_case(case: StressCase, data: Path, runner: BenchRunner, synthetic: bool)
     except UserError as e:
         msg = str(e)
         return {"method": case.method, "variant": case.variant, "status": "unsupported" if "unsupported" in msg else "error", "error": msg}
-    out = runner.run(spec, case_data)
+    out = runner.run(spec, case_data, step_hook=step_hook)
     split = "street"
     row: dict[str, Any] = {"method": case.method, "variant": case.variant, "data": str(case_data), "error": out.error}
     first = final = None
@@ -236,15 +237,15 @@ def run(plan: list[StressCase], data: Path, runs_root: Path, out_dir: Path, scal
     log_file = BenchLog(runs_root, "stability")
     rows = []
     with make_progress() as progress:
-        task = progress.add_task("stability", total=len(plan), stats="")
+        bar = BenchProgress(progress, "stability", [planned_steps(c.method, c.overrides) for c in plan])
         logger = log or progress_log(progress, log_file)
         runner = BenchRunner(runs_root, log=logger)
-        for case in plan:
-            progress.update(task, stats=case.label)
-            row = run_case(case, data, runner, synthetic)
+        for i, case in enumerate(plan):
+            bar.start(i, case.label)
+            row = run_case(case, data, runner, synthetic, step_hook=bar.hook)
             logger(f"[stability] {case.label}: {row['status']}" + (f" ({row['error']})" if row.get("error") else ""))
             rows.append(row)
-            progress.update(task, advance=1)
+            bar.finish(i)
     summary = summarize(rows)
     title = f"Stability under stress, {Path(data).name} ({scale} scale)"
     payload = {"scale": scale, "data": str(data), "rows": rows, "summary": summary}

@@ -182,3 +182,4 @@ def test_quick_scale_rescales_schedules_and_merges_extras(tmp_path):
     res = {"a": _result("a", "splatfacto", 30.0, 18.0, 20.0, 100, 1000, "/a"), "b": _result("b", "streetnerf", 0.2, 20.0, 21.0, 500, 0, "/b")}
     speed_quality_chart(res, tmp_path / "x_speed_quality.png", "t")
     assert (tmp_path / "x_speed_quality.png").read_bytes()[:4] == b"\x89PNG"
+
