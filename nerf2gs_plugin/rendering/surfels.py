@@ -138,7 +138,7 @@ def _rasterize_gsplat(means: Tensor, quats: Tensor, scales: Tensor, opacities: T
     render, alpha, normals, surf, distort, median, meta = gsplat.rasterization_2dgs(
         means, quats, scales, opacities, colors, viewmats, Ks, width, height, near_plane=near_plane,
         far_plane=far_plane, sh_degree=sh_degree, backgrounds=backgrounds, render_mode=render_mode,
-        tile_size=tile_size, distloss=True)
+        tile_size=tile_size, distloss="D" in render_mode)
     rot = viewmats[:, :3, :3]
     normals = torch.einsum("cij,chwj->chwi", rot, normals)
     if surf is None:

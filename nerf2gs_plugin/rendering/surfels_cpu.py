@@ -71,5 +71,5 @@ def composite_surfels_cpu(proj: SurfelProjection, lists: TileLists, opacities: T
     dims = (C, height, width, lists.tile_size, lists.tiles_w, lists.tiles_h, float(near_plane))
     out = _Composite.apply(adj, det, m2, zc, op, feats, dens, lists.flat_ids.contiguous(),
                            lists.starts.contiguous(), lists.counts.contiguous(), dims)
-    return {"colors": out[..., :D], "normals": out[..., D:D + 3], "depth": out[..., D + 3:D + 4],
-            "alpha": out[..., D + 4:D + 5], "distort": out[..., D + 5:D + 6], "median": out[..., D + 6:D + 7]}
+    parts = out.split([D, 3, 1, 1, 1, 1], dim=-1)  # one backward node for all six maps
+    return dict(zip(("colors", "normals", "depth", "alpha", "distort", "median"), parts))

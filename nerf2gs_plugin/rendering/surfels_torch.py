@@ -270,8 +270,8 @@ def composite_surfels_torch(proj: SurfelProjection, lists: TileLists, opacities:
         out = out.index_copy(0, torch.cat(done_tiles), torch.cat(results, 0))
     img = out.reshape(C, th, tw, ts, ts, D + 7).permute(0, 1, 3, 2, 4, 5).reshape(C, th * ts, tw * ts, D + 7)
     img = img[:, :height, :width]
-    return {"colors": img[..., :D], "depth": img[..., D:D + 1], "alpha": img[..., D + 1:D + 2],
-            "normals": img[..., D + 2:D + 5], "distort": img[..., D + 5:D + 6], "median": img[..., D + 6:D + 7]}
+    parts = img.split([D, 1, 1, 3, 1, 1], dim=-1)
+    return dict(zip(("colors", "depth", "alpha", "normals", "distort", "median"), parts))
 
 
 def _adjugate(T: Tensor) -> Tensor:

@@ -239,3 +239,30 @@ def test_missing_kernel_falls_back_to_torch_with_a_warning(monkeypatch):
         out = _render(*_random_scene(5, seed=0), sh_degree=3, backend="cpu")
     assert out[6]["backend"] == "torch"
     assert surfels_cpu.EXT_NAME in be._WARNED
+
+
+def test_camera_batch_equals_single_cameras_and_plane_through_the_camera_is_clipped():
+    means, quats, scales, opac, sh = _random_scene(25, seed=4)
+    # plus a large ground-like surfel that reaches behind the camera plane (y = 0.6, horizontal)
+    means = torch.cat([means, torch.tensor([[0.0, 0.6, 0.5]])])
+    quats = torch.cat([quats, _quat_axis([1.0, 0.0, 0.0], math.pi / 2)[None]])
+    scales = torch.cat([scales, torch.tensor([[3.0, 3.0, 0.0]])])
+    opac = torch.cat([opac, torch.tensor([0.9])])
+    sh = torch.cat([sh, torch.zeros(1, 16, 3)])
+    V, K = _cam()
+    V2 = V.clone()
+    V2[0, :3, 3] = torch.tensor([0.3, -0.1, 0.2])
+    Vs, Ks = torch.cat([V, V2]), K.expand(2, 3, 3)
+    both = rasterize_surfels(means, quats, scales, opac, sh, Vs, Ks, W, H, sh_degree=2, backend="torch")
+    for c in range(2):
+        one = rasterize_surfels(means, quats, scales, opac, sh, Vs[c:c + 1], Ks[c:c + 1], W, H, sh_degree=2,
+                                backend="torch")
+        for a, b in zip(both[:6], one[:6]):
+            assert torch.allclose(a[c], b[0], atol=1e-5)
+    alpha, depth = both[1][0, ..., 0], both[0][0, ..., 3]
+    assert all(torch.isfinite(t).all() for t in both[:6])
+    # the ground surfel covers the lower image rows, at the ray-plane depth 0.6 * F / (y_px - H/2)
+    row = H - 1
+    expect = 0.6 * F / (row + 0.5 - H / 2)
+    assert float(alpha[row].min()) > 0.5
+    assert float(depth[row, 2]) == pytest.approx(expect, rel=0.05)
