@@ -6,7 +6,8 @@ Conventions:
     blender-style data); grey images are repeated to 3 channels;
   * ``downscale`` shrinks to ``(round(W / d), round(H / d))`` with area averaging, the same rounding
     the parsers use for the cameras;
-  * masks are bool ``[H, W]``: a pixel is inside the mask when its value is nonzero (any channel);
+  * masks are bool ``[H, W]``: a pixel is inside the mask when its value is nonzero (any colour
+    channel; the alpha channel of an RGBA mask is ignored, it is usually 255 everywhere);
   * depth maps are ``.npy`` (or ``.npz`` with one array) float32 ``[H, W]`` metres, z-depth, ``0`` = no
     depth (sky).
 
@@ -101,12 +102,17 @@ def image_size(path: PathLike) -> tuple[int, int]:
     return int(arr.shape[1]), int(arr.shape[0])
 
 
+def mask_channels(arr: np.ndarray) -> np.ndarray:
+    """A decoded mask file -> ``[H, W]``: the max over its colour channels (alpha ignored)."""
+    if arr.ndim == 3:
+        arr = arr[:, :, :3].max(axis=2) if arr.shape[2] == 4 else arr.max(axis=2)
+    return arr
+
+
 def load_mask(path: PathLike, expected_hw: Optional[tuple[int, int]] = None) -> Tensor:
     """Mask file -> bool ``[H, W]`` (nonzero = inside). A size other than ``expected_hw`` is a DataError."""
     path = Path(path)
-    arr = read_raw(path, "mask")
-    if arr.ndim == 3:
-        arr = arr.max(axis=2)
+    arr = mask_channels(read_raw(path, "mask"))
     if expected_hw is not None and tuple(arr.shape[:2]) != tuple(expected_hw):
         h, w = expected_hw
         raise DataError(f"mask is {arr.shape[1]}x{arr.shape[0]} but its image is {w}x{h}", path)

@@ -170,7 +170,7 @@ def process_mask(cache: SplitCache, src: Path, intr: Intrinsics, downscale: floa
 
     def make(s: Path, d: Path) -> None:
         m = im.read_raw(s, "mask")
-        m = (m.max(axis=2) if m.ndim == 3 else m) > 0
+        m = im.mask_channels(m) > 0
         _check_size(m, intr, s, "mask", image_path)
         m = m.astype(np.uint8) * 255
         if intr.distorted:
