@@ -117,14 +117,22 @@ class Stability:
     data: Optional[Path] = None
     scale: Literal["quick", "default"] = "quick"
     methods: tuple[str, ...] = ("streetnerf", "splatfacto", "scaffold-gs", "2dgs")
+    cases: tuple[str, ...] = ()
+    """Only the cases whose name starts with one of these (e.g. seed "pose noise"); default all."""
     out: Path = RESULTS
     runs: Path = RUNS
 
     def main(self) -> None:
+        from nerf2gs_plugin.errors import ConfigError
         from nerf2gs_plugin.eval.bench_stability import run, stability_plan
 
+        plan = stability_plan(self.scale, self.methods)
+        if self.cases:
+            plan = [c for c in plan if c.variant.startswith(tuple(self.cases))]
+            if not plan:
+                raise ConfigError(f"--cases {' '.join(self.cases)} matches no stability case")
         data = ensure_street(self.data, self.runs)
-        run(stability_plan(self.scale, self.methods), data, self.runs, self.out, self.scale, synthetic=self.data is None)
+        run(plan, data, self.runs, self.out, self.scale, synthetic=self.data is None)
 
 
 @dataclass
@@ -143,8 +151,9 @@ class ModelSize:
     def main(self) -> None:
         from nerf2gs_plugin.eval.bench_size import run, size_plan
 
+        plan = size_plan(self.scale, self.methods, self.augment)  # bad names fail before any work
         data = ensure_street(self.data, self.runs)
-        run(size_plan(self.scale, self.methods, self.augment), data, self.runs, self.out, self.scale)
+        run(plan, data, self.runs, self.out, self.scale)
 
 
 def bench_enhancer(data: Path, runs_root: Path, scale: str) -> str:
