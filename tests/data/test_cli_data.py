@@ -49,3 +49,10 @@ def test_augmented_subcommands_are_registered(monkeypatch, capsys):
     helptext = capsys.readouterr().out
     for sub in ("synth-street", "preview", "export-augmented", "preview-augmented"):
         assert sub in helptext
+
+
+def test_preview_colmap_dataset(small_street, write_colmap, tmp_path, monkeypatch, capsys):
+    root = write_colmap(small_street, tmp_path / "colmap")
+    _run(monkeypatch, "preview", str(root), "--rows", "1")
+    assert (root / "preview.png").is_file()
+    assert cv2.imread(str(root / "preview.png")) is not None
