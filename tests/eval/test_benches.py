@@ -183,3 +183,4 @@ def test_quick_scale_rescales_schedules_and_merges_extras(tmp_path):
     speed_quality_chart(res, tmp_path / "x_speed_quality.png", "t")
     assert (tmp_path / "x_speed_quality.png").read_bytes()[:4] == b"\x89PNG"
 
+
