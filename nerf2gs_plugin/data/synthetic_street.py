@@ -51,7 +51,9 @@ class SynthStreetConfig:
     seed: int = 0
     """Layout, colours, cars, poses and exposures all follow from the seed."""
     width: int = 200
+    """Image width in pixels (every camera)."""
     height: int = 112
+    """Image height in pixels."""
     fov_deg: float = 80.0
     """Horizontal field of view of every camera."""
     num_train: int = 60
@@ -61,6 +63,7 @@ class SynthStreetConfig:
     num_bev: int = 12
     """Views per bird's-eye eval split (bev_1, bev_2; no cars)."""
     num_cars: int = 6
+    """Moving cars (transients, training views only)."""
     cam_height: float = 3.0
     """Training camera height (m)."""
     drive_half_len: float = 24.0
@@ -73,6 +76,7 @@ class SynthStreetConfig:
     exposure_jitter: float = 0.05
     """Training images get a per-image exposure in 1 +- this (appearance variation)."""
     num_points: int = 4000
+    """Sparse SfM-like points written to sparse_pc.ply."""
     point_noise: float = 0.03
     """Sparse point noise (m), plus 0.4% of the depth, like triangulation error."""
     coverage_angle_deg: float = 15.0
@@ -80,6 +84,7 @@ class SynthStreetConfig:
     overwrite: bool = False
     """Replace an existing dataset in OUT."""
     progress: bool = True
+    """Show a progress bar on stderr."""
 
 
 def _check(cfg: SynthStreetConfig) -> None:
