@@ -140,6 +140,8 @@ def case_dataset(case: StressCase, data: Path, runs_root: Path, synthetic: bool)
         return path
     if case.perturbation is None:
         return Path(data)
+    if not (Path(data) / "transforms.json").is_file():
+        raise DataError("unsupported: this stress writes a perturbed transforms.json; the dataset has none (COLMAP?)", data)
     return perturbed_copy(data, Path(runs_root) / "data", case.perturbation)
 
 

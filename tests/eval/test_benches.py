@@ -184,3 +184,17 @@ def test_quick_scale_rescales_schedules_and_merges_extras(tmp_path):
     assert (tmp_path / "x_speed_quality.png").read_bytes()[:4] == b"\x89PNG"
 
 
+
+
+def test_case_dataset_reports_unsupported_stresses(tiny_scene, tmp_path):
+    from nerf2gs_plugin.eval.bench_stability import case_dataset
+
+    colmap_like = tmp_path / "colmap"
+    colmap_like.mkdir()
+    with pytest.raises(DataError, match="unsupported: this stress writes a perturbed transforms.json"):
+        case_dataset(StressCase("splatfacto", "no masks", perturbation=Perturbation(drop_masks=True)), colmap_like, tmp_path, True)
+    with pytest.raises(DataError, match="unsupported: more transients"):
+        case_dataset(StressCase("splatfacto", "2x transients", transients_factor=2), tiny_scene, tmp_path, False)
+    assert case_dataset(StressCase("splatfacto", "seed 1"), tiny_scene, tmp_path, False) == tiny_scene
+    copy = case_dataset(StressCase("splatfacto", "random init", perturbation=Perturbation(drop_points=True)), tiny_scene, tmp_path, False)
+    assert copy.parent == tmp_path / "data" and "nopoints" in copy.name
