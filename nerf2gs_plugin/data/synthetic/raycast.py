@@ -65,12 +65,19 @@ class View:
 
 @dataclass
 class Hits:
-    """Nearest hits of a grid of rays ``[..., H, W]``: distance (inf = none), primitive index
-    (boxes 0..B-1, spheres B..B+S-1, -1 = none) and the slab axis of a box hit."""
+    """Nearest hits of a grid of rays ``[..., H, W]``: distance (inf = none) and
+    ``code = 3 * primitive + slab axis`` (boxes 0..B-1, spheres B..B+S-1; -3 = none)."""
 
     t: Tensor
-    prim: Tensor
-    axis: Tensor
+    code: Tensor
+
+    @property
+    def prim(self) -> Tensor:
+        return torch.div(self.code, 3, rounding_mode="floor")
+
+    @property
+    def axis(self) -> Tensor:
+        return torch.remainder(self.code, 3)
 
 
 def camera_rays(c2w: Tensor, intr: Pinhole, spp: int) -> Tensor:
@@ -117,13 +124,17 @@ def _pixel_rects(corners: Tensor, c2w: Tensor, intr: Pinhole) -> list[Optional[t
     return rects
 
 
-def _slab(o: Tensor, d: Tensor, lo: Tensor, hi: Tensor) -> tuple[Tensor, Tensor]:
-    """Entry distance (inf = miss) and entry axis of rays ``o, d [..., 3]`` into one box."""
-    inv = 1.0 / torch.where(d.abs() < 1e-9, torch.full_like(d, 1e-9), d)
+def _slab(o: Tensor, inv: Tensor, lo: Tensor, hi: Tensor) -> tuple[Tensor, Tensor]:
+    """Entry distance (inf = miss) and entry axis of rays (origins ``o``, inverse directions
+    ``inv [..., 3]``) into one box."""
     t1, t2 = (lo - o) * inv, (hi - o) * inv
     tnear, axis = torch.minimum(t1, t2).max(dim=-1)
     tfar = torch.maximum(t1, t2).min(dim=-1).values
-    return torch.where((tfar >= tnear) & (tnear > _EPS), tnear, torch.full_like(tnear, math.inf)), axis
+    return torch.where((tfar >= tnear) & (tnear > _EPS), tnear, math.inf), axis
+
+
+def _inverse(d: Tensor) -> Tensor:
+    return 1.0 / torch.where(d.abs() < 1e-9, 1e-9, d)
 
 
 def _sphere(o: Tensor, d: Tensor, c: Tensor, r: float) -> Tensor:
@@ -131,35 +142,35 @@ def _sphere(o: Tensor, d: Tensor, c: Tensor, r: float) -> Tensor:
     b = (oc * d).sum(-1)
     disc = b * b - ((oc * oc).sum(-1) - r * r)
     t = -b - torch.sqrt(disc.clamp(min=0))
-    return torch.where((disc > 0) & (t > _EPS), t, torch.full_like(t, math.inf))
+    return torch.where((disc > 0) & (t > _EPS), t, math.inf)
 
 
-def _update(h: Hits, sl: tuple, t: Tensor, prim: int, axis: Optional[Tensor]) -> None:
-    better = t < h.t[sl]
-    h.t[sl] = torch.where(better, t, h.t[sl])
-    h.prim[sl] = torch.where(better, torch.full_like(h.prim[sl], prim), h.prim[sl])
-    if axis is not None:
-        h.axis[sl] = torch.where(better, axis, h.axis[sl])
+def _update(h: Hits, sl: tuple, t: Tensor, code: Tensor | int) -> None:
+    """Keep the nearer hit; ``code`` = primitive * 3 + slab axis."""
+    cur = h.t[sl]
+    better = t < cur
+    h.t[sl] = torch.where(better, t, cur)
+    h.code[sl] = torch.where(better, code, h.code[sl])
 
 
 def cast(o: Tensor, d: Tensor, boxes: Boxes, spheres: Spheres, rects: list) -> Hits:
     """Nearest box/sphere hit of rays ``d [S, H, W, 3]`` (origins ``o`` broadcastable), visiting
     only each primitive's pixel rectangle (``rects``: boxes then spheres)."""
     shape = d.shape[:-1]
-    h = Hits(torch.full(shape, math.inf), torch.full(shape, -1, dtype=torch.long), torch.zeros(shape, dtype=torch.long))
+    h = Hits(torch.full(shape, math.inf), torch.full(shape, -3, dtype=torch.long))
+    inv = _inverse(d)
     B = len(boxes)
     for i, rect in enumerate(rects):
         if rect is None:
             continue
         sl = (slice(None), slice(rect[0], rect[1]), slice(rect[2], rect[3]))
-        dd = d[sl]
         oo = o[sl] if o.dim() == d.dim() else o
         if i < B:
-            t, axis = _slab(oo, dd, boxes.lo[i], boxes.hi[i])
-            _update(h, sl, t, i, axis)
+            t, axis = _slab(oo, inv[sl], boxes.lo[i], boxes.hi[i])
+            _update(h, sl, t, axis + 3 * i)
         else:
-            t = _sphere(oo, dd, spheres.centre[i - B], float(spheres.radius[i - B]))
-            _update(h, sl, t, i, None)
+            t = _sphere(oo, d[sl], spheres.centre[i - B], float(spheres.radius[i - B]))
+            _update(h, sl, t, 3 * i)
     return h
 
 
