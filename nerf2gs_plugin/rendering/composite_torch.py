@@ -1,8 +1,9 @@
 """Pure-torch tile compositing: the reference the C++ kernel is tested against, and the fallback.
 
 Differentiable by autograd. Memory stays bounded: tiles are processed in batches whose padded
-``tiles x pixels x list-length`` block stays under ``budget`` elements, and a tile whose list is
-longer than that is walked in list chunks with the transmittance carried over. The semantics are
+``tiles x pixels x list-length`` block stays under ``budget`` elements (a tile whose list is
+longer than that is walked in list chunks with the transmittance carried over), and each batch is
+checkpointed, so backward recomputes it rather than keeping every batch's intermediates. The semantics are
 those of the kernel (and gsplat): ``alpha = min(0.99, o exp(-sigma))``, pairs with
 ``alpha < 1/255`` or ``sigma < 0`` are skipped, and compositing stops before the Gaussian that
 would bring the transmittance to ``<= 1e-4``.
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import torch
 from torch import Tensor
+from torch.utils.checkpoint import checkpoint
 
 from nerf2gs_plugin.rendering.tiles import tile_grid
 
@@ -56,8 +58,12 @@ def composite_torch(
         y = torch.div(local, tx_n, rounding_mode="floor")[:, None] * tile_size + off_y[None]
         inside = (x < width) & (y < height)
         pix_idx.append(((cam[:, None] * height + y) * width + x)[inside])
-        r, a, m = _composite_tiles(means2d, conics, colors, opacities, flat_ids, tile_offsets[t:t + b + 1],
-                                   x.to(dt) + 0.5, y.to(dt) + 0.5, budget)
+        args = (means2d, conics, colors, opacities, flat_ids, tile_offsets[t:t + b + 1], x.to(dt) + 0.5, y.to(dt) + 0.5, budget)
+        if torch.is_grad_enabled() and any(v.requires_grad for v in (means2d, conics, colors, opacities)):
+            # recompute the batch in backward instead of keeping its [B, P, L] intermediates alive
+            r, a, m = checkpoint(_composite_tiles, *args, use_reentrant=False)
+        else:
+            r, a, m = _composite_tiles(*args)
         renders.append(r[inside])
         alphas.append(a[inside])
         medians.append(m[inside])

@@ -8,7 +8,8 @@
 //
 // Pixels of a tile are the innermost loop so that it vectorises (AVX-512 with -march=native); a
 // Gaussian only visits the tile rows its alpha >= 1/255 ellipse can reach. OpenMP parallelises over
-// tiles; gradients go to per-thread buffers (no atomics).
+// tiles; gradients go to per-thread buffers (no atomics). Rows whose pixels are all terminated
+// (forward) or past their last composited Gaussian (backward) are skipped.
 #pragma once
 #include <omp.h>
 
@@ -73,15 +74,16 @@ inline void row_range(T my, T ca, T cb, T cc, T op, int y0, int ts, int& r0, int
 
 // out [C,H,W,D], out_a [C,H,W], out_last / out_med [C,H,W] (list index of the last composited
 // pair / pair id of the median Gaussian, -1 for none).
-template <typename T>
-void forward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
-                   const Dims d, int n_threads, T* out, T* out_a, int64_t* out_last, int64_t* out_med) {
-  const int ts = d.ts, P = ts * ts;
+// TS: the tile edge at compile time (one SIMD row of 16 floats), or 0 for d.ts at run time.
+template <typename T, int TS>
+void forward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
+                        const Dims d, int n_threads, T* out, T* out_a, int64_t* out_last, int64_t* out_med) {
+  const int ts = TS > 0 ? TS : d.ts, P = ts * ts;
   const int64_t D = d.D;
 #pragma omp parallel num_threads(n_threads)
   {
     std::vector<T> px(P), py(P), Tr(P), act(P), acc(P * D), w(P);
-    std::vector<int32_t> lst(P), med(P);
+    std::vector<int32_t> lst(P), med(P), rowlive(ts);
 #pragma omp for schedule(dynamic, 1)
     for (int64_t t = 0; t < d.n_tiles(); ++t) {
       const Tile g = tile_of(t, d);
@@ -95,15 +97,16 @@ void forward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const i
         med[p] = -1;
       }
       std::fill(acc.begin(), acc.end(), T(0));
+      int32_t tile_live = 0;
+      for (int r = 0; r < ts; ++r) {
+        int32_t c = 0;
+        for (int q = 0; q < ts; ++q) c += act[r * ts + q] > 0 ? 1 : 0;
+        rowlive[r] = c;
+        tile_live += c;
+      }
       const int64_t k0 = off[t];
       const int32_t n_list = static_cast<int32_t>(off[t + 1] - k0);
-      for (int32_t kk = 0; kk < n_list; ++kk) {
-        if ((kk & 15) == 15) {
-          T any = 0;
-#pragma omp simd reduction(max : any)
-          for (int p = 0; p < P; ++p) any = std::max(any, act[p]);
-          if (any == 0) break;
-        }
+      for (int32_t kk = 0; kk < n_list && tile_live > 0; ++kk) {
         const int64_t id = ids[k0 + kk];
         const T mx = m2[2 * id], my = m2[2 * id + 1];
         const T ca = cn[3 * id], cb = cn[3 * id + 1], cc = cn[3 * id + 2];
@@ -114,8 +117,14 @@ void forward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const i
         const int p0 = r0 * ts, p1 = r1 * ts;
         const int32_t id32 = static_cast<int32_t>(id);
         int32_t any_w = 0;
-#pragma omp simd reduction(| : any_w)
-        for (int p = p0; p < p1; ++p) {
+        for (int row = p0; row < p1; row += ts) {
+        if (rowlive[row / ts] == 0) {
+          for (int p = row; p < row + ts; ++p) w[p] = T(0);
+          continue;
+        }
+        int32_t n_term = 0;
+#pragma omp simd reduction(| : any_w) reduction(+ : n_term)
+        for (int p = row; p < row + ts; ++p) {
           const T dx = mx - px[p], dy = my - py[p];
           const T sigma = T(0.5) * (ca * dx * dx + cc * dy * dy) + cb * dx * dy;
           T a = op * exp_neg<T>(-sigma);
@@ -130,14 +139,20 @@ void forward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const i
           med[p] = (contrib && tr > T(0.5)) ? id32 : med[p];
           Tr[p] = contrib ? nt : tr;
           act[p] = term ? T(0) : act[p];
+          n_term += term ? 1 : 0;
           lst[p] = contrib ? kk : lst[p];
+        }
+        rowlive[row / ts] -= n_term;
+        tile_live -= n_term;
         }
         if (!any_w) continue;
         for (int64_t ch = 0; ch < D; ++ch) {
           const T c = col[id * D + ch];
           T* ac = acc.data() + ch * P;
+          for (int row = p0; row < p1; row += ts) {
 #pragma omp simd
-          for (int p = p0; p < p1; ++p) ac[p] += w[p] * c;
+            for (int p = row; p < row + ts; ++p) ac[p] += w[p] * c;
+          }
         }
       }
       for (int p = 0; p < P; ++p) {
@@ -153,19 +168,28 @@ void forward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const i
   }
 }
 
+template <typename T>
+void forward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
+                   const Dims d, int n_threads, T* out, T* out_a, int64_t* out_last, int64_t* out_med) {
+  if (d.ts == 16)
+    forward_tiles_impl<T, 16>(m2, cn, col, opa, off, ids, d, n_threads, out, out_a, out_last, out_med);
+  else
+    forward_tiles_impl<T, 0>(m2, cn, col, opa, off, ids, d, n_threads, out, out_a, out_last, out_med);
+}
+
 // grads: [n_threads][CN][6 + D] zero-initialised; per pair (means2d x, y, conic a, b, c, opacity,
 // features...). The caller sums over threads.
-template <typename T>
-void backward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
-                    const T* al, const int64_t* lastp, const T* vr, const T* va, const Dims d, int64_t CN,
-                    int n_threads, T* grads) {
-  const int ts = d.ts, P = ts * ts;
+template <typename T, int TS>
+void backward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
+                         const T* al, const int64_t* lastp, const T* vr, const T* va, const Dims d, int64_t CN,
+                         int n_threads, T* grads) {
+  const int ts = TS > 0 ? TS : d.ts, P = ts * ts;
   const int64_t D = d.D, G = 6 + D;
 #pragma omp parallel num_threads(n_threads)
   {
     T* my_gr = grads + static_cast<int64_t>(omp_get_thread_num()) * CN * G;
     std::vector<T> px(P), py(P), Tr(P), Tfin(P), vout(P * D), buf(P * D), vap(P), fac(P), rap(P), Tb(P), vacc(P);
-    std::vector<int32_t> lst(P);
+    std::vector<int32_t> lst(P), rowmax(ts);
     std::vector<T> vcol(D);
 #pragma omp for schedule(dynamic, 1)
     for (int64_t t = 0; t < d.n_tiles(); ++t) {
@@ -188,6 +212,11 @@ void backward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const 
         }
         kmax = std::max(kmax, lst[p]);
       }
+      for (int r = 0; r < ts; ++r) {  // last composited list index per row: rows past it are skipped
+        int32_t m = -1;
+        for (int q = 0; q < ts; ++q) m = std::max(m, lst[r * ts + q]);
+        rowmax[r] = m;
+      }
       for (int32_t kk = kmax; kk >= 0; --kk) {
         const int64_t id = ids[k0 + kk];
         const T mx = m2[2 * id], my = m2[2 * id + 1];
@@ -198,8 +227,12 @@ void backward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const 
         if (r0 >= r1) continue;
         const int p0 = r0 * ts, p1 = r1 * ts;
         int32_t any = 0;
+        for (int row = p0; row < p1; row += ts) {
+        if (kk > rowmax[row / ts]) {
+          continue;
+        }
 #pragma omp simd reduction(| : any)
-        for (int p = p0; p < p1; ++p) {
+        for (int p = row; p < row + ts; ++p) {
           const T dx = mx - px[p], dy = my - py[p];
           const T sigma = T(0.5) * (ca * dx * dx + cc * dy * dy) + cb * dx * dy;
           T a = op * exp_neg<T>(-sigma);
@@ -214,23 +247,29 @@ void backward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const 
           Tr[p] = valid ? tb : Tr[p];
           any |= valid ? 1 : 0;
         }
+        }
         if (!any) continue;
         for (int64_t ch = 0; ch < D; ++ch) {
           const T c = col[id * D + ch];
           T* vo = vout.data() + ch * P;
           T* bf = buf.data() + ch * P;
           T vc = 0;
+          for (int row = p0; row < p1; row += ts) {
+            if (kk > rowmax[row / ts]) continue;
 #pragma omp simd reduction(+ : vc)
-          for (int p = p0; p < p1; ++p) {
-            vc += fac[p] * vo[p];
-            vacc[p] += (c * Tb[p] - bf[p] * rap[p]) * vo[p];
-            bf[p] += c * fac[p];
+            for (int p = row; p < row + ts; ++p) {
+              vc += fac[p] * vo[p];
+              vacc[p] += (c * Tb[p] - bf[p] * rap[p]) * vo[p];
+              bf[p] += c * fac[p];
+            }
           }
           vcol[ch] = vc;
         }
         T g_mx = 0, g_my = 0, g_a = 0, g_b = 0, g_c = 0, g_o = 0;
+        for (int row = p0; row < p1; row += ts) {
+        if (kk > rowmax[row / ts]) continue;
 #pragma omp simd reduction(+ : g_mx, g_my, g_a, g_b, g_c, g_o)
-        for (int p = p0; p < p1; ++p) {
+        for (int p = row; p < row + ts; ++p) {
           const T dx = mx - px[p], dy = my - py[p];
           const T sigma = T(0.5) * (ca * dx * dx + cc * dy * dy) + cb * dx * dy;
           const T vis = exp_neg<T>(-sigma);
@@ -243,6 +282,7 @@ void backward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const 
           g_mx += v_sig * (ca * dx + cb * dy);
           g_my += v_sig * (cb * dx + cc * dy);
         }
+        }
         T* o = my_gr + id * G;
         o[0] += g_mx;
         o[1] += g_my;
@@ -254,6 +294,16 @@ void backward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const 
       }
     }
   }
+}
+
+template <typename T>
+void backward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
+                    const T* al, const int64_t* lastp, const T* vr, const T* va, const Dims d, int64_t CN,
+                    int n_threads, T* grads) {
+  if (d.ts == 16)
+    backward_tiles_impl<T, 16>(m2, cn, col, opa, off, ids, al, lastp, vr, va, d, CN, n_threads, grads);
+  else
+    backward_tiles_impl<T, 0>(m2, cn, col, opa, off, ids, al, lastp, vr, va, d, CN, n_threads, grads);
 }
 
 }  // namespace gs3d
