@@ -13,7 +13,6 @@ import cv2
 from nerf2gs_plugin.viewer.browser import browser_unavailable_reason, grab, headless_page
 
 _REASON = browser_unavailable_reason()
-pytestmark = pytest.mark.skipif(_REASON is not None, reason=f"browser test skipped: {_REASON}")
 
 
 def _free_port() -> int:
@@ -43,6 +42,7 @@ def _wait(cond, timeout):
     return False
 
 
+@pytest.mark.skipif(_REASON is not None, reason=f"browser test skipped: {_REASON}")
 def test_browser_shows_render_and_follows_camera(tiny_run, tmp_path):
     from nerf2gs_plugin.viewer.server import ViewerConfig, open_viewer
 
