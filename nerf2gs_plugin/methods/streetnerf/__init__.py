@@ -1,0 +1,1 @@
+"""StreetNeRF: the segmentation-guided street NeRF used as the reference method (Sec. 2.2)."""

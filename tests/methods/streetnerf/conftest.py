@@ -1,0 +1,6 @@
+"""Make tests/tiny_scene.py importable by name."""
+
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))

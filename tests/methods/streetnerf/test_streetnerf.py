@@ -1,0 +1,177 @@
+"""StreetNeRF on the tiny analytic scene: sky, transients, ground, learning, rendering, masks."""
+
+import dataclasses
+import shutil
+import warnings
+
+import pytest
+import torch
+
+from nerf2gs_plugin.data import parse_dataset
+from nerf2gs_plugin.engine.trainer import Trainer
+from nerf2gs_plugin.methods.streetnerf.config import streetnerf_config, streetnerf_method, with_steps
+from nerf2gs_plugin.methods.streetnerf.model import StreetNeRFModel, StreetNeRFModelConfig, median_depth
+
+STEPS = 300
+LR_HORIZON = 10  # the learning rate decays over 10x the steps: a short run keeps it near its start
+
+
+def small_model_config(**kw) -> StreetNeRFModelConfig:
+    base = dict(num_levels=12, log2_hashmap_size=14, max_res=512, hidden_dim=64, color_hidden_dim=64, sh_degree=2,
+                num_proposal_samples=(24, 12), num_nerf_samples=12, proposal_levels=4, proposal_log2_hashmap_size=11,
+                proposal_max_res=(64, 128), proposal_anneal_steps=100, ground_start_step=100, eval_chunk=333)
+    base.update(kw)
+    return StreetNeRFModelConfig(**base)
+
+
+def make_trainer(data, tmp_path, steps: int = STEPS, **model_kw) -> Trainer:
+    cfg = with_steps(streetnerf_config, steps * LR_HORIZON)
+    pipe = dataclasses.replace(cfg.pipeline, model=small_model_config(**model_kw),
+                               datamanager=dataclasses.replace(cfg.pipeline.datamanager, rays_per_batch=256))
+    cfg = dataclasses.replace(cfg, max_num_iterations=steps, data=data, output_dir=tmp_path, progress=False, steps_per_eval_image=0, pipeline=pipe)
+    tr = Trainer(cfg)
+    tr.setup()
+    return tr
+
+
+def psnr(a, b) -> float:
+    return float(-10 * torch.log10(((a - b) ** 2).mean()))
+
+
+@pytest.fixture(scope="module")
+def trained(tiny_scene, tmp_path_factory):
+    torch.manual_seed(0)
+    tr = make_trainer(tiny_scene, tmp_path_factory.mktemp("snerf"))
+    dm = tr.pipeline.datamanager
+    before = [psnr(tr.pipeline.model.render_camera(dm.train_images.cameras[i])["rgb"], dm.train_images.image(i)) for i in (1, 3)]
+    for step in range(STEPS):
+        tr.train_step(step)
+    return tr, before
+
+
+def test_registered_config_has_the_ablation_flags():
+    model = streetnerf_method.config.pipeline.model
+    for flag in ("sky", "ground_reg", "transient_mask", "appearance"):
+        assert getattr(model, flag) is True
+    assert set(streetnerf_method.config.optimizers) == {"fields", "proposal_networks", "sky_appearance"}
+
+
+def test_training_raises_psnr_and_empties_the_sky(trained):
+    tr, before = trained
+    model, dm = tr.pipeline.model, tr.pipeline.datamanager
+    after = [psnr(model.render_camera(dm.train_images.cameras[i])["rgb"], dm.train_images.image(i)) for i in (1, 3)]
+    assert min(a - b for a, b in zip(after, before)) > 5.0, (before, after)
+    assert min(after) > 20.0
+    # sky pixels: near-zero accumulation (the sky model paints them); ground pixels: opaque
+    accs_sky, accs_ground = [], []
+    for i in (1, 3):
+        acc = model.render_camera(dm.train_images.cameras[i])["accumulation"][..., 0]
+        accs_sky.append(acc[dm.train_images.mask("sky", i)[..., 0]])
+        accs_ground.append(acc[dm.train_images.mask("ground", i)[..., 0]])
+    assert float(torch.cat(accs_sky).mean()) < 0.1
+    assert float(torch.cat(accs_ground).mean()) > 0.9
+    # the ground plane was estimated at the data's ground height (z = 0 before normalisation)
+    pts_h = dm.train_data.points3D_xyz @ model.up
+    assert abs(float(model.ground_height) - float(pts_h.median())) < 0.05
+
+
+def test_render_camera_shapes_and_determinism(trained):
+    tr, _ = trained
+    model = tr.pipeline.model
+    model.train()
+    cam = tr.pipeline.datamanager.eval_split("bev_1")[1].cameras[0]
+    a, b = model.render_camera(cam), model.render_camera(cam)
+    h, w = int(cam.height[0]), int(cam.width[0])
+    assert a["rgb"].shape == (h, w, 3) and a["depth"].shape == (h, w, 1) and a["accumulation"].shape == (h, w, 1)
+    for k in a:
+        assert torch.equal(a[k], b[k])
+    assert model.training  # the mode is restored
+    assert float(a["rgb"].min()) >= 0.0 and float(a["rgb"].max()) <= 1.0
+
+
+def test_transient_pixels_do_not_change_the_loss(trained):
+    tr, _ = trained
+    model, dm = tr.pipeline.model, tr.pipeline.datamanager
+    model.eval()
+    rays, batch = dm.next_train(0)
+    mask = batch["transient_mask"][:, 0]
+    assert mask.any() and (~mask).any()
+    with torch.no_grad():
+        out = model.get_outputs(rays)
+        loss_a = model.get_loss_dict(out, batch, {})
+        changed = dict(batch, rgb=torch.where(batch["transient_mask"], 1.0 - batch["rgb"], batch["rgb"]))
+        loss_b = model.get_loss_dict(out, changed, {})
+        outside = dict(batch, rgb=torch.where(batch["transient_mask"], batch["rgb"], 1.0 - batch["rgb"]))
+        loss_c = model.get_loss_dict(out, outside, {})
+    assert torch.equal(sum(loss_a.values()), sum(loss_b.values()))
+    assert float(loss_c["rgb"]) > float(loss_a["rgb"])  # the non-transient pixels do count
+    model.config.transient_mask = False
+    model.use_transient = False
+    try:
+        with torch.no_grad():
+            assert float(model.get_loss_dict(out, changed, {})["rgb"]) != float(model.get_loss_dict(out, batch, {})["rgb"])
+    finally:
+        model.use_transient = True
+        model.config.transient_mask = True
+    model.train()
+
+
+def test_ground_loss_prefers_mass_on_the_plane(trained):
+    tr, _ = trained
+    model = tr.pipeline.model
+    model.train()
+    o = torch.tensor([[0.0, 0.0, float(model.ground_height) + 0.3]])
+    d = torch.nn.functional.normalize(torch.tensor([[1.0, 0.0, -1.0]]), dim=-1)
+    t_star = 0.3 * 2**0.5
+    t_mid = torch.linspace(0.05, 2.0, 400)[None]
+    on_plane = torch.exp(-((t_mid - t_star) ** 2) / 1e-4)
+    spread = torch.full_like(t_mid, 1.0)
+    losses = []
+    for w in (on_plane, spread):
+        w = 0.99 * w / w.sum()
+        outputs = {"origins": o, "directions": d, "weights": w, "t_mid": t_mid, "accumulation": w.sum(-1, keepdim=True)}
+        losses.append(float(model._ground_loss(outputs, torch.tensor([True]))))
+    assert losses[0] < 0.05 and losses[1] > 5 * losses[0]
+    assert float(median_depth(on_plane, t_mid)) == pytest.approx(t_star, abs=0.05)
+
+
+def test_flags_off_remove_the_terms(tiny_scene):
+    data = parse_dataset(tiny_scene, "train")
+    cfg = small_model_config(sky=False, ground_reg=False, appearance=False)
+    model = cfg.setup(train_data=data)
+    assert model.sky_model is None and model.appearance is None and not model.use_ground
+    assert set(model.get_param_groups()) == {"fields", "proposal_networks", "sky_appearance"}
+
+
+def test_missing_mask_kind_turns_the_term_off_with_a_warning(tiny_scene, tmp_path):
+    data_dir = tmp_path / "no_ground"
+    shutil.copytree(tiny_scene, data_dir)
+    shutil.rmtree(data_dir / "masks" / "ground")
+    data = parse_dataset(data_dir, "train")
+    with pytest.warns(UserWarning, match="no ground masks"):
+        model: StreetNeRFModel = small_model_config(ground_start_step=0).setup(train_data=data)
+    assert not model.use_ground and model.use_sky_loss and model.use_transient
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        tr = make_trainer(data_dir, tmp_path / "runs", steps=3, ground_start_step=0)
+    assert sum("no ground masks" in str(w.message) for w in caught) == 1  # said once per run
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # and never again per step
+        for step in range(3):
+            _, losses, _ = tr.pipeline.get_train_loss_dict(step)
+            assert "ground" not in losses and "sky" in losses
+
+
+def test_wrong_size_mask_is_a_data_error(tiny_scene, tmp_path):
+    import cv2
+    import numpy as np
+
+    from nerf2gs_plugin.datamanagers.image_set import load_image_set
+    from nerf2gs_plugin.errors import DataError
+
+    data_dir = tmp_path / "bad_mask"
+    shutil.copytree(tiny_scene, data_dir)
+    bad = data_dir / "masks" / "sky" / "train_000.png"
+    cv2.imwrite(str(bad), np.zeros((5, 7), np.uint8))
+    with pytest.raises(DataError, match="mask"):
+        load_image_set(parse_dataset(data_dir, "train"))
