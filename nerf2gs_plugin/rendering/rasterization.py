@@ -109,6 +109,8 @@ def rasterize_gaussians(
         raise ConfigError(f"unknown render_mode {render_mode!r}; choose one of {', '.join(RENDER_MODES)}")
     if rasterize_mode not in RASTERIZE_MODES:
         raise ConfigError(f"unknown rasterize_mode {rasterize_mode!r}; choose one of {', '.join(RASTERIZE_MODES)}")
+    if not 1 <= int(tile_size) <= 64:
+        raise ConfigError(f"tile_size must be in 1..64, got {tile_size}")
     n, n_cams = means.shape[0], viewmats.shape[0]
     if quats.shape != (n, 4) or scales.shape != (n, 3) or opacities.shape != (n,) or Ks.shape != (n_cams, 3, 3):
         raise ValueError(f"shape mismatch: means {tuple(means.shape)}, quats {tuple(quats.shape)}, scales "

@@ -24,6 +24,7 @@ namespace gs3d {
 constexpr float kAlphaMin = 1.0f / 255.0f;
 constexpr float kAlphaMax = 0.99f;
 constexpr float kTMin = 1e-4f;
+constexpr int kMaxTile = 64;  // largest tile edge the kernels accept
 
 // exp(x) for x <= 0: 2^n * 2^f with |f| <= 0.5 and a degree-6 Taylor polynomial (relative error
 // ~1e-7), branch-free so that GCC vectorises it (libm's expf would not be, without -ffast-math).
@@ -79,6 +80,7 @@ template <typename T, int TS>
 void forward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
                         const Dims d, int n_threads, T* out, T* out_a, int64_t* out_last, int64_t* out_med) {
   const int ts = TS > 0 ? TS : d.ts, P = ts * ts;
+  constexpr int L = TS > 0 ? TS : kMaxTile;
   const int64_t D = d.D;
 #pragma omp parallel num_threads(n_threads)
   {
@@ -107,6 +109,18 @@ void forward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, co
       const int64_t k0 = off[t];
       const int32_t n_list = static_cast<int32_t>(off[t + 1] - k0);
       for (int32_t kk = 0; kk < n_list && tile_live > 0; ++kk) {
+        if ((kk & 7) == 7) {  // refresh which rows still have live pixels
+          tile_live = 0;
+          for (int r = 0; r < ts; ++r) {
+            if (rowlive[r] == 0) continue;
+            T m = 0;
+#pragma omp simd reduction(max : m)
+            for (int q = 0; q < ts; ++q) m = std::max(m, act[r * ts + q]);
+            rowlive[r] = m > 0 ? 1 : 0;
+            tile_live += rowlive[r];
+          }
+          if (tile_live == 0) break;
+        }
         const int64_t id = ids[k0 + kk];
         const T mx = m2[2 * id], my = m2[2 * id + 1];
         const T ca = cn[3 * id], cb = cn[3 * id + 1], cc = cn[3 * id + 2];
@@ -116,15 +130,15 @@ void forward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, co
         if (r0 >= r1) continue;
         const int p0 = r0 * ts, p1 = r1 * ts;
         const int32_t id32 = static_cast<int32_t>(id);
-        int32_t any_w = 0;
+        int32_t lane_any[L] = {};
         for (int row = p0; row < p1; row += ts) {
         if (rowlive[row / ts] == 0) {
           for (int p = row; p < row + ts; ++p) w[p] = T(0);
           continue;
         }
-        int32_t n_term = 0;
-#pragma omp simd reduction(| : any_w) reduction(+ : n_term)
-        for (int p = row; p < row + ts; ++p) {
+#pragma omp simd
+        for (int q = 0; q < ts; ++q) {
+          const int p = row + q;
           const T dx = mx - px[p], dy = my - py[p];
           const T sigma = T(0.5) * (ca * dx * dx + cc * dy * dy) + cb * dx * dy;
           T a = op * exp_neg<T>(-sigma);
@@ -135,16 +149,15 @@ void forward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, co
           const bool term = valid && nt <= T(kTMin);
           const bool contrib = valid && !term;
           w[p] = contrib ? a * tr : T(0);
-          any_w |= contrib ? 1 : 0;
+          lane_any[q] |= contrib ? 1 : 0;
           med[p] = (contrib && tr > T(0.5)) ? id32 : med[p];
           Tr[p] = contrib ? nt : tr;
           act[p] = term ? T(0) : act[p];
-          n_term += term ? 1 : 0;
           lst[p] = contrib ? kk : lst[p];
         }
-        rowlive[row / ts] -= n_term;
-        tile_live -= n_term;
         }
+        int32_t any_w = 0;
+        for (int q = 0; q < ts; ++q) any_w |= lane_any[q];
         if (!any_w) continue;
         for (int64_t ch = 0; ch < D; ++ch) {
           const T c = col[id * D + ch];
@@ -184,14 +197,17 @@ void backward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, c
                          const T* al, const int64_t* lastp, const T* vr, const T* va, const Dims d, int64_t CN,
                          int n_threads, T* grads) {
   const int ts = TS > 0 ? TS : d.ts, P = ts * ts;
+  constexpr int L = TS > 0 ? TS : kMaxTile;
   const int64_t D = d.D, G = 6 + D;
 #pragma omp parallel num_threads(n_threads)
   {
     T* my_gr = grads + static_cast<int64_t>(omp_get_thread_num()) * CN * G;
-    std::vector<T> px(P), py(P), Tr(P), Tfin(P), vout(P * D), buf(P * D), vap(P), fac(P), rap(P), Tb(P), vacc(P);
+    std::vector<T> px(P), py(P), Tr(P), Tfin(P), vout(P * D), buf(P * D), vap(P), fac(P), rap(P), Tb(P), vacc(P), visp(P);
     std::vector<int32_t> lst(P), rowmax(ts);
     std::vector<T> vcol(D);
-#pragma omp for schedule(dynamic, 1)
+// static round-robin: tile -> thread is fixed, so the per-thread sums (and the gradients) are
+    // bit-for-bit reproducible
+#pragma omp for schedule(static, 1)
     for (int64_t t = 0; t < d.n_tiles(); ++t) {
       const Tile g = tile_of(t, d);
       const int64_t k0 = off[t];
@@ -235,9 +251,11 @@ void backward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, c
         for (int p = row; p < row + ts; ++p) {
           const T dx = mx - px[p], dy = my - py[p];
           const T sigma = T(0.5) * (ca * dx * dx + cc * dy * dy) + cb * dx * dy;
-          T a = op * exp_neg<T>(-sigma);
+          const T vis = exp_neg<T>(-sigma);
+          T a = op * vis;
           a = a > T(kAlphaMax) ? T(kAlphaMax) : a;
           const bool valid = kk <= lst[p] && sigma >= 0 && a >= T(kAlphaMin);
+          visp[p] = vis;
           const T ra = T(1) / (T(1) - a);
           const T tb = Tr[p] * ra;
           rap[p] = valid ? ra : T(0);
@@ -253,35 +271,48 @@ void backward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, c
           const T c = col[id * D + ch];
           T* vo = vout.data() + ch * P;
           T* bf = buf.data() + ch * P;
-          T vc = 0;
+          T lane_c[L] = {};
           for (int row = p0; row < p1; row += ts) {
             if (kk > rowmax[row / ts]) continue;
-#pragma omp simd reduction(+ : vc)
-            for (int p = row; p < row + ts; ++p) {
-              vc += fac[p] * vo[p];
+#pragma omp simd
+            for (int q = 0; q < ts; ++q) {
+              const int p = row + q;
+              lane_c[q] += fac[p] * vo[p];
               vacc[p] += (c * Tb[p] - bf[p] * rap[p]) * vo[p];
               bf[p] += c * fac[p];
             }
           }
+          T vc = 0;
+          for (int q = 0; q < ts; ++q) vc += lane_c[q];
           vcol[ch] = vc;
         }
-        T g_mx = 0, g_my = 0, g_a = 0, g_b = 0, g_c = 0, g_o = 0;
+        // per-lane partial sums, reduced once per Gaussian (not once per row)
+        T l_mx[L] = {}, l_my[L] = {}, l_a[L] = {}, l_b[L] = {}, l_c[L] = {}, l_o[L] = {};
         for (int row = p0; row < p1; row += ts) {
-        if (kk > rowmax[row / ts]) continue;
-#pragma omp simd reduction(+ : g_mx, g_my, g_a, g_b, g_c, g_o)
-        for (int p = row; p < row + ts; ++p) {
-          const T dx = mx - px[p], dy = my - py[p];
-          const T sigma = T(0.5) * (ca * dx * dx + cc * dy * dy) + cb * dx * dy;
-          const T vis = exp_neg<T>(-sigma);
-          const T v_al = op * vis < T(kAlphaMax) ? vacc[p] : T(0);  // 0 where not composited
-          const T v_sig = -op * vis * v_al;
-          g_o += vis * v_al;
-          g_a += T(0.5) * v_sig * dx * dx;
-          g_b += v_sig * dx * dy;
-          g_c += T(0.5) * v_sig * dy * dy;
-          g_mx += v_sig * (ca * dx + cb * dy);
-          g_my += v_sig * (cb * dx + cc * dy);
+          if (kk > rowmax[row / ts]) continue;
+#pragma omp simd
+          for (int q = 0; q < ts; ++q) {
+            const int p = row + q;
+            const T dx = mx - px[p], dy = my - py[p];
+            const T vis = visp[p];
+            const T v_al = op * vis < T(kAlphaMax) ? vacc[p] : T(0);  // 0 where not composited
+            const T v_sig = -op * vis * v_al;
+            l_o[q] += vis * v_al;
+            l_a[q] += T(0.5) * v_sig * dx * dx;
+            l_b[q] += v_sig * dx * dy;
+            l_c[q] += T(0.5) * v_sig * dy * dy;
+            l_mx[q] += v_sig * (ca * dx + cb * dy);
+            l_my[q] += v_sig * (cb * dx + cc * dy);
+          }
         }
+        T g_mx = 0, g_my = 0, g_a = 0, g_b = 0, g_c = 0, g_o = 0;
+        for (int q = 0; q < ts; ++q) {
+          g_mx += l_mx[q];
+          g_my += l_my[q];
+          g_a += l_a[q];
+          g_b += l_b[q];
+          g_c += l_c[q];
+          g_o += l_o[q];
         }
         T* o = my_gr + id * G;
         o[0] += g_mx;

@@ -18,6 +18,7 @@ void check(const torch::Tensor& x, const char* name) {
 }
 
 gs3d::Dims dims(const torch::Tensor& colors, int64_t n_cams, int64_t height, int64_t width, int64_t ts) {
+  TORCH_CHECK(ts >= 1 && ts <= gs3d::kMaxTile, "tile_size must be in 1..", gs3d::kMaxTile);
   return gs3d::Dims{n_cams, height, width, colors.size(1), static_cast<int>(ts)};
 }
 
