@@ -22,9 +22,9 @@ Losses (sum is minimised; ``M_*`` are the masks, ``W`` the per-image weight):
     ``opaque_weight * mean_{not M_s, not M_t} (1 - A)`` (0.01), so sky is never a floater wall and
     everything that is not sky is solid.
   * ground (``ground_reg``): StreetNeRF regularises ground rays towards a plane. Our form: the plane
-    has the data's up vector as normal and an offset ``h`` estimated from the data (low percentile
-    of the sparse points when present, refined as an EMA of the median height of the rendered
-    ground points once geometry exists). For a ground ray with plane hit ``t*``:
+    has the data's up vector as normal and an offset ``h`` estimated from the data: the densest
+    height of the sparse points below the cameras when the data has points (kept fixed), else an
+    EMA of the median height of the rendered ground points once geometry exists. For a ground ray with plane hit ``t*``:
     ``ground_weight * mean_{M_g} [ sum_i w_i min(|t_i - t*| / t*, 1) + (1 - A) ]`` (0.05), a
     line-of-sight loss (Urban Radiance Fields, Rematas et al. 2022) that bounds the relative depth
     error and pays full price for missing mass: the road becomes one opaque flat sheet, which is
@@ -145,14 +145,13 @@ class StreetNeRFModel(Model):
         self.register_buffer("up", up)
         self.register_buffer("ground_height", torch.zeros(()))
         self.register_buffer("ground_known", torch.zeros((), dtype=torch.bool))
-        pts = train_data.points3D_xyz
-        if pts is not None and len(pts) >= 20:
-            heights = pts.float() @ up
-            cams = train_data.cameras.centers.float() @ up
-            below = heights[heights < cams.min()]  # ground lies below every car-mounted camera
-            if len(below) >= 10:
-                self.ground_height.fill_(float(torch.quantile(below, 0.5)))
+        self.ground_from_points = False
+        if train_data.points3D_xyz is not None:
+            h = ground_height_from_points(train_data.points3D_xyz.float() @ up, train_data.cameras.centers.float() @ up)
+            if h is not None:  # a plane from the data's points stays fixed; else it is estimated while training
+                self.ground_height.fill_(h)
                 self.ground_known.fill_(True)
+                self.ground_from_points = True
         self.step = 0
 
     @staticmethod
@@ -280,16 +279,8 @@ class StreetNeRFModel(Model):
             return None
         o, d = outputs["origins"][ground], outputs["directions"][ground]
         w, t_mid, acc = outputs["weights"][ground], outputs["t_mid"][ground], outputs["accumulation"][ground]
-        with torch.no_grad():  # refine the plane offset from the rendered ground points
-            pts_h = (o + d * median_depth(w, t_mid)) @ self.up
-            solid = acc.reshape(-1) > 0.5
-            if int(solid.sum()) >= 16:
-                med = pts_h[solid].median()
-                if bool(self.ground_known):
-                    self.ground_height.mul_(self.config.ground_ema).add_((1 - self.config.ground_ema) * med)
-                else:
-                    self.ground_height.copy_(med)
-                    self.ground_known.fill_(True)
+        if not self.ground_from_points:
+            self._update_ground_height(o, d, w, t_mid, acc)
         if not bool(self.ground_known):
             return None
         cos = d @ self.up
@@ -301,6 +292,20 @@ class StreetNeRFModel(Model):
         rel = ((t_mid[valid] - t_star).abs() / t_star).clamp(max=1.0)
         per_ray = (w[valid] * rel).sum(-1) + (1.0 - acc[valid, 0])
         return per_ray.mean()
+
+    @torch.no_grad()
+    def _update_ground_height(self, o: Tensor, d: Tensor, w: Tensor, t_mid: Tensor, acc: Tensor) -> None:
+        """EMA of the median height of the rendered ground points (median depth, solid rays only)."""
+        pts_h = (o + d * median_depth(w, t_mid)) @ self.up
+        solid = acc.reshape(-1) > 0.5
+        if int(solid.sum()) < 16:
+            return
+        med = pts_h[solid].median()
+        if bool(self.ground_known):
+            self.ground_height.mul_(self.config.ground_ema).add_((1 - self.config.ground_ema) * med)
+        else:
+            self.ground_height.copy_(med)
+            self.ground_known.fill_(True)
 
     @torch.no_grad()
     def render_camera(self, camera: Cameras) -> dict[str, Tensor]:
@@ -334,3 +339,21 @@ def median_depth(weights: Tensor, t_mid: Tensor) -> Tensor:
     half = 0.5 * cw[:, -1:]
     idx = torch.searchsorted(cw.contiguous(), half.contiguous()).clamp(max=t_mid.shape[1] - 1)
     return t_mid.gather(-1, idx)
+
+
+def ground_height_from_points(heights: Tensor, camera_heights: Tensor, min_points: int = 20) -> Optional[float]:
+    """The road's height along ``up`` from sparse points: the densest height below every camera
+    (a histogram mode, refined by the median of the points near it). Facades and cars spread their
+    points over many heights; the road piles them up in one thin layer."""
+    below = heights[heights < camera_heights.min()]
+    if len(below) < min_points:
+        return None
+    lo, hi = float(below.min()), float(below.max())
+    if hi - lo < 1e-9:
+        return lo
+    bins = 64
+    hist = torch.histc(below, bins, lo, hi)
+    width = (hi - lo) / bins
+    centre = lo + (int(hist.argmax()) + 0.5) * width
+    near = below[(below - centre).abs() <= 1.5 * width]
+    return float(near.median())

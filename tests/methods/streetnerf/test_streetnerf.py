@@ -10,7 +10,7 @@ import torch
 from nerf2gs_plugin.data import parse_dataset
 from nerf2gs_plugin.engine.trainer import Trainer
 from nerf2gs_plugin.methods.streetnerf.config import streetnerf_config, streetnerf_method, with_steps
-from nerf2gs_plugin.methods.streetnerf.model import StreetNeRFModel, StreetNeRFModelConfig, median_depth
+from nerf2gs_plugin.methods.streetnerf.model import StreetNeRFModel, StreetNeRFModelConfig, ground_height_from_points, median_depth
 
 STEPS = 300
 LR_HORIZON = 10  # the learning rate decays over 10x the steps: a short run keeps it near its start
@@ -175,3 +175,13 @@ def test_wrong_size_mask_is_a_data_error(tiny_scene, tmp_path):
     cv2.imwrite(str(bad), np.zeros((5, 7), np.uint8))
     with pytest.raises(DataError, match="mask"):
         load_image_set(parse_dataset(data_dir, "train"))
+
+
+def test_ground_height_from_points_ignores_facades_and_cars():
+    g = torch.Generator().manual_seed(0)
+    road = -3.0 + 0.02 * torch.randn(300, generator=g)
+    facades = -3.0 + 6.0 * torch.rand(500, generator=g)  # from the road up to above the cameras
+    cars = -3.0 + 1.5 * torch.rand(100, generator=g)
+    h = ground_height_from_points(torch.cat([road, facades, cars]), torch.zeros(10))
+    assert h == pytest.approx(-3.0, abs=0.05)
+    assert ground_height_from_points(torch.zeros(5) - 1, torch.zeros(3)) is None  # too few points
