@@ -22,7 +22,7 @@ from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.rendering.backend import resolve_backend
 from nerf2gs_plugin.rendering.projection import camera_centers
 from nerf2gs_plugin.rendering.sh import eval_sh
-from nerf2gs_plugin.rendering.surfels_cpu import EXT_NAME, EXT_SOURCES, composite_surfels_cpu
+from nerf2gs_plugin.rendering.surfels_cpu import EXT_HEADERS, EXT_NAME, EXT_SOURCES, composite_surfels_cpu
 from nerf2gs_plugin.rendering.surfels_torch import (
     build_tile_lists,
     composite_surfels_torch,
@@ -86,7 +86,7 @@ def rasterize_surfels(
     ``height``, ``tile_size``, ``n_cameras``, ``backend``.
     """
     _check(means, quats, scales, opacities, colors, viewmats, Ks, sh_degree, render_mode)
-    chosen = resolve_backend(backend, means.device.type, EXT_NAME, EXT_SOURCES)
+    chosen = resolve_backend(backend, means.device.type, EXT_NAME, EXT_SOURCES, EXT_HEADERS)
     if chosen == "gsplat":
         return _rasterize_gsplat(means, quats, scales, opacities, colors, viewmats, Ks, width, height, near_plane,
                                  far_plane, sh_degree, backgrounds, render_mode, tile_size)

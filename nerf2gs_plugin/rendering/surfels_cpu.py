@@ -17,11 +17,12 @@ from nerf2gs_plugin.rendering.surfels_torch import SurfelProjection, TileLists, 
 
 EXT_NAME = "nerf2gs_surfels"
 EXT_SOURCES = ["surfels.cpp"]
+EXT_HEADERS: list[str] = []  # the kernel is self-contained
 
 
 def extension() -> Optional[Any]:
     """The compiled kernel (built on first use, cached under ``TORCH_EXTENSIONS_DIR``), or None."""
-    return load_extension(EXT_NAME, EXT_SOURCES)
+    return load_extension(EXT_NAME, EXT_SOURCES, EXT_HEADERS)
 
 
 def available() -> bool:
@@ -35,21 +36,21 @@ def error() -> Optional[str]:
 class _Composite(torch.autograd.Function):
     @staticmethod
     def forward(ctx: Any, adj: Tensor, det: Tensor, m2: Tensor, zc: Tensor, op: Tensor, feats: Tensor,
-                densify: Tensor, ids: Tensor, starts: Tensor, counts: Tensor, dims: tuple) -> Tensor:
+                densify: Tensor, box: Tensor, ids: Tensor, starts: Tensor, counts: Tensor, dims: tuple) -> Tensor:
         ext = extension()
-        out, auxf, auxi = ext.forward(adj, det, m2, zc, op, feats, ids, starts, counts, *dims)
-        ctx.save_for_backward(adj, det, m2, zc, op, feats, ids, starts, counts, out, auxf, auxi)
+        out, auxf, auxi = ext.forward(adj, det, m2, zc, op, box, feats, ids, starts, counts, *dims)
+        ctx.save_for_backward(adj, det, m2, zc, op, box, feats, ids, starts, counts, out, auxf, auxi)
         ctx.dims = dims
         return out
 
     @staticmethod
     def backward(ctx: Any, gout: Tensor) -> tuple:
-        adj, det, m2, zc, op, feats, ids, starts, counts, out, auxf, auxi = ctx.saved_tensors
-        g = extension().backward(adj, det, m2, zc, op, feats, ids, starts, counts, *ctx.dims, out, auxf, auxi,
+        adj, det, m2, zc, op, box, feats, ids, starts, counts, out, auxf, auxi = ctx.saved_tensors
+        g = extension().backward(adj, det, m2, zc, op, box, feats, ids, starts, counts, *ctx.dims, out, auxf, auxi,
                                  gout.contiguous())
         F = feats.shape[1]
         return (g[:, 0:9], g[:, 9], g[:, 10:12], g[:, 12], g[:, 13], g[:, 16:16 + F], g[:, 14:16],
-                None, None, None, None)
+                None, None, None, None, None)
 
 
 def composite_surfels_cpu(proj: SurfelProjection, lists: TileLists, opacities: Tensor, colors: Tensor,
@@ -69,7 +70,8 @@ def composite_surfels_cpu(proj: SurfelProjection, lists: TileLists, opacities: T
     feats = torch.cat([colors.reshape(C * N, D), proj.normals.reshape(C * N, 3)], dim=-1).to(dt).contiguous()
     dens = densify.reshape(C * N, 2) if densify is not None else torch.zeros(C * N, 2, dtype=dt)
     dims = (C, height, width, lists.tile_size, lists.tiles_w, lists.tiles_h, float(near_plane))
-    out = _Composite.apply(adj, det, m2, zc, op, feats, dens, lists.flat_ids.contiguous(),
+    box = proj.bbox.reshape(C * N, 4).to(dt).contiguous()
+    out = _Composite.apply(adj, det, m2, zc, op, feats, dens, box, lists.flat_ids.contiguous(),
                            lists.starts.contiguous(), lists.counts.contiguous(), dims)
     parts = out.split([D, 3, 1, 1, 1, 1], dim=-1)  # one backward node for all six maps
     return dict(zip(("colors", "normals", "depth", "alpha", "distort", "median"), parts))

@@ -28,6 +28,7 @@ struct Surfel {
   T h[9];
   T det, mx, my, zc, o;
   T thr;  // rho beyond which o exp(-rho/2) < 1/255, plus a margin (a pre-test only)
+  T by0, by1;  // rows of the footprint box, 1 px margin
   int64_t row;
 };
 
@@ -67,7 +68,7 @@ inline Hit<T> intersect(const Surfel<T>& s, T a, T b, T near) {
 
 template <typename T>
 void load_tile(std::vector<Surfel<T>>& buf, const int64_t* ids, int64_t start, int64_t count, const T* adj,
-               const T* det, const T* m2, const T* zc, const T* op) {
+               const T* det, const T* m2, const T* zc, const T* op, const T* box) {
   buf.resize(count);
   for (int64_t k = 0; k < count; ++k) {
     const int64_t g = ids[start + k];
@@ -79,18 +80,34 @@ void load_tile(std::vector<Surfel<T>>& buf, const int64_t* ids, int64_t start, i
     s.zc = zc[g];
     s.o = op[g];
     s.thr = s.o > T(0) ? T(2) * std::log(s.o * T(255)) * T(1.001) + T(1e-3) : T(-1);
+    s.by0 = box[g * 4 + 1] - T(1);
+    s.by1 = box[g * 4 + 3] + T(1);
     s.row = g;
   }
 }
 
+// Per tile row, the list positions of the surfels whose footprint box reaches that row (in list
+// order, i.e. front to back): a pixel only visits those.
 template <typename T>
-void forward_impl(const T* adj, const T* det, const T* m2, const T* zc, const T* op, const T* feats, int64_t F,
+void row_lists(const std::vector<Surfel<T>>& buf, int64_t y0, int64_t ts, std::vector<std::vector<int32_t>>& rows) {
+  rows.resize(ts);
+  for (auto& r : rows) r.clear();
+  for (int32_t k = 0; k < (int32_t)buf.size(); ++k) {
+    const T lo = std::ceil(buf[k].by0 - T(0.5) - T(y0)), hi = std::floor(buf[k].by1 - T(0.5) - T(y0));
+    const int64_t r0 = (int64_t)std::max(lo, T(0)), r1 = (int64_t)std::min(hi, T(ts - 1));
+    for (int64_t r = r0; r <= r1; ++r) rows[r].push_back(k);
+  }
+}
+
+template <typename T>
+void forward_impl(const T* adj, const T* det, const T* m2, const T* zc, const T* op, const T* box, const T* feats, int64_t F,
                   const int64_t* ids, const int64_t* starts, const int64_t* counts, const std::vector<int64_t>& tiles,
                   int64_t H, int64_t W, int64_t ts, int64_t tw, int64_t th, T near, T* out, T* auxf, int32_t* auxi) {
   const int64_t nc = F + 4;
 #pragma omp parallel
   {
     std::vector<Surfel<T>> buf;
+    std::vector<std::vector<int32_t>> rows;
     std::vector<T> acc(F);
 #pragma omp for schedule(dynamic, 1)
     for (int64_t ti = 0; ti < (int64_t)tiles.size(); ++ti) {
@@ -98,14 +115,16 @@ void forward_impl(const T* adj, const T* det, const T* m2, const T* zc, const T*
       const int64_t cam = tile / (tw * th), t_in = tile % (tw * th);
       const int64_t x0 = (t_in % tw) * ts, y0 = (t_in / tw) * ts;
       const int64_t cnt = counts[tile];
-      load_tile(buf, ids, starts[tile], cnt, adj, det, m2, zc, op);
+      load_tile(buf, ids, starts[tile], cnt, adj, det, m2, zc, op, box);
+      row_lists(buf, y0, ts, rows);
       for (int64_t py = y0; py < std::min(y0 + ts, H); ++py) {
+        const std::vector<int32_t>& rl = rows[py - y0];
         for (int64_t px = x0; px < std::min(x0 + ts, W); ++px) {
           const T a = T(px) + T(0.5), b = T(py) + T(0.5);
           T Tr = 1, dsum = 0, A = 0, M1 = 0, M2 = 0, dist = 0, median = 0;
           int32_t med_pos = -1, last = 0;
           std::fill(acc.begin(), acc.end(), T(0));
-          for (int64_t k = 0; k < cnt; ++k) {
+          for (const int32_t k : rl) {
             const Surfel<T>& s = buf[k];
             const Hit<T> hit = intersect(s, a, b, near);
             if (!hit.ok) continue;
@@ -146,7 +165,7 @@ void forward_impl(const T* adj, const T* det, const T* m2, const T* zc, const T*
 
 // gradient row layout (per surfel row): adj 9 | det | m2 2 | zc | o | densify 2 | feats F
 template <typename T>
-void backward_impl(const T* adj, const T* det, const T* m2, const T* zc, const T* op, const T* feats, int64_t F,
+void backward_impl(const T* adj, const T* det, const T* m2, const T* zc, const T* op, const T* box, const T* feats, int64_t F,
                    const int64_t* ids, const int64_t* starts, const int64_t* counts, const std::vector<int64_t>& tiles,
                    int64_t H, int64_t W, int64_t ts, int64_t tw, int64_t th, T near, const T* out, const T* auxf,
                    const int32_t* auxi, const T* gout, T* grads, int64_t M) {
@@ -159,13 +178,16 @@ void backward_impl(const T* adj, const T* det, const T* m2, const T* zc, const T
     std::vector<T>& gl = local[tid];
     gl.assign(M * G, T(0));
     std::vector<Surfel<T>> buf;
+    std::vector<std::vector<int32_t>> rows;
 #pragma omp for schedule(dynamic, 1)
     for (int64_t ti = 0; ti < (int64_t)tiles.size(); ++ti) {
       const int64_t tile = tiles[ti];
       const int64_t cam = tile / (tw * th), t_in = tile % (tw * th);
       const int64_t x0 = (t_in % tw) * ts, y0 = (t_in / tw) * ts;
-      load_tile(buf, ids, starts[tile], counts[tile], adj, det, m2, zc, op);
+      load_tile(buf, ids, starts[tile], counts[tile], adj, det, m2, zc, op, box);
+      row_lists(buf, y0, ts, rows);
       for (int64_t py = y0; py < std::min(y0 + ts, H); ++py) {
+        const std::vector<int32_t>& rl = rows[py - y0];
         for (int64_t px = x0; px < std::min(x0 + ts, W); ++px) {
           const int64_t pix = (cam * H + py) * W + px;
           const int32_t last = auxi[pix * 2], med_pos = auxi[pix * 2 + 1];
@@ -177,7 +199,9 @@ void backward_impl(const T* adj, const T* det, const T* m2, const T* zc, const T
           const T gD = go[F], gA = go[F + 1], gDist = go[F + 2], gMed = go[F + 3];
           T Tr = auxf[pix * 2];
           T S = 0;
-          for (int64_t k = last - 1; k >= 0; --k) {
+          for (int64_t j = (int64_t)rl.size() - 1; j >= 0; --j) {
+            const int32_t k = rl[j];
+            if (k >= last) continue;
             const Surfel<T>& s = buf[k];
             const Hit<T> hit = intersect(s, a, b, near);
             if (!hit.ok) continue;
@@ -244,7 +268,7 @@ std::vector<int64_t> nonempty_tiles(const torch::Tensor& counts) {
 }  // namespace
 
 std::vector<torch::Tensor> surfels_forward(torch::Tensor adj, torch::Tensor det, torch::Tensor m2, torch::Tensor zc,
-                                           torch::Tensor op, torch::Tensor feats, torch::Tensor ids,
+                                           torch::Tensor op, torch::Tensor box, torch::Tensor feats, torch::Tensor ids,
                                            torch::Tensor starts, torch::Tensor counts, int64_t C, int64_t H, int64_t W,
                                            int64_t ts, int64_t tw, int64_t th, double near) {
   const int64_t F = feats.size(1);
@@ -256,7 +280,7 @@ std::vector<torch::Tensor> surfels_forward(torch::Tensor adj, torch::Tensor det,
   const auto tiles = nonempty_tiles(counts);
   AT_DISPATCH_FLOATING_TYPES(feats.scalar_type(), "surfels_forward", [&] {
     forward_impl<scalar_t>(adj.data_ptr<scalar_t>(), det.data_ptr<scalar_t>(), m2.data_ptr<scalar_t>(),
-                           zc.data_ptr<scalar_t>(), op.data_ptr<scalar_t>(), feats.data_ptr<scalar_t>(), F,
+                           zc.data_ptr<scalar_t>(), op.data_ptr<scalar_t>(), box.data_ptr<scalar_t>(), feats.data_ptr<scalar_t>(), F,
                            ids.data_ptr<int64_t>(), starts.data_ptr<int64_t>(), counts.data_ptr<int64_t>(), tiles, H,
                            W, ts, tw, th, (scalar_t)near, out.data_ptr<scalar_t>(), auxf.data_ptr<scalar_t>(),
                            auxi.data_ptr<int32_t>());
@@ -265,7 +289,7 @@ std::vector<torch::Tensor> surfels_forward(torch::Tensor adj, torch::Tensor det,
 }
 
 torch::Tensor surfels_backward(torch::Tensor adj, torch::Tensor det, torch::Tensor m2, torch::Tensor zc,
-                               torch::Tensor op, torch::Tensor feats, torch::Tensor ids, torch::Tensor starts,
+                               torch::Tensor op, torch::Tensor box, torch::Tensor feats, torch::Tensor ids, torch::Tensor starts,
                                torch::Tensor counts, int64_t C, int64_t H, int64_t W, int64_t ts, int64_t tw,
                                int64_t th, double near, torch::Tensor out, torch::Tensor auxf, torch::Tensor auxi,
                                torch::Tensor gout) {
@@ -274,7 +298,7 @@ torch::Tensor surfels_backward(torch::Tensor adj, torch::Tensor det, torch::Tens
   const auto tiles = nonempty_tiles(counts);
   AT_DISPATCH_FLOATING_TYPES(feats.scalar_type(), "surfels_backward", [&] {
     backward_impl<scalar_t>(adj.data_ptr<scalar_t>(), det.data_ptr<scalar_t>(), m2.data_ptr<scalar_t>(),
-                            zc.data_ptr<scalar_t>(), op.data_ptr<scalar_t>(), feats.data_ptr<scalar_t>(), F,
+                            zc.data_ptr<scalar_t>(), op.data_ptr<scalar_t>(), box.data_ptr<scalar_t>(), feats.data_ptr<scalar_t>(), F,
                             ids.data_ptr<int64_t>(), starts.data_ptr<int64_t>(), counts.data_ptr<int64_t>(), tiles,
                             H, W, ts, tw, th, (scalar_t)near, out.data_ptr<scalar_t>(), auxf.data_ptr<scalar_t>(),
                             auxi.data_ptr<int32_t>(), gout.data_ptr<scalar_t>(), grads.data_ptr<scalar_t>(), M);
