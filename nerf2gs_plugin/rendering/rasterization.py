@@ -18,13 +18,13 @@ from torch import Tensor
 from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.rendering.backend import load_extension, resolve_backend
 from nerf2gs_plugin.rendering.composite_torch import composite_torch
-from nerf2gs_plugin.rendering.projection import camera_centers, project_gaussians
+from nerf2gs_plugin.rendering.projection import Projected, camera_centers, project_gaussians
 from nerf2gs_plugin.rendering.sh import eval_sh
 from nerf2gs_plugin.rendering.tiles import bin_gaussians
 
 EXT_NAME = "nerf2gs_rasterize_gaussians"
 EXT_SOURCES = ["rasterize_gaussians.cpp"]
-EXT_HEADERS = ["gaussians_core.h"]
+EXT_HEADERS = ["gaussians_core.h", "binning_core.h", "projection_core.h"]
 RENDER_MODES = ("RGB", "D", "ED", "RGB+D", "RGB+ED")
 RASTERIZE_MODES = ("classic", "antialiased")
 
@@ -122,12 +122,16 @@ def rasterize_gaussians(
         return rasterize_gsplat(means, quats, scales, opacities, colors, viewmats, Ks, width, height, near_plane,
                                 far_plane, sh_degree, backgrounds, render_mode, rasterize_mode, tile_size, return_median)
 
-    proj = project_gaussians(means, quats, scales, viewmats, Ks, width, height, near_plane, far_plane)
-    opac = opacities[None].expand(n_cams, n)
-    if rasterize_mode == "antialiased":
-        opac = opac * proj.compensations
-
-    feats = _features(colors, sh_degree, means, viewmats, n_cams, render_mode)  # [C, N, D'] or None
+    needs_grad = torch.is_grad_enabled() and any(t.requires_grad for t in (means, quats, scales, opacities, colors, viewmats, Ks))
+    if chosen == "cpu" and not needs_grad:  # one fused C++ pass instead of ~100 small torch ops
+        proj, opac, feats = _project_fused(means, quats, scales, opacities, colors, viewmats, Ks, width, height, near_plane,
+                                           far_plane, sh_degree, rasterize_mode, render_mode)
+    else:
+        proj = project_gaussians(means, quats, scales, viewmats, Ks, width, height, near_plane, far_plane)
+        opac = opacities[None].expand(n_cams, n)
+        if rasterize_mode == "antialiased":
+            opac = opac * proj.compensations
+        feats = _features(colors, sh_degree, means, viewmats, n_cams, render_mode)  # [C, N, D']
     depth_ch = proj.depths[..., None]
     if render_mode in ("D", "ED"):
         feats = depth_ch
@@ -159,6 +163,30 @@ def rasterize_gaussians(
         flat_depth = torch.cat([proj.depths.reshape(-1), proj.depths.new_zeros(1)])  # index -1 -> 0
         meta["median_depth"] = flat_depth[median_ids][..., None]
     return render, alpha, meta
+
+
+def _project_fused(
+    means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, colors: Tensor, viewmats: Tensor, Ks: Tensor,
+    width: int, height: int, near_plane: float, far_plane: float, sh_degree: Optional[int], rasterize_mode: str,
+    render_mode: str,
+) -> tuple[Projected, Tensor, Tensor]:
+    """The no-gradient path of the cpu backend: projection (+ SH colours) by the C++ extension,
+    numerically the same as :func:`project_gaussians` + :func:`eval_sh`."""
+    n_cams, n = viewmats.shape[0], means.shape[0]
+    use_sh = sh_degree is not None and render_mode not in ("D", "ED")
+    if use_sh and (colors.dim() != 3 or colors.shape[0] != n or colors.shape[-1] != 3):
+        raise ValueError(f"SH colours must be [N, K, 3], got {tuple(colors.shape)}")
+    dt = means.dtype
+    sh = colors.to(dt).contiguous() if use_sh else means.new_zeros(0)
+    m2, con, dep, radii, comp, cov, cols = load_kernel().project_forward(
+        means.contiguous(), quats.to(dt).contiguous(), scales.to(dt).contiguous(), sh,
+        viewmats.to(dt).contiguous(), Ks.to(dt).contiguous(), int(width), int(height), float(near_plane),
+        float(far_plane), int(sh_degree or 0),
+    )
+    opac = opacities[None].expand(n_cams, n) * comp if rasterize_mode == "antialiased" else opacities[None].expand(n_cams, n)
+    feats = cols if use_sh else _features(colors, None if render_mode in ("D", "ED") else sh_degree, means, viewmats, n_cams, render_mode)
+    proj = Projected(means2d=m2, conics=con, depths=dep, radii=radii, compensations=comp, cov2d=cov)
+    return proj, opac, feats
 
 
 def _features(colors: Tensor, sh_degree: Optional[int], means: Tensor, viewmats: Tensor, n_cams: int, render_mode: str) -> Tensor:

@@ -9,6 +9,7 @@
 
 #include "binning_core.h"
 #include "gaussians_core.h"
+#include "projection_core.h"
 
 namespace {
 
@@ -105,8 +106,34 @@ std::vector<torch::Tensor> bin_gaussians(torch::Tensor means2d, torch::Tensor co
   return {o, i};
 }
 
+std::vector<torch::Tensor> project_forward(torch::Tensor means, torch::Tensor quats, torch::Tensor scales,
+                                           torch::Tensor sh, torch::Tensor viewmats, torch::Tensor Ks,
+                                           int64_t width, int64_t height, double near_plane, double far_plane,
+                                           int64_t sh_degree) {
+  // sh: [N, K, 3] SH coefficients, or an empty tensor for no colour evaluation
+  for (auto* x : {&means, &quats, &scales, &sh, &viewmats, &Ks}) check(*x, "input");
+  const int64_t C = viewmats.size(0), N = means.size(0);
+  const int64_t K = sh.numel() > 0 ? sh.size(1) : 0;
+  TORCH_CHECK(sh_degree >= 0 && sh_degree <= 3 && (K == 0 || K >= (sh_degree + 1) * (sh_degree + 1)), "bad SH degree");
+  auto opts = means.options();
+  auto means2d = torch::empty({C, N, 2}, opts), conics = torch::empty({C, N, 3}, opts), depths = torch::empty({C, N}, opts);
+  auto radii = torch::empty({C, N}, opts.dtype(torch::kInt32)), comp = torch::empty({C, N}, opts);
+  auto cov2d = torch::empty({C, N, 2, 2}, opts), colors = torch::empty({C, N, K > 0 ? 3 : 0}, opts);
+  const gs3d::ProjectArgs a{C, N, width, height, K, static_cast<int>(sh_degree), near_plane, far_plane, 0.3};
+  const int nt = std::max(1, at::get_num_threads());
+  AT_DISPATCH_FLOATING_TYPES(means.scalar_type(), "project_forward", [&] {
+    gs3d::project_forward<scalar_t>(means.data_ptr<scalar_t>(), quats.data_ptr<scalar_t>(), scales.data_ptr<scalar_t>(),
+                                    K > 0 ? sh.data_ptr<scalar_t>() : nullptr,
+                                    viewmats.data_ptr<scalar_t>(), Ks.data_ptr<scalar_t>(), a, nt, means2d.data_ptr<scalar_t>(),
+                                    conics.data_ptr<scalar_t>(), depths.data_ptr<scalar_t>(), radii.data_ptr<int32_t>(),
+                                    comp.data_ptr<scalar_t>(), cov2d.data_ptr<scalar_t>(), colors.data_ptr<scalar_t>());
+  });
+  return {means2d, conics, depths, radii, comp, cov2d, colors};
+}
+
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("forward", &rasterize_forward, "3DGS tile compositing forward (CPU)");
   m.def("backward", &rasterize_backward, "3DGS tile compositing backward (CPU)");
+  m.def("project_forward", &project_forward, "projection + SH colours without gradients (CPU)");
   m.def("bin_gaussians", &bin_gaussians, "per-tile depth-sorted lists of (camera, Gaussian) pairs (CPU)");
 }
