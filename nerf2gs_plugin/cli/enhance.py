@@ -60,7 +60,9 @@ class Apply:
         from nerf2gs_plugin.errors import DataError
 
         spec = _spec(self.model)
-        enh = OnnxModelEnhancer(Path(spec.split(":", 1)[1]), tile_size=self.tile_size) if self.tile_size and spec.startswith("onnx:") else make_enhancer(spec)
+        enh = make_enhancer(spec)
+        if self.tile_size and isinstance(enh, OnnxModelEnhancer):
+            enh = OnnxModelEnhancer(enh.path, tile_size=self.tile_size)
         ref = load_image(self.reference) if self.reference is not None else None
         to_file = len(self.input) == 1 and self.output.suffix.lower() in (".png", ".jpg", ".jpeg")
         for p in self.input:

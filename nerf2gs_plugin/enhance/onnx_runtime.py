@@ -169,6 +169,8 @@ class OnnxEnhancer:
         try:
             self.multiple = int(conv.get("multiple", 1))
             ov = overlap if overlap is not None else int(conv.get("overlap", (min(tile) // 4) if tile else 0))
+            if overlap is None and tile_size is not None:  # the caller's smaller tiles: keep the model's overlap if it fits
+                ov = min(ov, tile_size // 2)
         except ValueError:
             raise ConfigError("multiple and overlap must be integers", self.path) from None
         if self.multiple < 1:

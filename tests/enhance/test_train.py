@@ -70,6 +70,10 @@ def test_cli_train_apply_eval(tiny_scene, tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(sys, "argv", ["ns2gs-enhance", "apply", "--model", str(model), "--input", str(src), "--output", str(tmp_path / "o")])
     cli.entrypoint()
     assert load_image(tmp_path / "o" / src.name).shape == load_image(src).shape
+    monkeypatch.setattr(sys, "argv", ["ns2gs-enhance", "apply", "--model", f"builtin:{model}", "--input", str(src), "--output",
+                                      str(tmp_path / "tiled.png"), "--tile-size", "16"])
+    cli.entrypoint()
+    assert (load_image(tmp_path / "tiled.png") - load_image(tmp_path / "o" / src.name)).abs().max() < 3 / 255
     monkeypatch.setattr(sys, "argv", ["ns2gs-enhance", "eval", "--model", str(model), "--data", str(tiny_scene), "--out", str(tmp_path / "e.json")])
     cli.entrypoint()
     res = json.loads((tmp_path / "e.json").read_text())
