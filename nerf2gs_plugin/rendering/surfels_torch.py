@@ -14,7 +14,8 @@ wins the depth is the centre's depth. Alphas are clamped at 0.99, skipped under 
 pixel stops once its transmittance would fall under 1e-4 (as 2DGS/gsplat).
 
 Memory: Gaussians are binned into ``tile_size``^2 tiles with depth-sorted lists; tiles are
-composited in batches padded to the longest list in the batch (tiles grouped by list length),
+composited in batches padded to the longest list in the batch (tiles grouped by list length;
+large images recompute each batch in backward instead of keeping its temporaries),
 so no tensor is ever Gaussians x pixels.
 """
 
@@ -26,6 +27,7 @@ from typing import Optional
 
 import torch
 from torch import Tensor
+from torch.utils.checkpoint import checkpoint
 
 from nerf2gs_plugin.rendering.projection import quat_to_rotmat
 
@@ -35,6 +37,8 @@ T_MIN = 1e-4
 LOWPASS_INV_SQ = 2.0  # 1 / (sqrt(2)/2)^2: the screen-space filter of 2DGS
 # pairs x pixels held per compositing batch (bounds the peak of the temporaries)
 PAIR_PIXEL_BUDGET = 1 << 22
+# above this many pairs x pixels per image batch, batches are recomputed in backward (checkpointing)
+RECOMPUTE_ABOVE = 1 << 25
 
 
 @dataclass
@@ -160,13 +164,13 @@ def _composite_batch(ids: Tensor, valid: Tensor, pix: Tensor, attr: dict[str, Te
 
     Returns ``[B, P, D + 7]``: colours (D), accumulated depth, alpha, normals (3), distortion, median.
     """
-    H = attr["adj"][ids]  # [B,K,3,3] adjugate of T
+    B, K = ids.shape
     a = pix[..., 0:1]  # [B,P,1]
     b = pix[..., 1:2]
-    Hk = H[:, None]  # [B,1,K,3,3]
-    qx = a * Hk[..., 0, 0] + b * Hk[..., 0, 1] + Hk[..., 0, 2]  # [B,P,K]
-    qy = a * Hk[..., 1, 0] + b * Hk[..., 1, 1] + Hk[..., 1, 2]
-    qz = a * Hk[..., 2, 0] + b * Hk[..., 2, 1] + Hk[..., 2, 2]
+    # q = adj(T) (a, b, 1) for every pixel and surfel of a tile as one batched matmul
+    hm = attr["adj"][ids].permute(0, 3, 2, 1).reshape(B, 3, 3 * K)  # [B, j, i*K + k] = adj_k[i, j]
+    pixh = torch.cat([pix, torch.ones_like(a)], dim=-1)  # [B,P,3]
+    qx, qy, qz = torch.bmm(pixh, hm).view(B, -1, 3, K).unbind(2)  # each [B,P,K]
     ok = (qz.abs() * 1e6 > qx.abs() + qy.abs()) & (qz != 0) & valid[:, None, :]
     inv = 1.0 / torch.where(ok, qz, torch.ones_like(qz))
     u, v = qx * inv, qy * inv
@@ -249,6 +253,8 @@ def composite_surfels_torch(proj: SurfelProjection, lists: TileLists, opacities:
         py, px = torch.meshgrid(local, local, indexing="ij")
         offs = torch.stack([px.reshape(-1), py.reshape(-1)], dim=-1)  # [P,2]
         results, done_tiles = [], []
+        padded = sum(cnts_sorted) * n_pix
+        recompute = torch.is_grad_enabled() and padded > RECOMPUTE_ABOVE
         i = 0
         while i < len(cnts_sorted):
             # grow the batch while (tiles x longest list x pixels) fits the budget
@@ -264,7 +270,10 @@ def composite_surfels_torch(proj: SurfelProjection, lists: TileLists, opacities:
             t_in_cam = tiles % (th * tw)
             origin = torch.stack([(t_in_cam % tw) * ts, (t_in_cam // tw) * ts], dim=-1).to(dt)  # [B,2]
             pix = origin[:, None, :] + offs[None]
-            results.append(_composite_batch(ids, valid, pix, attr, near_plane, dens))
+            if recompute:  # bounded memory: keep only the batch inputs, redo the batch in backward
+                results.append(checkpoint(_composite_batch, ids, valid, pix, attr, near_plane, dens, use_reentrant=False))
+            else:
+                results.append(_composite_batch(ids, valid, pix, attr, near_plane, dens))
             done_tiles.append(tiles)
             i = j
         out = out.index_copy(0, torch.cat(done_tiles), torch.cat(results, 0))
