@@ -24,7 +24,7 @@ from nerf2gs_plugin.rendering.tiles import bin_gaussians
 
 EXT_NAME = "nerf2gs_rasterize_gaussians"
 EXT_SOURCES = ["rasterize_gaussians.cpp"]
-EXT_HEADERS = ["gaussians_core.h", "binning_core.h", "projection_core.h"]
+EXT_HEADERS = ["gaussians_core.h", "binning_core.h", "projection_core.h", "sh_core.h"]
 RENDER_MODES = ("RGB", "D", "ED", "RGB+D", "RGB+ED")
 RASTERIZE_MODES = ("classic", "antialiased")
 
@@ -32,6 +32,22 @@ RASTERIZE_MODES = ("classic", "antialiased")
 def load_kernel() -> Optional[Any]:
     """The compiled compositing kernel (built on first use), or None when it cannot be built."""
     return load_extension(EXT_NAME, EXT_SOURCES, EXT_HEADERS)
+
+
+class _SHCPU(torch.autograd.Function):
+    """SH colours by the extension: dirs ``[C, N, 3]`` (unnormalised), coeffs ``[N, K, 3]`` -> ``[C, N, 3]``."""
+
+    @staticmethod
+    def forward(ctx, degree, dirs, coeffs):  # type: ignore[override]
+        ctx.degree = degree
+        ctx.save_for_backward(dirs, coeffs)
+        return load_kernel().sh_forward(degree, dirs, coeffs)
+
+    @staticmethod
+    def backward(ctx, v_colors):  # type: ignore[override]
+        dirs, coeffs = ctx.saved_tensors
+        v_coeffs, v_dirs = load_kernel().sh_backward(ctx.degree, dirs, coeffs, v_colors.contiguous())
+        return None, v_dirs, v_coeffs
 
 
 class _CompositeCPU(torch.autograd.Function):
@@ -131,7 +147,7 @@ def rasterize_gaussians(
         opac = opacities[None].expand(n_cams, n)
         if rasterize_mode == "antialiased":
             opac = opac * proj.compensations
-        feats = _features(colors, sh_degree, means, viewmats, n_cams, render_mode)  # [C, N, D']
+        feats = _features(colors, sh_degree, means, viewmats, n_cams, render_mode, fused=chosen == "cpu")  # [C, N, D']
     depth_ch = proj.depths[..., None]
     if render_mode in ("D", "ED"):
         feats = depth_ch
@@ -189,7 +205,10 @@ def _project_fused(
     return proj, opac, feats
 
 
-def _features(colors: Tensor, sh_degree: Optional[int], means: Tensor, viewmats: Tensor, n_cams: int, render_mode: str) -> Tensor:
+def _features(
+    colors: Tensor, sh_degree: Optional[int], means: Tensor, viewmats: Tensor, n_cams: int, render_mode: str,
+    fused: bool = False,
+) -> Tensor:
     """Per camera and Gaussian features ``[C, N, D]``: SH evaluated along mean - camera centre, or as given."""
     n = means.shape[0]
     if render_mode in ("D", "ED"):
@@ -198,6 +217,8 @@ def _features(colors: Tensor, sh_degree: Optional[int], means: Tensor, viewmats:
         if colors.dim() != 3 or colors.shape[0] != n or colors.shape[-1] != 3:
             raise ValueError(f"SH colours must be [N, K, 3], got {tuple(colors.shape)}")
         dirs = means[None] - camera_centers(viewmats)[:, None]  # [C, N, 3]
+        if fused and not viewmats.requires_grad and 0 <= sh_degree <= 3 and dirs.dtype == colors.dtype:
+            return _SHCPU.apply(int(sh_degree), dirs.contiguous(), colors.contiguous())
         return eval_sh(sh_degree, colors, dirs)
     if colors.dim() == 2 and colors.shape[0] == n:
         return colors[None].expand(n_cams, n, colors.shape[-1])

@@ -10,6 +10,7 @@
 #include "binning_core.h"
 #include "gaussians_core.h"
 #include "projection_core.h"
+#include "sh_core.h"
 
 namespace {
 
@@ -131,9 +132,36 @@ std::vector<torch::Tensor> project_forward(torch::Tensor means, torch::Tensor qu
   return {means2d, conics, depths, radii, comp, cov2d, colors};
 }
 
+torch::Tensor sh_forward(int64_t degree, torch::Tensor dirs, torch::Tensor coeffs) {
+  // dirs [C, N, 3] (mean - camera centre), coeffs [N, K, 3] -> colours [C, N, 3]
+  check(dirs, "dirs");
+  check(coeffs, "coeffs");
+  TORCH_CHECK(degree >= 0 && degree <= 3 && coeffs.size(1) >= (degree + 1) * (degree + 1), "bad SH degree");
+  auto out = torch::empty_like(dirs);
+  AT_DISPATCH_FLOATING_TYPES(dirs.scalar_type(), "sh_forward", [&] {
+    gs3d::sh_forward<scalar_t>(static_cast<int>(degree), dirs.data_ptr<scalar_t>(), coeffs.data_ptr<scalar_t>(), dirs.size(0),
+                               dirs.size(1), coeffs.size(1), std::max(1, at::get_num_threads()), out.data_ptr<scalar_t>());
+  });
+  return out;
+}
+
+std::vector<torch::Tensor> sh_backward(int64_t degree, torch::Tensor dirs, torch::Tensor coeffs, torch::Tensor v_colors) {
+  for (auto* x : {&dirs, &coeffs, &v_colors}) check(*x, "input");
+  auto v_coeffs = torch::zeros_like(coeffs);
+  auto v_dirs = torch::empty_like(dirs);
+  AT_DISPATCH_FLOATING_TYPES(dirs.scalar_type(), "sh_backward", [&] {
+    gs3d::sh_backward<scalar_t>(static_cast<int>(degree), dirs.data_ptr<scalar_t>(), coeffs.data_ptr<scalar_t>(),
+                                v_colors.data_ptr<scalar_t>(), dirs.size(0), dirs.size(1), coeffs.size(1),
+                                std::max(1, at::get_num_threads()), v_coeffs.data_ptr<scalar_t>(), v_dirs.data_ptr<scalar_t>());
+  });
+  return {v_coeffs, v_dirs};
+}
+
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("forward", &rasterize_forward, "3DGS tile compositing forward (CPU)");
   m.def("backward", &rasterize_backward, "3DGS tile compositing backward (CPU)");
+  m.def("sh_forward", &sh_forward, "SH colours, 3DGS convention (CPU)");
+  m.def("sh_backward", &sh_backward, "SH colours backward (CPU)");
   m.def("project_forward", &project_forward, "projection + SH colours without gradients (CPU)");
   m.def("bin_gaussians", &bin_gaussians, "per-tile depth-sorted lists of (camera, Gaussian) pairs (CPU)");
 }
