@@ -7,6 +7,9 @@ STAMP  := $(VENV)/.installed
 export XDG_CACHE_HOME ?= $(CURDIR)/.cache
 export TORCH_EXTENSIONS_DIR ?= $(CURDIR)/.cache/torch_extensions
 export MPLCONFIGDIR ?= $(CURDIR)/.cache/matplotlib
+# idle OpenMP threads sleep instead of spinning: on a shared 2-core machine spinning made the
+# rasterizer kernels 10x slower (measured: 5k surfels fwd+bwd 1.9 s spinning vs 0.17 s passive)
+export OMP_WAIT_POLICY ?= PASSIVE
 
 .PHONY: setup browser demo test bench clean
 
