@@ -139,7 +139,7 @@ def rasterize_gaussians(
                                 far_plane, sh_degree, backgrounds, render_mode, rasterize_mode, tile_size, return_median)
 
     needs_grad = torch.is_grad_enabled() and any(t.requires_grad for t in (means, quats, scales, opacities, colors, viewmats, Ks))
-    if chosen == "cpu" and not needs_grad:  # one fused C++ pass instead of ~100 small torch ops
+    if chosen == "cpu" and not needs_grad and (sh_degree or 0) <= 3:  # one C++ pass instead of ~100 torch ops
         proj, opac, feats = _project_fused(means, quats, scales, opacities, colors, viewmats, Ks, width, height, near_plane,
                                            far_plane, sh_degree, rasterize_mode, render_mode)
     else:
