@@ -25,8 +25,8 @@ from nerf2gs_plugin.eval.machine import machine_info, machine_line
 SCALES = {
     # fwd+bwd scenes (gaussians, width, height); the torch reference runs only on those up to
     # torch_max_pixels x torch_max_gaussians (it takes minutes beyond, on a shared 2-core machine)
-    "quick": {"fwdbwd": [(20_000, 200, 112), (20_000, 640, 360)], "fps": (50_000, 200, 112), "repeats": 3,
-              "torch_max_pixels": 200 * 112, "torch_max_gaussians": 20_000},
+    "quick": {"fwdbwd": [(20_000, 200, 112), (20_000, 640, 360)], "fps": (50_000, 200, 112), "repeats": 5,
+              "torch_max_pixels": 640 * 360, "torch_max_gaussians": 20_000},
     "full": {"fwdbwd": [(20_000, 200, 112), (20_000, 640, 360), (50_000, 200, 112), (200_000, 200, 112),
                         (200_000, 640, 360)], "fps": (50_000, 200, 112), "repeats": 5,
              "torch_max_pixels": 640 * 360, "torch_max_gaussians": 50_000},
