@@ -88,30 +88,41 @@ def _hole(y: Tensor, gen: torch.Generator) -> Tensor:
     return y
 
 
+def _apply(kind: str, y: Tensor, gen: torch.Generator, strength: float) -> Tensor:
+    if kind == "blur":
+        return gaussian_blur(y, _u(gen, 0.6, 2.0) * strength)
+    if kind == "resample":
+        return _resample(y, 1 + _u(gen, 0.5, 2.5) * strength)
+    if kind == "smear":
+        return _smear(y, gen)
+    if kind == "holes":
+        return _hole(y, gen)
+    if kind == "color":
+        gain = 1 + torch.empty(1, 3, 1, 1).uniform_(-0.08, 0.08, generator=gen) * strength
+        bias = torch.empty(1, 3, 1, 1).uniform_(-0.03, 0.03, generator=gen) * strength
+        return y * gain.to(y) + bias.to(y)
+    sigma = _u(gen, 0.01, 0.05) * strength  # noise
+    return y + sigma * torch.randn(y.shape, generator=gen).to(y)
+
+
+# Probability of each kind in a mix; a sample that draws none gets one kind at random, so every
+# degraded image differs from its ground truth (a clean one would score an infinite PSNR).
+PROBS = {"blur": 0.5, "resample": 0.35, "smear": 0.35, "holes": 0.25, "color": 0.35, "noise": 0.5}
+
+
 def degrade(x: Tensor, gen: torch.Generator, kinds: Sequence[str] = KINDS, strength: float = 1.0) -> Tensor:
-    """A random mix of ``kinds`` applied to each image of ``x`` ``[B, 3, H, W]`` (0..1)."""
+    """A random mix of ``kinds`` (at least one) applied to each image of ``x`` ``[B, 3, H, W]`` (0..1)."""
     unknown = set(kinds) - set(KINDS)
     if unknown:
         raise ValueError(f"unknown degradations {sorted(unknown)}; known: {', '.join(KINDS)}")
+    order = [k for k in ("blur", "resample", "smear", "holes", "color", "noise") if k in kinds]
     out = []
-    always = len(kinds) == 1  # a single kind is always applied (simple, learnable test setting)
     for b in range(x.shape[0]):  # over samples only; each op is vectorised over pixels
+        chosen = [k for k in order if float(torch.rand((), generator=gen)) < PROBS[k]]
+        if not chosen:
+            chosen = [order[int(torch.randint(len(order), (), generator=gen))]]
         y = x[b : b + 1]
-        p = lambda q: always or float(torch.rand((), generator=gen)) < q  # noqa: E731
-        if "blur" in kinds and p(0.5):
-            y = gaussian_blur(y, _u(gen, 0.6, 2.0) * strength)
-        if "resample" in kinds and p(0.35):
-            y = _resample(y, 1 + _u(gen, 0.5, 2.5) * strength)
-        if "smear" in kinds and p(0.35):
-            y = _smear(y, gen)
-        if "holes" in kinds and p(0.25):
-            y = _hole(y, gen)
-        if "color" in kinds and p(0.35):
-            gain = 1 + torch.empty(1, 3, 1, 1).uniform_(-0.08, 0.08, generator=gen) * strength
-            bias = torch.empty(1, 3, 1, 1).uniform_(-0.03, 0.03, generator=gen) * strength
-            y = y * gain.to(y) + bias.to(y)
-        if "noise" in kinds and p(0.5):
-            sigma = _u(gen, 0.01, 0.05) * strength
-            y = y + sigma * torch.randn(y.shape, generator=gen).to(y)
+        for k in chosen:
+            y = _apply(k, y, gen, strength)
         out.append(y)
     return torch.cat(out).clamp(0, 1)

@@ -19,6 +19,9 @@ def test_degradations_change_images_and_are_seeded():
         out = degrade(img, torch.Generator().manual_seed(1), (kind,))
         assert out.shape == img.shape and (out - img).abs().mean() > 1e-3, kind
         assert torch.equal(out, degrade(img, torch.Generator().manual_seed(1), (kind,)))
+    clean = torch.rand(32, 3, 16, 16)
+    mix = degrade(clean, torch.Generator().manual_seed(2), KINDS)
+    assert ((mix - clean).abs().flatten(1).amax(1) > 1e-3).all()  # every sample is degraded somehow
     with pytest.raises(ValueError, match="unknown"):
         degrade(img, torch.Generator(), ("jpeg",))
 
