@@ -54,9 +54,11 @@ class _CompositeCPU(torch.autograd.Function):
     """C++ tile compositing; gradients wrt means2d, conics, colours/features and opacities."""
 
     @staticmethod
-    def forward(ctx, means2d, conics, colors, opacities, offsets, ids, n_cams, width, height, tile_size):  # type: ignore[override]
+    def forward(ctx, means2d, conics, colors, opacities, offsets, ids, n_cams, width, height, tile_size, with_median):  # type: ignore[override]
         ext = load_kernel()
-        render, alpha, last, median = ext.forward(means2d, conics, colors, opacities, offsets, ids, n_cams, height, width, tile_size)
+        need_last = any(ctx.needs_input_grad[:4])  # only backward reads the last-composited indices
+        render, alpha, last, median = ext.forward(means2d, conics, colors, opacities, offsets, ids, n_cams, height, width,
+                                                  tile_size, need_last, with_median)
         ctx.save_for_backward(means2d, conics, colors, opacities, offsets, ids, alpha, last)
         ctx.dims = (n_cams, height, width, tile_size)
         ctx.mark_non_differentiable(median)
@@ -69,18 +71,19 @@ class _CompositeCPU(torch.autograd.Function):
             means2d, conics, colors, opacities, offsets, ids, alpha, last,
             v_render.contiguous(), v_alpha.contiguous(), *ctx.dims,
         )
-        return v_m, v_c, v_col, v_o, None, None, None, None, None, None
+        return v_m, v_c, v_col, v_o, None, None, None, None, None, None, None
 
 
 def composite(
     means2d: Tensor, conics: Tensor, colors: Tensor, opacities: Tensor, tile_offsets: Tensor, flat_ids: Tensor,
-    n_cams: int, width: int, height: int, tile_size: int, backend: str,
+    n_cams: int, width: int, height: int, tile_size: int, backend: str, with_median: bool = True,
 ) -> tuple[Tensor, Tensor, Tensor]:
     """Composite flattened pairs (``[CN, 2]``, ``[CN, 3]``, ``[CN, D]``, ``[CN]``) with ``backend``
-    ``"cpu"`` or ``"torch"`` -> render ``[C,H,W,D]``, alpha ``[C,H,W]``, median ids ``[C,H,W]``."""
+    ``"cpu"`` or ``"torch"`` -> render ``[C,H,W,D]``, alpha ``[C,H,W]``, median ids ``[C,H,W]`` (all -1 from
+    the cpu kernel unless ``with_median``)."""
     if backend == "cpu":
         return _CompositeCPU.apply(means2d.contiguous(), conics.contiguous(), colors.contiguous(), opacities.contiguous(),
-                                   tile_offsets, flat_ids, n_cams, width, height, tile_size)
+                                   tile_offsets, flat_ids, n_cams, width, height, tile_size, with_median)
     return composite_torch(means2d, conics, colors, opacities, tile_offsets, flat_ids, n_cams, width, height, tile_size)
 
 
@@ -160,7 +163,7 @@ def rasterize_gaussians(
                            proj.depths.detach().contiguous(), proj.radii.contiguous(), width, height, tile_size)
     render, alpha, median_ids = composite(
         proj.means2d.reshape(-1, 2), proj.conics.reshape(-1, 3), feats.reshape(n_cams * n, feats.shape[-1]), opac.reshape(-1),
-        offsets, ids, n_cams, width, height, tile_size, chosen,
+        offsets, ids, n_cams, width, height, tile_size, chosen, with_median=return_median,
     )
     alpha = alpha[..., None]  # [C, H, W, 1]
     if render_mode in ("ED", "RGB+ED"):

@@ -170,7 +170,7 @@ def test_torch_reference_is_chunk_invariant() -> None:
     assert torch.allclose(r_big, r_small, atol=1e-6) and torch.allclose(a_big, a_small, atol=1e-6)
     assert torch.equal(m_big, m_small)
     if load_kernel() is not None:
-        r_cpu, a_cpu = load_kernel().forward(*[t.contiguous() for t in args[:6]], 1, h, w, 16)[:2]
+        r_cpu, a_cpu = load_kernel().forward(*[t.contiguous() for t in args[:6]], 1, h, w, 16, False, True)[:2]
         assert torch.allclose(r_cpu, r_big, atol=1e-5) and torch.allclose(a_cpu, a_big, atol=1e-5)
 
 

@@ -76,7 +76,8 @@ inline void row_range(T my, T ca, T cb, T cc, T op, int y0, int ts, int& r0, int
 // out [C,H,W,D], out_a [C,H,W], out_last / out_med [C,H,W] (list index of the last composited
 // pair / pair id of the median Gaussian, -1 for none).
 // TS: the tile edge at compile time (one SIMD row of 16 floats), or 0 for d.ts at run time.
-template <typename T, int TS>
+// LAST / MED: whether the last-composited index (backward) and median ids are wanted.
+template <typename T, int TS, bool LAST, bool MED>
 void forward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
                         const Dims d, int n_threads, T* out, T* out_a, int64_t* out_last, int64_t* out_med) {
   const int ts = TS > 0 ? TS : d.ts, P = ts * ts;
@@ -150,10 +151,10 @@ void forward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, co
           const bool contrib = valid && !term;
           w[p] = contrib ? a * tr : T(0);
           lane_any[q] |= contrib ? 1 : 0;
-          med[p] = (contrib && tr > T(0.5)) ? id32 : med[p];
+          if constexpr (MED) med[p] = (contrib && tr > T(0.5)) ? id32 : med[p];
           Tr[p] = contrib ? nt : tr;
           act[p] = term ? T(0) : act[p];
-          lst[p] = contrib ? kk : lst[p];
+          if constexpr (LAST) lst[p] = contrib ? kk : lst[p];
         }
         }
         int32_t any_w = 0;
@@ -181,13 +182,29 @@ void forward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, co
   }
 }
 
+template <typename T, int TS>
+void forward_tiles_ts(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
+                      const Dims d, int n_threads, T* out, T* out_a, int64_t* out_last, int64_t* out_med, bool last,
+                      bool med) {
+  if (last && med)
+    forward_tiles_impl<T, TS, true, true>(m2, cn, col, opa, off, ids, d, n_threads, out, out_a, out_last, out_med);
+  else if (last)
+    forward_tiles_impl<T, TS, true, false>(m2, cn, col, opa, off, ids, d, n_threads, out, out_a, out_last, out_med);
+  else if (med)
+    forward_tiles_impl<T, TS, false, true>(m2, cn, col, opa, off, ids, d, n_threads, out, out_a, out_last, out_med);
+  else
+    forward_tiles_impl<T, TS, false, false>(m2, cn, col, opa, off, ids, d, n_threads, out, out_a, out_last, out_med);
+}
+
+// out_last / out_med stay -1 where not asked for (need_last is only required for backward).
 template <typename T>
 void forward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
-                   const Dims d, int n_threads, T* out, T* out_a, int64_t* out_last, int64_t* out_med) {
+                   const Dims d, int n_threads, T* out, T* out_a, int64_t* out_last, int64_t* out_med,
+                   bool need_last = true, bool need_med = true) {
   if (d.ts == 16)
-    forward_tiles_impl<T, 16>(m2, cn, col, opa, off, ids, d, n_threads, out, out_a, out_last, out_med);
+    forward_tiles_ts<T, 16>(m2, cn, col, opa, off, ids, d, n_threads, out, out_a, out_last, out_med, need_last, need_med);
   else
-    forward_tiles_impl<T, 0>(m2, cn, col, opa, off, ids, d, n_threads, out, out_a, out_last, out_med);
+    forward_tiles_ts<T, 0>(m2, cn, col, opa, off, ids, d, n_threads, out, out_a, out_last, out_med, need_last, need_med);
 }
 
 // grads: [n_threads][CN][6 + D] zero-initialised; per pair (means2d x, y, conic a, b, c, opacity,

@@ -27,7 +27,7 @@ gs3d::Dims dims(const torch::Tensor& colors, int64_t n_cams, int64_t height, int
 template <typename T>
 std::vector<torch::Tensor> forward_t(const torch::Tensor& means2d, const torch::Tensor& conics, const torch::Tensor& colors,
                                      const torch::Tensor& opacities, const torch::Tensor& offsets, const torch::Tensor& ids,
-                                     const gs3d::Dims d) {
+                                     const gs3d::Dims d, bool need_last, bool need_median) {
   auto opts = means2d.options();
   auto render = torch::zeros({d.n_cams, d.height, d.width, d.D}, opts);
   auto alpha = torch::zeros({d.n_cams, d.height, d.width}, opts);
@@ -35,7 +35,8 @@ std::vector<torch::Tensor> forward_t(const torch::Tensor& means2d, const torch::
   auto median = torch::full({d.n_cams, d.height, d.width}, -1, opts.dtype(torch::kInt64));
   gs3d::forward_tiles<T>(means2d.data_ptr<T>(), conics.data_ptr<T>(), colors.data_ptr<T>(), opacities.data_ptr<T>(),
                          offsets.data_ptr<int64_t>(), ids.data_ptr<int64_t>(), d, std::max(1, at::get_num_threads()),
-                         render.data_ptr<T>(), alpha.data_ptr<T>(), last.data_ptr<int64_t>(), median.data_ptr<int64_t>());
+                         render.data_ptr<T>(), alpha.data_ptr<T>(), last.data_ptr<int64_t>(), median.data_ptr<int64_t>(),
+                         need_last, need_median);
   return {render, alpha, last, median};
 }
 
@@ -59,14 +60,18 @@ std::vector<torch::Tensor> backward_t(const torch::Tensor& means2d, const torch:
 
 std::vector<torch::Tensor> rasterize_forward(torch::Tensor means2d, torch::Tensor conics, torch::Tensor colors,
                                              torch::Tensor opacities, torch::Tensor tile_offsets, torch::Tensor flat_ids,
-                                             int64_t n_cams, int64_t height, int64_t width, int64_t tile_size) {
+                                             int64_t n_cams, int64_t height, int64_t width, int64_t tile_size,
+                                             bool need_last, bool need_median) {
+  // need_last: record each pixel's last composited list entry (what backward needs);
+  // need_median: record the median-depth Gaussian. Unrequested outputs stay -1.
   for (auto* x : {&means2d, &conics, &colors, &opacities, &tile_offsets, &flat_ids}) check(*x, "input");
   TORCH_CHECK(tile_offsets.scalar_type() == torch::kInt64 && flat_ids.scalar_type() == torch::kInt64, "tile lists must be int64");
   TORCH_CHECK(means2d.size(0) < (int64_t(1) << 31), "too many camera x Gaussian pairs");
   const auto d = dims(colors, n_cams, height, width, tile_size);
-  if (means2d.scalar_type() == torch::kDouble) return forward_t<double>(means2d, conics, colors, opacities, tile_offsets, flat_ids, d);
+  if (means2d.scalar_type() == torch::kDouble)
+    return forward_t<double>(means2d, conics, colors, opacities, tile_offsets, flat_ids, d, need_last, need_median);
   TORCH_CHECK(means2d.scalar_type() == torch::kFloat, "rasterizer inputs must be float32 or float64");
-  return forward_t<float>(means2d, conics, colors, opacities, tile_offsets, flat_ids, d);
+  return forward_t<float>(means2d, conics, colors, opacities, tile_offsets, flat_ids, d, need_last, need_median);
 }
 
 std::vector<torch::Tensor> rasterize_backward(torch::Tensor means2d, torch::Tensor conics, torch::Tensor colors,
