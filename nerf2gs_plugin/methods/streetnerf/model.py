@@ -23,8 +23,9 @@ Losses (sum is minimised; ``M_*`` are the masks, ``W`` the per-image weight):
     everything that is not sky is solid.
   * ground (``ground_reg``): StreetNeRF regularises ground rays towards a plane. Our form: the plane
     has the data's up vector as normal and an offset ``h`` estimated from the data: the densest
-    height of the sparse points below the cameras when the data has points (kept fixed), else an
-    EMA of the median height of the rendered ground points once geometry exists. For a ground ray with plane hit ``t*``:
+    height of the sparse points below the cameras when the data has points, else an EMA of the
+    median height of the rendered ground points between ``ground_start_step / 2`` and
+    ``ground_start_step``; either way fixed while the loss is on (no feedback loop). For a ground ray with plane hit ``t*``:
     ``ground_weight * mean_{M_g} [ sum_i w_i min(|t_i - t*| / t*, 1) + (1 - A) ]`` (0.05), a
     line-of-sight loss (Urban Radiance Fields, Rematas et al. 2022) that bounds the relative depth
     error and pays full price for missing mass: the road becomes one opaque flat sheet, which is
@@ -275,13 +276,16 @@ class StreetNeRFModel(Model):
 
     def _ground_loss(self, outputs: dict[str, Any], ground: Tensor) -> Optional[Tensor]:
         """Line-of-sight loss of ground rays towards the ground plane (see the module docstring)."""
-        if not self.training or self.step < self.config.ground_start_step or not bool(ground.any()):
+        if not self.training or not bool(ground.any()):
             return None
         o, d = outputs["origins"][ground], outputs["directions"][ground]
         w, t_mid, acc = outputs["weights"][ground], outputs["t_mid"][ground], outputs["accumulation"][ground]
-        if not self.ground_from_points:
+        start = self.config.ground_start_step
+        if not self.ground_from_points and start // 2 <= self.step < start:
+            # estimated from photometric geometry only, then frozen: updating it while the loss pulls
+            # the weights towards it feeds back and drifts (measured: 1.3 m too low on the street)
             self._update_ground_height(o, d, w, t_mid, acc)
-        if not bool(self.ground_known):
+        if self.step < start or not bool(self.ground_known):
             return None
         cos = d @ self.up
         t_star = (self.ground_height - o @ self.up) / cos.clamp(max=-1e-6)

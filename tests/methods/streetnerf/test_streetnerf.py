@@ -185,3 +185,38 @@ def test_ground_height_from_points_ignores_facades_and_cars():
     h = ground_height_from_points(torch.cat([road, facades, cars]), torch.zeros(10))
     assert h == pytest.approx(-3.0, abs=0.05)
     assert ground_height_from_points(torch.zeros(5) - 1, torch.zeros(3)) is None  # too few points
+
+
+def test_without_points_the_plane_is_estimated_before_the_loss_and_then_frozen(tiny_scene, tmp_path):
+    import json
+
+    data_dir = tmp_path / "no_points"
+    shutil.copytree(tiny_scene, data_dir)
+    meta = json.loads((data_dir / "transforms.json").read_text())
+    meta.pop("ply_file_path")
+    (data_dir / "transforms.json").write_text(json.dumps(meta))
+    data = parse_dataset(data_dir, "train")
+    assert data.points3D_xyz is None
+    model = small_model_config(ground_start_step=100).setup(train_data=data)
+    model.train()
+    assert not model.ground_from_points and not bool(model.ground_known)
+
+    def outputs_at(height: float) -> dict:
+        n = 64
+        o = torch.zeros(n, 3)
+        d = torch.nn.functional.normalize(torch.cat([torch.rand(n, 2), -torch.ones(n, 1)], -1), dim=-1)
+        t_hit = (height - o[:, 2]) / d[:, 2]
+        t_mid = torch.linspace(0.01, 5.0, 500).expand(n, 500).contiguous()
+        w = torch.exp(-((t_mid - t_hit[:, None]) ** 2) / 1e-5)
+        w = 0.98 * w / w.sum(-1, keepdim=True)
+        return {"origins": o, "directions": d, "weights": w, "t_mid": t_mid, "accumulation": w.sum(-1, keepdim=True)}
+
+    model.step = 10  # before start / 2: nothing yet
+    assert model._ground_loss(outputs_at(-0.4), torch.ones(64, dtype=torch.bool)) is None and not bool(model.ground_known)
+    model.step = 60  # estimation window, loss still off
+    assert model._ground_loss(outputs_at(-0.4), torch.ones(64, dtype=torch.bool)) is None
+    assert float(model.ground_height) == pytest.approx(-0.4, abs=0.01)
+    model.step = 100  # loss on, plane frozen
+    loss = model._ground_loss(outputs_at(-0.8), torch.ones(64, dtype=torch.bool))
+    assert loss is not None and float(loss) > 0.2
+    assert float(model.ground_height) == pytest.approx(-0.4, abs=0.01)
