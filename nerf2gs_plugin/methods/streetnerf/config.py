@@ -3,6 +3,10 @@
 Default (CPU scale: the synthetic street at ~200x112 px on 2 CPU cores, well under 20 minutes):
 see ``DEFAULT_STEPS``, 1024 rays per batch, a 12-level 2^15 hash grid, proposal rounds 48 -> 24 ->
 24 fine samples. The learning rates decay over ``max_num_iterations`` whatever it is set to.
+Measured on the synthetic street (ns2gs-data synth-street defaults, 200x112, 60 views; shared 2-core
+Xeon, 1 torch thread, load 3-6): 3000 steps in 710 s; street / bev_1 / bev_2 PSNR 22.85 / 15.36 /
+14.90 (all eval views). At step 2000 (4 views per split) ground regularisation on vs off:
+23.20 / 15.15 / 14.75 vs 22.20 / 14.85 / 14.47, bev SSIM 0.40 vs 0.30 (flat road, no dark blotches).
 
 Paper scale (``streetnerf_paper_method``, :func:`paper_scale`): Zip-NeRF/nerfacto-like capacity for
 a GPU: 16 levels x 2^19 entries up to 4096, proposal samples 256 -> 96 -> 48, 4096 rays, 25k steps.
