@@ -21,6 +21,11 @@ BUILTIN_METHODS: dict[str, str] = {
     "splatfacto": "nerf2gs_plugin.methods.splatfacto.config:splatfacto_method",
     "scaffold-gs": "nerf2gs_plugin.methods.scaffold_gs.config:scaffold_gs_method",
     "2dgs": "nerf2gs_plugin.methods.two_dgs.config:two_dgs_method",
+    # the original step counts and schedules, for a GPU (`ns2gs-train splatfacto-paper ...`)
+    "streetnerf-paper": "nerf2gs_plugin.methods.streetnerf.config:streetnerf_paper_method",
+    "splatfacto-paper": "nerf2gs_plugin.methods.splatfacto.config:splatfacto_paper_method",
+    "scaffold-gs-paper": "nerf2gs_plugin.methods.scaffold_gs.config:scaffold_gs_paper_method",
+    "2dgs-paper": "nerf2gs_plugin.methods.two_dgs.config:two_dgs_paper_method",
 }
 
 

@@ -40,3 +40,12 @@ def test_broken_plugin_is_reported_and_isolated(tmp_path, monkeypatch, capsys):
             registry.get_method("broken-method")
     finally:
         registry.discover_methods.cache_clear()
+
+
+@pytest.mark.parametrize("name", ["streetnerf", "splatfacto", "scaffold-gs", "2dgs"])
+def test_builtin_methods_have_cpu_and_paper_scale(name):
+    cpu = registry.get_method(name).config
+    paper = registry.get_method(f"{name}-paper").config
+    # the paper variant trains the same method (its checkpoints load as `name`), far longer
+    assert paper.method_name == cpu.method_name == name
+    assert paper.max_num_iterations >= 25000 > cpu.max_num_iterations
