@@ -18,7 +18,7 @@ from torch import Tensor
 
 ROAD_HALF = 3.5
 SIDEWALK_H = 0.15
-FACADE_Y = 6.0
+FACADE_Y = 9.0  # 18 m between facades: bird's-eye views see mostly road and sidewalk, as in MatrixCity
 STREET_HALF_LEN = 36.0  # buildings line x in [-36, 36]; end blocks beyond
 CAR_RANGE = 33.0  # cars wrap around within |x| < CAR_RANGE
 CROSSWALKS = (-14.0, 12.0)

@@ -56,12 +56,12 @@ def street_poses(n: int, half_len: float, cam_height: float, gen: torch.Generato
 
 def bev_poses(n: int, half_len: float, height: float, pitch_deg: float, phase: float, gen: torch.Generator) -> Tensor:
     """Bird's-eye poses around the street, looking inward: headings alternate between the two
-    street directions, each within +-35 deg of the axis (``phase`` in [0, 1) shifts the pattern),
+    street directions, each within +-15 deg of the axis (``phase`` in [0, 1) shifts the pattern),
     and each camera sits on an ellipse (semi-axes ``0.75 half_len`` along, 1.8 m across) on the
     far side of the centre from where it looks, so every view has a long stretch of road below it."""
     k = torch.arange(n, dtype=torch.float32)
     frac = ((k // 2) + 0.5 + phase) / max((n + 1) // 2, 1)
-    off = torch.deg2rad(-35.0 + 70.0 * torch.remainder(frac * 1.618034, 1.0))
+    off = torch.deg2rad(-15.0 + 30.0 * torch.remainder(frac * 1.618034, 1.0))
     off = off + torch.deg2rad((torch.rand(n, generator=gen) - 0.5) * 6.0)
     yaw = torch.where(k % 2 == 0, 0.0, math.pi) + off
     x = -0.75 * half_len * torch.cos(yaw)
