@@ -1,6 +1,6 @@
 """Training runs for benchmarks, reused when nothing that matters changed.
 
-A run is keyed by (dataset fingerprint, method, config overrides, reference run): regenerating a
+A run is keyed by (dataset fingerprint, method, resolved config, reference run): regenerating a
 table after a change retrains only what changed, and an interrupted bench resumes from the
 run's last checkpoint.
 """
@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 from nerf2gs_plugin.engine.checkpoints import list_checkpoints, load_checkpoint
-from nerf2gs_plugin.engine.config import apply_plain, atomic_write_text
+from nerf2gs_plugin.engine.config import apply_plain, atomic_write_text, to_plain
 from nerf2gs_plugin.engine.trainer import Trainer
 
 
@@ -31,7 +31,11 @@ class RunSpec:
 
 
 def run_key(dataset: str, spec: RunSpec, reference_key: Optional[str]) -> str:
-    doc = {"data": dataset, "method": spec.method, "overrides": spec.overrides, "ref": reference_key, "augment": spec.augment}
+    """Keyed by the fully resolved config, not only the overrides: a changed method default retrains."""
+    from nerf2gs_plugin.registry import get_method
+
+    resolved = to_plain(apply_plain(get_method(spec.method).config, spec.overrides, where=f"bench run {spec.label}"))
+    doc = {"data": dataset, "method": spec.method, "config": resolved, "ref": reference_key, "augment": spec.augment}
     return hashlib.sha1(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:12]
 
 

@@ -198,3 +198,21 @@ def test_case_dataset_reports_unsupported_stresses(tiny_scene, tmp_path):
     assert case_dataset(StressCase("splatfacto", "seed 1"), tiny_scene, tmp_path, False) == tiny_scene
     copy = case_dataset(StressCase("splatfacto", "random init", perturbation=Perturbation(drop_points=True)), tiny_scene, tmp_path, False)
     assert copy.parent == tmp_path / "data" and "nopoints" in copy.name
+
+
+def test_run_key_follows_the_resolved_config(monkeypatch):
+    """A changed method default (not only a changed override) must retrain, never reuse a stale run."""
+    import dataclasses
+
+    from nerf2gs_plugin.eval import bench_runs
+    from nerf2gs_plugin import registry
+
+    spec = RunSpec("sf", "splatfacto", {"max_num_iterations": 50})
+    k0 = bench_runs.run_key("data", spec, None)
+    assert k0 == bench_runs.run_key("data", RunSpec("other label", "splatfacto", {"max_num_iterations": 50}), None)
+    assert k0 != bench_runs.run_key("data", RunSpec("sf", "splatfacto", {"max_num_iterations": 60}), None)
+    real = registry.get_method("splatfacto")
+    changed = dataclasses.replace(real.config, pipeline=dataclasses.replace(
+        real.config.pipeline, model=dataclasses.replace(real.config.pipeline.model, sh_degree=1)))
+    monkeypatch.setattr(registry, "get_method", lambda name: registry.MethodSpecification(changed, real.description))
+    assert bench_runs.run_key("data", spec, None) != k0
