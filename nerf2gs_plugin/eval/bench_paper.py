@@ -14,8 +14,9 @@ from nerf2gs_plugin.eval.bench_runs import RunSpec, train_or_reuse
 from nerf2gs_plugin.eval.machine import machine_info, machine_line
 
 SPLITS = ("street", "bev_1", "bev_2")
-METRICS = (("psnr", "PSNR", True), ("ssim", "SSIM", True), ("lpips", "LPIPS", False))
+METRICS = (("psnr", "PSNR", True), ("ssim", "SSIM", True), ("lpips", "LPIPS", False), ("psnr_ground", "PSNR road", True))
 TARGETS = ("splatfacto", "scaffold-gs", "2dgs")
+EVAL_VERSION = 2  # bump when evaluate_run gains a metric: cached bench evaluations are then redone
 
 # Step budgets per scale ("default" = the method's registered config). A shorter run rescales the
 # method's schedules with it (see step_overrides), so it is a faithful short run, not a truncated one.
@@ -123,12 +124,12 @@ def run_plan(plan: list[RunSpec], data: Path, runs_root: Path, log: Optional[Cal
             run_dir, key = train_or_reuse(spec, data, runs_root, dataset, reference=ref, progress=False, log=log, step_hook=bar.hook)
             done[spec.label] = (run_dir, key)
             eval_path = run_dir / "bench_eval.json"
-            if eval_path.is_file():
-                res = json.loads(eval_path.read_text())
-            else:
+            res = json.loads(eval_path.read_text()) if eval_path.is_file() else None
+            if res is None or res.get("eval_version") != EVAL_VERSION:  # evaluated by an older ns2gs-eval
                 run = load_run(run_dir, device=device)
                 names = [s for s in SPLITS if s in run.pipeline.datamanager.eval_split_names()] or None
                 res = evaluate_run(run, names, render_dir=run_dir / "eval_renders", lpips_model=lpips_model)
+                res["eval_version"] = EVAL_VERSION
                 atomic_write_text(eval_path, json.dumps(res, indent=1))
             res["run_dir"] = str(run_dir)
             res["label"] = spec.label

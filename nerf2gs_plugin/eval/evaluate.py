@@ -43,7 +43,8 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
                  fps_repeats: int = 5, render_dir: Optional[Path] = None, lpips_model=None) -> dict:
     """nerfstudio ``ns-eval``-style results for every requested split (all the data has by default).
 
-    Per split: PSNR/SSIM/LPIPS mean and std (LPIPS ``None`` when its weights are missing) and the
+    Per split: PSNR/SSIM/LPIPS mean and std (LPIPS ``None`` when its weights are missing), PSNR over
+    the ground-mask pixels (``psnr_ground``, ``None`` without ground masks) and the
     median render FPS of its images (the run's first render excluded as warm-up); top level: the
     median FPS of repeated renders of one camera, model size (primitives, parameters, MB of state
     and of the checkpoint file) and the training time recorded in the checkpoint."""
@@ -63,7 +64,7 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
     fps, fps_resolution = None, None
     warm = False
     for name in names:
-        rows = {"psnr": [], "ssim": [], "lpips": []}
+        rows = {"psnr": [], "ssim": [], "lpips": [], "psnr_ground": []}
         shown, times, resolution = [], [], None
         for i, (camera, batch) in enumerate(dm.eval_images(name)):
             if max_images is not None and i >= max_images:
@@ -76,6 +77,10 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
             pred, gt = out["rgb"].clamp(0, 1), batch["image"]
             rows["psnr"].append(float(psnr(pred, gt)))
             rows["ssim"].append(float(ssim(pred, gt)))
+            ground = batch.get("ground_mask")
+            if ground is not None and bool(ground.any()):  # road + sidewalk only: where the paper's holes are
+                m = ground[..., 0].to(pred.device)
+                rows["psnr_ground"].append(float(psnr(pred[m], gt.to(pred.device)[m])))
             if lpips_model is not None:
                 rows["lpips"].append(float(lpips_model(pred, gt)))
             if len(shown) < 4:

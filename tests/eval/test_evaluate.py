@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import torch
 
 from nerf2gs_plugin.engine.config import apply_plain
 from nerf2gs_plugin.engine.reference import load_run
@@ -63,6 +64,13 @@ def test_evaluate_run_schema_grids_and_lpips(tiny_run, tmp_path):
     json.dumps(res, allow_nan=False)  # strict JSON: no NaN/inf anywhere
     # the render is not the ground truth: worse than a perfect score, and PSNR agrees with a direct computation
     assert res["results"]["street"]["psnr"] < 60 and res["results"]["street"]["ssim"] < 0.999
+    # PSNR over the ground-mask pixels agrees with a direct computation on the first image
+    cam, batch = next(iter(run.pipeline.datamanager.eval_images("street")))
+    m = batch["ground_mask"][..., 0]
+    pred = run.model.render_camera(cam)["rgb"].clamp(0, 1)
+    direct = float(10 * torch.log10(1 / ((pred[m] - batch["image"][m]) ** 2).mean()))
+    single = evaluate_run(run, splits=["street"], max_images=1, fps_repeats=1)["results"]["street"]["psnr_ground"]
+    assert abs(single - direct) < 1e-3 and single != res["results"]["street"]["psnr"]
 
 
 def test_cli_writes_json_and_reports_missing_lpips(tiny_run, tmp_path, monkeypatch, capsys):
