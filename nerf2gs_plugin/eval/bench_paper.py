@@ -171,7 +171,7 @@ def markdown_table(results: dict[str, dict], groups: dict[str, list[str]], title
         for metric, _, _ in METRICS:
             for s in SPLITS:
                 v = _value(r, metric, s)
-                txt = "n/a" if v is None else (f"{v:.2f}" if metric == "psnr" else f"{v:.3f}")
+                txt = "n/a" if v is None else (f"{v:.2f}" if metric.startswith("psnr") else f"{v:.3f}")
                 rank = ranks.get((r["label"], metric, s))
                 cells.append(f"**{txt}**" if rank == 1 else f"_{txt}_" if rank == 2 else txt)
         size = r["size"]
