@@ -7,6 +7,7 @@ import json
 import math
 import random
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
@@ -83,7 +84,7 @@ class Trainer:
         self.run_dir = config.run_dir()
         self.step = 0
         self.last_good_checkpoint: Optional[Path] = None
-        self.history: list[dict[str, float]] = []
+        self.history = StepHistory()
         self.train_seconds = 0.0
         self.step_hooks: list = []  # called after every step (the live viewer attaches here)
 
@@ -202,8 +203,46 @@ class Trainer:
                     hook(step)
                 progress.update(task, advance=1, stats=_format_stats(ema, self.pipeline.model.num_primitives()))
         self.save_checkpoint(cfg.max_num_iterations - 1)
-        atomic_write_text(self.run_dir / "train_log.json", json.dumps({"train_seconds": self.train_seconds, "history": self.history[-2000:]}))
+        atomic_write_text(self.run_dir / "train_log.json", json.dumps(
+            {"train_seconds": self.train_seconds, "history_stride": self.history.stride, "history": self.history.records()}))
         return self.run_dir
+
+
+class StepHistory:
+    """Per-step records of a whole run in bounded memory: every step of the last ``recent`` steps,
+    every ``stride``-th older step (the stride doubles whenever more than ``older`` of them are
+    kept) and always the run's first step, so ``train_log.json`` holds at most
+    ``recent + older + 1`` records (about 4000) and still shows the start of the run."""
+
+    def __init__(self, recent: int = 2000, older: int = 2000) -> None:
+        self.recent: deque[dict[str, float]] = deque(maxlen=max(1, recent))
+        self.older: list[dict[str, float]] = []
+        self.max_older = max(1, older)
+        self.first: Optional[dict[str, float]] = None
+        self.stride = 1
+
+    def append(self, record: dict[str, float]) -> None:
+        if len(self.recent) == self.recent.maxlen:
+            self._age(self.recent[0])
+        self.recent.append(record)
+
+    def _age(self, record: dict[str, float]) -> None:
+        if self.first is None:
+            self.first = record
+            return
+        if int(record["step"]) % self.stride:
+            return
+        self.older.append(record)
+        if len(self.older) > self.max_older:
+            self.stride *= 2
+            self.older = [r for r in self.older if int(r["step"]) % self.stride == 0]
+
+    def records(self) -> list[dict[str, float]]:
+        """Oldest first."""
+        return ([self.first] if self.first is not None else []) + self.older + list(self.recent)
+
+    def __len__(self) -> int:
+        return len(self.records())
 
 
 def _format_stats(ema: dict[str, float], primitives: int) -> str:

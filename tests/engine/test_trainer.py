@@ -112,3 +112,33 @@ def test_checkpoint_of_other_method_is_rejected(tiny_scene, tmp_path):
     ckpt = list_checkpoints(run_dir)[-1]
     with pytest.raises(CheckpointError, match="of method 'voxel-grid', not 'splatfacto'"):
         load_checkpoint(ckpt, expected_method="splatfacto")
+
+
+def test_step_history_keeps_whole_run_bounded():
+    from nerf2gs_plugin.engine.trainer import StepHistory
+
+    h = StepHistory()
+    for step in range(30000):
+        h.append({"step": step, "psnr": float(step)})
+    steps = [int(r["step"]) for r in h.records()]
+    assert len(steps) <= 4001 and steps == sorted(set(steps))
+    assert steps[0] == 0  # the first step (the stability bench's step-0 PSNR) is always kept
+    assert steps[-2000:] == list(range(28000, 30000))  # every one of the last 2000 steps
+    older = steps[1:-2000]
+    assert older[0] <= 2 * h.stride and all(s % h.stride == 0 for s in older)  # the early run is still there, thinned
+    assert len(older) > 1000 and max(b - a for a, b in zip(older, older[1:])) == h.stride
+    short = StepHistory()
+    for step in range(50):
+        short.append({"step": step})
+    assert [r["step"] for r in short.records()] == list(range(50))
+
+
+def test_train_log_has_first_step_and_stride(tiny_scene, tmp_path):
+    import json
+
+    trainer = Trainer(_config(tiny_scene, tmp_path, steps=12))
+    trainer.setup()
+    run_dir = trainer.train()
+    log = json.loads((run_dir / "train_log.json").read_text())
+    assert [r["step"] for r in log["history"]] == list(range(12)) and log["history_stride"] == 1
+    assert "psnr" in log["history"][0] and log["train_seconds"] > 0
