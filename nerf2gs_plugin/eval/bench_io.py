@@ -12,10 +12,16 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from nerf2gs_plugin.engine.config import atomic_write_text
+from nerf2gs_plugin.errors import UserError
 from nerf2gs_plugin.eval.bench_runs import RunSpec, run_key, train_or_reuse
 from nerf2gs_plugin.eval.machine import machine_info, machine_line
 
 EVAL_SPLITS = ("street", "bev_1", "bev_2")
+EVAL_VERSION = 2  # bump when evaluate_run gains a metric: cached bench evaluations are then redone
+
+
+class BenchFailed(UserError):
+    """Some runs of a bench failed; the results (failed rows included) are written already."""
 
 
 def fmt(value: Optional[float], digits: int = 2) -> str:
@@ -66,12 +72,31 @@ class Outcome:
     result: Optional[dict] = None
     error: Optional[str] = None
     run_dir: Optional[str] = None
+    key: Optional[str] = None  # the run's cache key (a later run's reference)
+
+
+def nonfinite_metrics(result: Optional[dict]) -> bool:
+    """True when some split's PSNR or SSIM is missing or not finite (a NaN model)."""
+    if result is None:
+        return True
+    values = [r.get(k) for r in result.get("results", {}).values() for k in ("psnr", "ssim")]
+    return any(not isinstance(v, (int, float)) or not math.isfinite(v) for v in values)
+
+
+def failure_reason(outcome: Outcome) -> Optional[str]:
+    """Why a bench run counts as failed (its error, or non-finite metrics); None when it did not."""
+    if outcome.error is not None:
+        return outcome.error
+    if nonfinite_metrics(outcome.result):
+        return "nan: non-finite PSNR/SSIM"
+    return None
 
 
 class BenchRunner:
-    """Train-or-reuse then evaluate (cached in ``bench_eval.json``, as the paper-table bench does);
-    a user error (NaN/inf divergence, bad data) or a runtime error becomes an :class:`Outcome`
-    with ``error`` set, and the bench goes on."""
+    """Train-or-reuse then evaluate (cached in ``bench_eval.json`` per :data:`EVAL_VERSION`); any
+    error in training or evaluation (NaN/inf divergence, bad data, a runtime error) becomes an
+    :class:`Outcome` with ``error`` set, and the bench goes on. Deterministic failures (user
+    errors, divergence) are remembered so a rerun does not retrain them; others are retried."""
 
     def __init__(self, runs_root: Path, log: Callable[[str], None] = print, device: str = "auto") -> None:
         from nerf2gs_plugin.engine.trainer import pick_device
@@ -100,7 +125,6 @@ class BenchRunner:
 
     def run(self, spec: RunSpec, data: Path, reference: Optional[tuple[Path, str]] = None, step_hook=None) -> Outcome:
         from nerf2gs_plugin.engine.reference import load_run
-        from nerf2gs_plugin.errors import UserError
         from nerf2gs_plugin.eval.evaluate import evaluate_run
 
         key = run_key(self.fingerprint(data), spec, reference[1] if reference else None)
@@ -108,27 +132,28 @@ class BenchRunner:
         if marker.is_file():  # a failed run fails again the same way: do not retrain it on every rerun
             error = json.loads(marker.read_text())["error"]
             self.log(f"[bench] {spec.label}: known failure ({error}); delete {marker} to retry")
-            return Outcome(spec.label, error=error)
+            return Outcome(spec.label, error=error, key=key)
         try:
             run_dir, _ = train_or_reuse(spec, data, self.runs_root, self.fingerprint(data), reference=reference,
                                         progress=False, log=self.log, step_hook=step_hook)
             eval_path = run_dir / "bench_eval.json"
-            if eval_path.is_file():
-                res = json.loads(eval_path.read_text())
-            else:
+            res = json.loads(eval_path.read_text()) if eval_path.is_file() else None
+            if res is None or res.get("eval_version") != EVAL_VERSION:  # evaluated by an older ns2gs-eval
                 run = load_run(run_dir, device=self.device)
                 names = [s for s in EVAL_SPLITS if s in run.pipeline.datamanager.eval_split_names()] or None
                 res = evaluate_run(run, names, render_dir=run_dir / "eval_renders", lpips_model=self.lpips())
+                res["eval_version"] = EVAL_VERSION
                 atomic_write_text(eval_path, json.dumps(res, indent=1))
-        except (UserError, RuntimeError, ValueError, FloatingPointError) as e:
+        except Exception as e:  # noqa: BLE001 - one failed run must not stop a bench of many
             msg = str(e).splitlines()[0][:300] if str(e) else type(e).__name__
             error = f"{type(e).__name__}: {msg}"
             self.log(f"[bench] {spec.label} FAILED: {error}")
-            marker.parent.mkdir(parents=True, exist_ok=True)
-            atomic_write_text(marker, json.dumps({"label": spec.label, "error": error}))
-            return Outcome(spec.label, error=error)
+            if isinstance(e, (UserError, FloatingPointError)):
+                marker.parent.mkdir(parents=True, exist_ok=True)
+                atomic_write_text(marker, json.dumps({"label": spec.label, "error": error}))
+            return Outcome(spec.label, error=error, key=key)
         res.update(label=spec.label, target=spec.method, run_dir=str(run_dir))
-        return Outcome(spec.label, result=res, run_dir=str(run_dir))
+        return Outcome(spec.label, result=res, run_dir=str(run_dir), key=key)
 
 
 def progress_log(progress, log_file: BenchLog) -> Callable[[str], None]:

@@ -9,14 +9,13 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from nerf2gs_plugin.engine.config import atomic_write_text
-from nerf2gs_plugin.eval.bench_io import fmt
+from nerf2gs_plugin.eval.bench_io import EVAL_VERSION, BenchFailed, fmt  # noqa: F401 (EVAL_VERSION: re-exported)
 from nerf2gs_plugin.eval.bench_runs import RunSpec, train_or_reuse
 from nerf2gs_plugin.eval.machine import machine_info, machine_line
 
 SPLITS = ("street", "bev_1", "bev_2")
 METRICS = (("psnr", "PSNR", True), ("ssim", "SSIM", True), ("lpips", "LPIPS", False), ("psnr_ground", "PSNR road", True))
 TARGETS = ("splatfacto", "scaffold-gs", "2dgs")
-EVAL_VERSION = 2  # bump when evaluate_run gains a metric: cached bench evaluations are then redone
 
 # Step budgets per scale ("default" = the method's registered config). A shorter run rescales the
 # method's schedules with it (see step_overrides), so it is a faithful short run, not a truncated one.
@@ -97,51 +96,57 @@ def ablation_plan(scale: str, enhancer: Optional[str] = None) -> list[RunSpec]:
 def run_plan(plan: list[RunSpec], data: Path, runs_root: Path, log: Optional[Callable[[str], None]] = None,
              name: str = "bench") -> dict[str, dict]:
     """Train (or reuse) and evaluate every run of a plan, in order; returns label -> eval result.
-    One progress bar over the whole plan (in training steps); log lines also go to
-    ``<runs_root>/logs/<name>.log``."""
-    from nerf2gs_plugin.engine.reference import load_run
-    from nerf2gs_plugin.engine.trainer import pick_device
+    A run that fails (training diverged, an error in training or evaluation, non-finite metrics)
+    is a row with ``failed: True`` and its ``error``, as in the stability bench, and the plan goes
+    on; runs that augment from a failed run fail too. One progress bar over the whole plan (in
+    training steps); log lines also go to ``<runs_root>/logs/<name>.log``."""
     from nerf2gs_plugin.errors import ConfigError
-    from nerf2gs_plugin.eval.bench_io import BenchLog, BenchProgress, BenchRunner, planned_steps, progress_log
-    from nerf2gs_plugin.eval.evaluate import evaluate_run
-    from nerf2gs_plugin.eval.metrics import LPIPS
+    from nerf2gs_plugin.eval.bench_io import BenchLog, BenchProgress, BenchRunner, failure_reason, planned_steps, progress_log
     from nerf2gs_plugin.progress import make_progress
 
-    device = pick_device("auto")
     done: dict[str, tuple[Path, str]] = {}
     results: dict[str, dict] = {}
-    lpips_model = LPIPS.load_default(device=device)
     with make_progress() as progress:
         bar = BenchProgress(progress, name, [planned_steps(s.method, s.overrides) for s in plan])
         log = log or progress_log(progress, BenchLog(runs_root, name))
-        dataset = BenchRunner(runs_root, log=log).fingerprint(data)
+        runner = BenchRunner(runs_root, log=log)
         for i, spec in enumerate(plan):
             bar.start(i, spec.label)
             log(f"[bench] ({i + 1}/{len(plan)}) {spec.label}")
-            ref = done.get(spec.augment_from) if spec.augment_from else None
-            if spec.augment_from and ref is None:
+            if spec.augment_from and spec.augment_from not in {s.label for s in plan[:i]}:
                 raise ConfigError(f"run '{spec.label}' augments from '{spec.augment_from}', which is not earlier in the plan")
-            run_dir, key = train_or_reuse(spec, data, runs_root, dataset, reference=ref, progress=False, log=log, step_hook=bar.hook)
-            done[spec.label] = (run_dir, key)
-            eval_path = run_dir / "bench_eval.json"
-            res = json.loads(eval_path.read_text()) if eval_path.is_file() else None
-            if res is None or res.get("eval_version") != EVAL_VERSION:  # evaluated by an older ns2gs-eval
-                run = load_run(run_dir, device=device)
-                names = [s for s in SPLITS if s in run.pipeline.datamanager.eval_split_names()] or None
-                res = evaluate_run(run, names, render_dir=run_dir / "eval_renders", lpips_model=lpips_model)
-                res["eval_version"] = EVAL_VERSION
-                atomic_write_text(eval_path, json.dumps(res, indent=1))
-            res["run_dir"] = str(run_dir)
-            res["label"] = spec.label
-            res["target"] = spec.method
-            results[spec.label] = res
+            if spec.augment_from and spec.augment_from not in done:
+                reason = f"reference run '{spec.augment_from}' failed"
+                log(f"[bench] {spec.label} FAILED: {reason}")
+                results[spec.label] = {"label": spec.label, "target": spec.method, "failed": True, "error": reason}
+            else:
+                out = runner.run(spec, data, reference=done.get(spec.augment_from) if spec.augment_from else None,
+                                 step_hook=bar.hook)
+                reason = failure_reason(out)
+                if reason is None:
+                    done[spec.label] = (Path(out.run_dir), out.key)
+                    results[spec.label] = out.result
+                else:
+                    if out.error is None:
+                        log(f"[bench] {spec.label} FAILED: {reason}")
+                    results[spec.label] = {**(out.result or {}), "label": spec.label, "target": spec.method,
+                                           "run_dir": out.run_dir, "failed": True, "error": reason}
             bar.finish(i)
     return results
 
 
+def failures(results: dict[str, dict]) -> dict[str, str]:
+    """label -> reason of every failed run."""
+    return {label: r.get("error") or "failed" for label, r in results.items() if r.get("failed")}
+
+
+def succeeded(results: dict[str, dict]) -> dict[str, dict]:
+    return {label: r for label, r in results.items() if not r.get("failed")}
+
+
 # ----------------------------------------------------------------------------- tables
 def _value(res: dict, metric: str, split: str) -> Optional[float]:
-    r = res["results"].get(split, {})
+    r = res.get("results", {}).get(split, {})
     return r.get(metric)
 
 
@@ -163,11 +168,15 @@ def _group_ranks(rows: list[dict], groups: dict[str, list[str]]) -> dict[tuple[s
 
 def markdown_table(results: dict[str, dict], groups: dict[str, list[str]], title: str) -> str:
     rows = list(results.values())
-    ranks = _group_ranks(rows, groups)
+    ranks = _group_ranks([r for r in rows if not r.get("failed")], groups)
     head = ["method"] + [f"{name} {s}" for _, name, _ in METRICS for s in SPLITS] + ["FPS", "primitives", "MB", "train s"]
     lines = [f"### {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         cells = [r["label"]]
+        if r.get("failed"):  # the reason in the first metric cell; no number is made up
+            reason = str(r.get("error") or "unknown error").replace("|", "/").replace("\n", " ")[:160]
+            lines.append("| " + " | ".join(cells + [f"failed: {reason}"] + ["-"] * (len(head) - 2)) + " |")
+            continue
         for metric, _, _ in METRICS:
             for s in SPLITS:
                 v = _value(r, metric, s)
@@ -183,6 +192,7 @@ def markdown_table(results: dict[str, dict], groups: dict[str, list[str]], title
 
 def rich_table(results: dict[str, dict], title: str):
     from rich.table import Table
+    from rich.text import Text
 
     table = Table(title=title)
     table.add_column("method")
@@ -193,6 +203,9 @@ def rich_table(results: dict[str, dict], title: str):
     table.add_column("FPS", justify="right")
     table.add_column("prims", justify="right")
     for r in results.values():
+        if r.get("failed"):
+            table.add_row(r["label"], Text(f"failed: {r.get('error')}", style="red"), *[""] * (2 * len(SPLITS) + 1))
+            continue
         ps = [_value(r, "psnr", s) for s in SPLITS]
         ss = [_value(r, "ssim", s) for s in SPLITS]
         table.add_row(r["label"], *[f"{v:.2f}" if v is not None else "n/a" for v in ps],
@@ -213,12 +226,16 @@ def speed_quality_chart(results: dict[str, dict], path: Path, title: str) -> Non
     """FPS and training time against BEV PSNR for this bench's runs, Pareto fronts marked."""
     from nerf2gs_plugin.eval.bench_speed_quality import chart, points_from_results
 
+    if not results:
+        return
     chart(points_from_results(results, Path(path).stem), path, title)
 
 
 def psnr_bar_chart(results: dict[str, dict], path: Path, title: str) -> None:
     from nerf2gs_plugin.eval.figures import _mpl, save_figure
 
+    if not results:  # every run failed: nothing to draw
+        return
     plt = _mpl()
     labels = list(results)
     fig, ax = plt.subplots(figsize=(max(6, 1.1 * len(labels)), 4.2))
@@ -265,10 +282,13 @@ def write_results(out_dir: Path, name: str, results: dict[str, dict], title: str
     out_dir.mkdir(parents=True, exist_ok=True)
     info = machine_info()
     md = markdown_table(results, target_groups(results), title)
+    failed = failures(results)
+    if failed:
+        md += f"\n\n**{len(failed)} of {len(results)} runs failed** (reasons in the table and in {name}.json)."
     md = f"# {title}\n\nMachine: {machine_line(info)}\n\n{md}\n\n{extra_md}"
-    atomic_write_text(out_dir / f"{name}.json", json.dumps({"machine": info, "results": results}, indent=1))
+    atomic_write_text(out_dir / f"{name}.json", json.dumps({"machine": info, "results": results, "failed": failed}, indent=1))
     atomic_write_text(out_dir / f"{name}.md", md)
-    psnr_bar_chart(results, out_dir / f"{name}.png", title)
+    psnr_bar_chart(succeeded(results), out_dir / f"{name}.png", title)
     return md
 
 
@@ -276,7 +296,7 @@ def ratios_md(results: dict[str, dict], pairs: list[tuple[str, str]]) -> str:
     """Augmented vs baseline, measured in the same run of the bench (absolute times drift)."""
     lines = ["| comparison | d PSNR street | d PSNR bev_1 | d PSNR bev_2 | FPS ratio |", "|---|---|---|---|---|"]
     for a, b in pairs:
-        if a in results and b in results:
+        if a in results and b in results and not results[a].get("failed") and not results[b].get("failed"):
             d = [(_value(results[a], "psnr", s) or 0) - (_value(results[b], "psnr", s) or 0) for s in SPLITS]
             fr = results[a]["fps"] / results[b]["fps"] if results[a].get("fps") and results[b].get("fps") else float("nan")
             lines.append(f"| {a} vs {b} | {d[0]:+.2f} | {d[1]:+.2f} | {d[2]:+.2f} | {fr:.2f}x |")
@@ -285,17 +305,24 @@ def ratios_md(results: dict[str, dict], pairs: list[tuple[str, str]]) -> str:
 
 def run_named_bench(name: str, plan: list[RunSpec], data: Path, runs_root: Path, out_dir: Path, title: str,
                     compare: list[tuple[str, str]], figure_labels: Optional[list[str]] = None) -> dict[str, dict]:
+    """Run the plan and write the table, charts and figures; failed runs are rows of the table,
+    and then :class:`BenchFailed` (exit status 2 from ``ns2gs-bench``) names them."""
     from rich.console import Console
 
     t0 = time.time()
     results = run_plan(plan, data, runs_root, name=name)
     md = write_results(out_dir, name, results, title, extra_md="Differences, same bench run:\n\n" + ratios_md(results, compare)
                        + f"\n\nBench wall time: {time.time() - t0:.0f} s (training reused where cached).\n")
-    speed_quality_chart(results, Path(out_dir) / f"{name}_speed_quality.png", title)
+    ok = succeeded(results)
+    speed_quality_chart(ok, Path(out_dir) / f"{name}_speed_quality.png", title)
     if figure_labels:
-        renders_figure(results, figure_labels, "bev_1", Path(out_dir) / f"{name}_renders_bev_1.png")
-        renders_figure(results, figure_labels, "street", Path(out_dir) / f"{name}_renders_street.png")
+        renders_figure(ok, figure_labels, "bev_1", Path(out_dir) / f"{name}_renders_bev_1.png")
+        renders_figure(ok, figure_labels, "street", Path(out_dir) / f"{name}_renders_street.png")
     Console().print(rich_table(results, title))
     print(ratios_md(results, compare))
     print(f"results: {out_dir}/{name}.md")
+    failed = failures(results)
+    if failed:
+        listed = "; ".join(f"'{label}' ({reason})" for label, reason in failed.items())
+        raise BenchFailed(f"{len(failed)} of {len(results)} runs failed: {listed}; results written to {out_dir}/{name}.md")
     return results

@@ -30,9 +30,12 @@ def pareto_front(xs: Sequence[float], ys: Sequence[float], x_higher: bool = True
 
 
 def points_from_results(results: dict[str, dict], source: str) -> list[dict]:
-    """One point per result of a table bench's JSON (``results`` maps label -> eval result)."""
+    """One point per result of a table bench's JSON (``results`` maps label -> eval result);
+    failed runs have no measurement and no point."""
     pts = []
     for label, r in results.items():
+        if r.get("failed"):
+            continue
         bev = mean_psnr(r, ("bev_1", "bev_2"))
         pts.append({
             "label": r.get("label", label), "source": source, "method": r.get("target") or r.get("method_name"),

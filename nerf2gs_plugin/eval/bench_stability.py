@@ -22,8 +22,8 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from nerf2gs_plugin.engine.config import atomic_write_text
-from nerf2gs_plugin.eval.bench_io import (BenchLog, BenchProgress, BenchRunner, fmt, mean_psnr, planned_steps, progress_log,
-                                         write_bench_files)
+from nerf2gs_plugin.eval.bench_io import (BenchLog, BenchProgress, BenchRunner, fmt, mean_psnr, nonfinite_metrics, planned_steps,
+                                         progress_log, write_bench_files)
 from nerf2gs_plugin.eval.bench_runs import RunSpec
 from nerf2gs_plugin.eval.perturb import Perturbation, perturbed_copy
 
@@ -78,7 +78,9 @@ def stability_plan(scale: str, methods=METHODS, seeds: Optional[tuple[int, ...]]
 
 
 def classify(result: Optional[dict], error: Optional[str], initial_psnr: Optional[float], final_psnr: Optional[float]) -> str:
-    """The outcome of one case (see the module docstring)."""
+    """The outcome of one case (see the module docstring). An error or non-finite metrics fail a
+    case exactly as they fail a paper-table run (:func:`~nerf2gs_plugin.eval.bench_io.failure_reason`);
+    collapse is this bench's extra check."""
     if error is not None:
         if error.startswith("unsupported"):
             return "unsupported"
@@ -87,8 +89,7 @@ def classify(result: Optional[dict], error: Optional[str], initial_psnr: Optiona
         return "error"
     if result is None:
         return "error"
-    values = [r.get(k) for r in result.get("results", {}).values() for k in ("psnr", "ssim")]
-    if final_psnr is None or any(v is None or not math.isfinite(v) for v in values) or not math.isfinite(final_psnr):
+    if final_psnr is None or nonfinite_metrics(result) or not math.isfinite(final_psnr):  # as the table benches
         return "nan"
     if initial_psnr is not None and math.isfinite(initial_psnr) and final_psnr < initial_psnr:
         return "collapse"
