@@ -1,9 +1,11 @@
 """The 3DGS rasterization entry: :func:`rasterize_gaussians` (gsplat-style), three backends behind it.
 
-Pipeline (``cpu`` and ``torch`` backends): EWA projection and SH colours in torch (autograd) ->
-tile binning (vectorised torch, no gradients) -> per-tile front-to-back alpha compositing, either
-by the C++/OpenMP kernel (``csrc/rasterize_gaussians.cpp``, forward and backward wrapped in an
-autograd Function) or by the pure-torch reference (:mod:`.composite_torch`). On CUDA with gsplat
+Pipeline of the ``torch`` backend (the reference): EWA projection and SH colours in torch
+(autograd) -> tile binning (vectorised torch, no gradients) -> per-tile front-to-back alpha
+compositing in torch (:mod:`.composite_torch`). The ``cpu`` backend runs the same three stages in
+the C++/OpenMP extension (``csrc/rasterize_gaussians.cpp``): projection fused with SH evaluation
+and compositing each with a C++ backward behind an autograd Function, binning without gradients
+(projection falls back to torch autograd when the cameras need gradients or SH degree > 3). On CUDA with gsplat
 installed the whole call goes to ``gsplat.rasterization`` and its outputs are mapped to the same
 shapes and meta keys.
 """
@@ -24,7 +26,7 @@ from nerf2gs_plugin.rendering.tiles import bin_gaussians
 
 EXT_NAME = "nerf2gs_rasterize_gaussians"
 EXT_SOURCES = ["rasterize_gaussians.cpp"]
-EXT_HEADERS = ["gaussians_core.h", "binning_core.h", "projection_core.h", "sh_core.h"]
+EXT_HEADERS = ["gaussians_core.h", "binning_core.h", "projection_core.h", "projection_bwd.h", "sh_core.h"]
 RENDER_MODES = ("RGB", "D", "ED", "RGB+D", "RGB+ED")
 RASTERIZE_MODES = ("classic", "antialiased")
 
@@ -32,6 +34,51 @@ RASTERIZE_MODES = ("classic", "antialiased")
 def load_kernel() -> Optional[Any]:
     """The compiled compositing kernel (built on first use), or None when it cannot be built."""
     return load_extension(EXT_NAME, EXT_SOURCES, EXT_HEADERS)
+
+
+class _ProjectCPU(torch.autograd.Function):
+    """Projection + SH colours by the extension (forward and backward): means ``[N,3]``, quats ``[N,4]``,
+    scales ``[N,3]``, SH ``[N,K,3]`` (or empty: no colours), cameras -> means2d, conics, depths, radii,
+    compensations, cov2d, colours (radii and cov2d carry no gradient; cov2d only feeds binning)."""
+
+    @staticmethod
+    def forward(ctx, means, quats, scales, sh, viewmats, Ks, width, height, near_plane, far_plane, degree):  # type: ignore[override]
+        ctx.set_materialize_grads(False)
+        ctx.args = (int(width), int(height), float(near_plane), float(far_plane), int(degree))
+        ctx.save_for_backward(means, quats, scales, sh, viewmats, Ks)
+        out = load_kernel().project_forward(means, quats, scales, sh, viewmats, Ks, *ctx.args)
+        ctx.mark_non_differentiable(out[3], out[5])
+        return tuple(out)
+
+    @staticmethod
+    def backward(ctx, v_m2, v_con, v_dep, _v_radii, v_comp, _v_cov, v_col):  # type: ignore[override]
+        means, quats, scales, sh, viewmats, Ks = ctx.saved_tensors
+        c, n = viewmats.shape[0], means.shape[0]
+        z = means.new_zeros
+        v_m2 = v_m2.contiguous() if v_m2 is not None else z(c, n, 2)
+        v_con = v_con.contiguous() if v_con is not None else z(c, n, 3)
+        v_dep = v_dep.contiguous() if v_dep is not None else z(c, n)
+        v_comp = v_comp.contiguous() if v_comp is not None else z(0)
+        v_col = v_col.contiguous() if v_col is not None and sh.numel() > 0 else z(0)
+        v_means, v_quats, v_scales, v_sh = load_kernel().project_backward(
+            means, quats, scales, sh, viewmats, Ks, *ctx.args, v_m2, v_con, v_dep, v_comp, v_col)
+        return v_means, v_quats, v_scales, (v_sh if sh.numel() > 0 else None), None, None, None, None, None, None, None
+
+
+def project_cpu(
+    means: Tensor, quats: Tensor, scales: Tensor, viewmats: Tensor, Ks: Tensor, width: int, height: int,
+    near_plane: float = 0.01, far_plane: float = 1e10, sh: Optional[Tensor] = None, sh_degree: int = 0,
+) -> tuple[Projected, Optional[Tensor]]:
+    """:func:`project_gaussians` (+ :func:`eval_sh` of ``sh [N,K,3]`` at ``sh_degree`` <= 3 when given)
+    by the extension, differentiable w.r.t. means, quats, scales and SH (not the cameras) ->
+    (projection, colours ``[C,N,3]`` or None)."""
+    dt = means.dtype
+    use_sh = sh is not None
+    sh_t = sh.to(dt).contiguous() if use_sh else means.new_zeros(0)
+    m2, con, dep, radii, comp, cov, cols = _ProjectCPU.apply(
+        means.contiguous(), quats.to(dt).contiguous(), scales.to(dt).contiguous(), sh_t,
+        viewmats.to(dt).contiguous(), Ks.to(dt).contiguous(), width, height, near_plane, far_plane, sh_degree if use_sh else 0)
+    return Projected(means2d=m2, conics=con, depths=dep, radii=radii, compensations=comp, cov2d=cov), (cols if use_sh else None)
 
 
 class _SHCPU(torch.autograd.Function):
@@ -141,8 +188,8 @@ def rasterize_gaussians(
         return rasterize_gsplat(means, quats, scales, opacities, colors, viewmats, Ks, width, height, near_plane,
                                 far_plane, sh_degree, backgrounds, render_mode, rasterize_mode, tile_size, return_median)
 
-    needs_grad = torch.is_grad_enabled() and any(t.requires_grad for t in (means, quats, scales, opacities, colors, viewmats, Ks))
-    if chosen == "cpu" and not needs_grad and (sh_degree or 0) <= 3:  # one C++ pass instead of ~100 torch ops
+    cams_grad = torch.is_grad_enabled() and (viewmats.requires_grad or Ks.requires_grad)
+    if chosen == "cpu" and not cams_grad and (sh_degree or 0) <= 3:  # one C++ pass instead of ~100 torch ops
         proj, opac, feats = _project_fused(means, quats, scales, opacities, colors, viewmats, Ks, width, height, near_plane,
                                            far_plane, sh_degree, rasterize_mode, render_mode)
     else:
@@ -189,22 +236,20 @@ def _project_fused(
     width: int, height: int, near_plane: float, far_plane: float, sh_degree: Optional[int], rasterize_mode: str,
     render_mode: str,
 ) -> tuple[Projected, Tensor, Tensor]:
-    """The no-gradient path of the cpu backend: projection (+ SH colours) by the C++ extension,
+    """The cpu backend's projection (+ SH colours) by the C++ extension with its C++ backward,
     numerically the same as :func:`project_gaussians` + :func:`eval_sh`."""
     n_cams, n = viewmats.shape[0], means.shape[0]
     use_sh = sh_degree is not None and render_mode not in ("D", "ED")
     if use_sh and (colors.dim() != 3 or colors.shape[0] != n or colors.shape[-1] != 3):
         raise ValueError(f"SH colours must be [N, K, 3], got {tuple(colors.shape)}")
-    dt = means.dtype
-    sh = colors.to(dt).contiguous() if use_sh else means.new_zeros(0)
-    m2, con, dep, radii, comp, cov, cols = load_kernel().project_forward(
-        means.contiguous(), quats.to(dt).contiguous(), scales.to(dt).contiguous(), sh,
-        viewmats.to(dt).contiguous(), Ks.to(dt).contiguous(), int(width), int(height), float(near_plane),
-        float(far_plane), int(sh_degree or 0),
-    )
-    opac = opacities[None].expand(n_cams, n) * comp if rasterize_mode == "antialiased" else opacities[None].expand(n_cams, n)
+    if use_sh and colors.shape[1] < (sh_degree + 1) ** 2:
+        raise ValueError(f"SH degree {sh_degree} needs {(sh_degree + 1) ** 2} coefficients, got {colors.shape[1]}")
+    proj, cols = project_cpu(means, quats, scales, viewmats, Ks, width, height, near_plane, far_plane,
+                             sh=colors if use_sh else None, sh_degree=int(sh_degree or 0))
+    opac = opacities[None].expand(n_cams, n)
+    if rasterize_mode == "antialiased":
+        opac = opac * proj.compensations
     feats = cols if use_sh else _features(colors, None if render_mode in ("D", "ED") else sh_degree, means, viewmats, n_cams, render_mode)
-    proj = Projected(means2d=m2, conics=con, depths=dep, radii=radii, compensations=comp, cov2d=cov)
     return proj, opac, feats
 
 

@@ -1,14 +1,19 @@
 // Tile binning on the CPU (what tiles.py does in torch, for the cpu backend): each visible
 // (camera, Gaussian) pair is listed in every tile its alpha >= 1/255 ellipse (capped at 3 sigma)
-// can reach, front to back. Pairs are visited in depth order (a stable sort) and appended to
-// their tiles' buckets, so each tile's list comes out sorted without a per-tile sort.
+// can reach, front to back. Pairs are visited in depth order and appended to their tiles'
+// buckets, so each tile's list comes out sorted without a per-tile sort. The depth order is an LSD
+// radix sort on the depths' bits (stable, like tiles.py's torch.argsort(stable=True); digits that
+// all keys share are skipped), a few linear passes instead of a comparison sort.
 #pragma once
 #include <omp.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <numeric>
+#include <type_traits>
 #include <vector>
 
 namespace gs3d {
@@ -27,6 +32,41 @@ inline Rect tile_rect(T mx, T my, T cxx, T cyy, T op, int32_t radius, int ts, in
   auto clampi = [](T v, int hi) { return static_cast<int32_t>(std::min(std::max(v, T(0)), T(hi))); };
   return {clampi(std::floor((mx - ex) / ts), tx_n), clampi(std::floor((mx + ex) / ts) + T(1), tx_n),
           clampi(std::floor((my - ey) / ts), ty_n), clampi(std::floor((my + ey) / ts) + T(1), ty_n)};
+}
+
+// Order-preserving unsigned key of a float/double (negative values flipped entirely, positive
+// ones get the sign bit set), so unsigned comparison of keys is numeric comparison of values.
+template <typename T>
+inline auto sort_key(T v) {
+  using U = std::conditional_t<sizeof(T) == 8, uint64_t, uint32_t>;
+  U u;
+  std::memcpy(&u, &v, sizeof(T));
+  constexpr U sign = U(1) << (8 * sizeof(T) - 1);
+  return (u & sign) ? U(~u) : U(u | sign);
+}
+
+// Stable LSD radix sort (8-bit digits) of `idx` by `depth[idx]`.
+template <typename T>
+void radix_sort_by_depth(std::vector<int64_t>& idx, const T* depth) {
+  using U = decltype(sort_key(T(0)));
+  const size_t n = idx.size();
+  if (n < 2) return;
+  std::vector<U> key(n), key2(n);
+  std::vector<int64_t> idx2(n);
+  for (size_t i = 0; i < n; ++i) key[i] = sort_key(depth[idx[i]]);
+  for (unsigned shift = 0; shift < 8 * sizeof(U); shift += 8) {
+    std::array<size_t, 257> cnt{};
+    for (size_t i = 0; i < n; ++i) ++cnt[((key[i] >> shift) & 0xFF) + 1];
+    if (*std::max_element(cnt.begin() + 1, cnt.end()) == n) continue;  // every key has this digit
+    for (int b = 0; b < 256; ++b) cnt[b + 1] += cnt[b];
+    for (size_t i = 0; i < n; ++i) {
+      const size_t dst = cnt[(key[i] >> shift) & 0xFF]++;
+      key2[dst] = key[i];
+      idx2[dst] = idx[i];
+    }
+    key.swap(key2);
+    idx.swap(idx2);
+  }
 }
 
 // means2d [C*N, 2], cov2d [C*N, 4] (xx, xy, yx, yy), opacities, depths [C*N], radii [C*N];
@@ -52,7 +92,7 @@ std::vector<int64_t> bin_pairs(const T* m2, const T* cov, const T* opa, const T*
     for (int y = r.y0; y < r.y1; ++y)
       for (int x = r.x0; x < r.x1; ++x) ++counts[base + static_cast<int64_t>(y) * tx_n + x + 1];
   }
-  std::stable_sort(order.begin(), order.end(), [depth](int64_t a, int64_t b) { return depth[a] < depth[b]; });
+  radix_sort_by_depth<T>(order, depth);
   for (int64_t t = 0; t < n_tiles; ++t) counts[t + 1] += counts[t];
   offsets_out.assign(counts.begin(), counts.end());
   std::vector<int64_t> ids(counts[n_tiles]);

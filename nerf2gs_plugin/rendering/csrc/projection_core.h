@@ -1,6 +1,6 @@
-// Forward-only projection + SH colours of 3D Gaussians for renders without gradients (viewer,
-// eval): the same formulas as projection.py / sh.py, fused per (camera, Gaussian) pair so that a
-// frame does not pay for ~100 small torch ops. Training renders keep the torch (autograd) path.
+// Projection + SH colours of 3D Gaussians, forward and backward: the same formulas as
+// projection.py / sh.py, fused per (camera, Gaussian) pair so that a frame does not pay for ~100
+// small torch ops (and their autograd graph). The backward is in projection_bwd.h.
 #pragma once
 #include <omp.h>
 

@@ -9,6 +9,7 @@
 
 #include "binning_core.h"
 #include "gaussians_core.h"
+#include "projection_bwd.h"
 #include "projection_core.h"
 #include "sh_core.h"
 
@@ -137,6 +138,35 @@ std::vector<torch::Tensor> project_forward(torch::Tensor means, torch::Tensor qu
   return {means2d, conics, depths, radii, comp, cov2d, colors};
 }
 
+std::vector<torch::Tensor> project_backward(torch::Tensor means, torch::Tensor quats, torch::Tensor scales,
+                                            torch::Tensor sh, torch::Tensor viewmats, torch::Tensor Ks, int64_t width,
+                                            int64_t height, double near_plane, double far_plane, int64_t sh_degree,
+                                            torch::Tensor v_means2d, torch::Tensor v_conics, torch::Tensor v_depths,
+                                            torch::Tensor v_comp, torch::Tensor v_colors) {
+  // v_comp / v_colors may be empty (no gradient reaches them); returns v_means, v_quats, v_scales, v_sh
+  for (auto* x : {&means, &quats, &scales, &sh, &viewmats, &Ks, &v_means2d, &v_conics, &v_depths, &v_comp, &v_colors})
+    check(*x, "input");
+  const int64_t C = viewmats.size(0), N = means.size(0);
+  const int64_t K = sh.numel() > 0 ? sh.size(1) : 0;
+  TORCH_CHECK(sh_degree >= 0 && sh_degree <= 3 && (K == 0 || K >= (sh_degree + 1) * (sh_degree + 1)), "bad SH degree");
+  TORCH_CHECK(v_means2d.numel() == C * N * 2 && v_conics.numel() == C * N * 3 && v_depths.numel() == C * N,
+              "projection gradients have the wrong size");
+  auto v_means = torch::empty_like(means), v_quats = torch::empty_like(quats), v_scales = torch::empty_like(scales);
+  auto v_sh = torch::empty_like(sh);
+  const gs3d::ProjectArgs a{C, N, width, height, K, static_cast<int>(sh_degree), near_plane, far_plane, 0.3};
+  const int nt = std::max(1, at::get_num_threads());
+  AT_DISPATCH_FLOATING_TYPES(means.scalar_type(), "project_backward", [&] {
+    gs3d::project_backward<scalar_t>(
+        means.data_ptr<scalar_t>(), quats.data_ptr<scalar_t>(), scales.data_ptr<scalar_t>(),
+        K > 0 ? sh.data_ptr<scalar_t>() : nullptr, viewmats.data_ptr<scalar_t>(), Ks.data_ptr<scalar_t>(), a, nt,
+        v_means2d.data_ptr<scalar_t>(), v_conics.data_ptr<scalar_t>(), v_depths.data_ptr<scalar_t>(),
+        v_comp.numel() > 0 ? v_comp.data_ptr<scalar_t>() : nullptr,
+        (K > 0 && v_colors.numel() > 0) ? v_colors.data_ptr<scalar_t>() : nullptr, v_means.data_ptr<scalar_t>(),
+        v_quats.data_ptr<scalar_t>(), v_scales.data_ptr<scalar_t>(), K > 0 ? v_sh.data_ptr<scalar_t>() : nullptr);
+  });
+  return {v_means, v_quats, v_scales, v_sh};
+}
+
 torch::Tensor sh_forward(int64_t degree, torch::Tensor dirs, torch::Tensor coeffs) {
   // dirs [C, N, 3] (mean - camera centre), coeffs [N, K, 3] -> colours [C, N, 3]
   check(dirs, "dirs");
@@ -167,6 +197,7 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("backward", &rasterize_backward, "3DGS tile compositing backward (CPU)");
   m.def("sh_forward", &sh_forward, "SH colours, 3DGS convention (CPU)");
   m.def("sh_backward", &sh_backward, "SH colours backward (CPU)");
-  m.def("project_forward", &project_forward, "projection + SH colours without gradients (CPU)");
+  m.def("project_forward", &project_forward, "projection + SH colours (CPU)");
+  m.def("project_backward", &project_backward, "backward of project_forward (CPU)");
   m.def("bin_gaussians", &bin_gaussians, "per-tile depth-sorted lists of (camera, Gaussian) pairs (CPU)");
 }

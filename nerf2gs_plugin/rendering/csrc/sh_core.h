@@ -8,6 +8,8 @@
 #include <cmath>
 #include <cstdint>
 
+#include "projection_core.h"  // sh_basis
+
 namespace gs3d {
 
 // d(basis)/d(x, y, z) contracted with G_k = dL/dY_k (unit direction x, y, z).
