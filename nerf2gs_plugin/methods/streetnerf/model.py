@@ -30,6 +30,11 @@ Losses (sum is minimised; ``M_*`` are the masks, ``W`` the per-image weight):
     line-of-sight loss (Urban Radiance Fields, Rematas et al. 2022) that bounds the relative depth
     error and pays full price for missing mass: the road becomes one opaque flat sheet, which is
     what removes the holes seen from above. Starts at ``ground_start_step``.
+  * sparse-point depth (``point_depth``, ours, not in the paper; ``point_depth.py``): the same bounded
+    line-of-sight loss on rays cast from training cameras through the dataset's sparse points that
+    they see, ``point_depth_weight * mean [ sum_i w_i min(|t_i - t*| / t*, 1) + (1 - A) ]`` (0.05, DS-NeRF's
+    SfM depth in URF's form), ``point_rays_per_batch`` rays a step. It builds the facades that street
+    cameras see only at grazing angles, which is what bird's-eye views look at.
   * appearance (``appearance``): per-image affine 3x4 colour transform applied to the composite
     (``fields/appearance.py``), mean transform at novel views; ``appearance_reg_weight`` (1e-3)
     pulls the transforms towards the identity so the mean stays a neutral exposure.
@@ -56,6 +61,7 @@ from nerf2gs_plugin.fields.appearance import AppearanceTransforms
 from nerf2gs_plugin.fields.hash_encoding import HashGridSpec
 from nerf2gs_plugin.fields.sky import SkyModel
 from nerf2gs_plugin.fields.street_field import ProposalField, StreetField
+from nerf2gs_plugin.methods.streetnerf.point_depth import line_of_sight_loss, visible_point_rays
 from nerf2gs_plugin.methods.streetnerf.sampling import (
     distortion_loss,
     interlevel_loss,
@@ -79,6 +85,9 @@ class StreetNeRFModelConfig(ModelConfig):
     """Exclude transient-mask pixels from the colour loss."""
     appearance: bool = True
     """Per-image affine colour transform."""
+    point_depth: bool = True
+    """Depth supervision from the dataset's sparse points (ours, see the module docstring); off
+    with a warning when the data has no points."""
     # field
     num_levels: int = 12
     features_per_level: int = 2
@@ -115,6 +124,8 @@ class StreetNeRFModelConfig(ModelConfig):
     ground_start_step: int = 200
     ground_ema: float = 0.95
     appearance_reg_weight: float = 1e-3
+    point_depth_weight: float = 0.05
+    point_rays_per_batch: int = 256
     # rendering
     eval_chunk: int = 4096
     background: tuple[float, float, float] = (0.5, 0.5, 0.5)
@@ -158,7 +169,27 @@ class StreetNeRFModel(Model):
                 self.ground_height.fill_(h)
                 self.ground_known.fill_(True)
                 self.ground_from_points = True
+        self._setup_point_rays(train_data)
         self.step = 0
+
+    def _setup_point_rays(self, train_data: DataparserOutputs) -> None:
+        """Rays through every (training camera, visible sparse point) pair, kept as non-persistent
+        buffers: they are rebuilt from the data, never stored in checkpoints."""
+        self.use_point_depth = False
+        if not self.config.point_depth:
+            return
+        if train_data.points3D_xyz is None or len(train_data.points3D_xyz) == 0:
+            warnings.warn("StreetNeRF: the dataset has no sparse points; training without the point depth loss", stacklevel=3)
+            return
+        pr = visible_point_rays(train_data.cameras, train_data.points3D_xyz)
+        if len(pr) == 0:
+            warnings.warn("StreetNeRF: no sparse point is visible in a training view; training without the point depth loss", stacklevel=3)
+            return
+        rays = train_data.cameras.generate_rays(pr.camera_indices, pr.coords)
+        for name, value in (("pt_origins", rays.origins), ("pt_directions", rays.directions), ("pt_radius", rays.pixel_radius),
+                            ("pt_cameras", pr.camera_indices), ("pt_t_star", pr.t_star)):
+            self.register_buffer(name, value.clone(), persistent=False)
+        self.use_point_depth = True
 
     @staticmethod
     def _mask_available(kind: str, kinds: set[str], term: str) -> bool:
@@ -275,9 +306,20 @@ class StreetNeRFModel(Model):
             g = self._ground_loss(outputs, batch["ground_mask"].reshape(-1) & (static.reshape(-1) > 0))
             if g is not None:
                 losses["ground"] = c.ground_weight * g
+        if self.use_point_depth and self.training:
+            losses["point_depth"] = c.point_depth_weight * self._point_depth_loss()
         if self.appearance is not None:
             losses["appearance_reg"] = c.appearance_reg_weight * self.appearance.deviation()
         return losses
+
+    def _point_depth_loss(self) -> Tensor:
+        """Line-of-sight loss on a random batch of the sparse-point rays."""
+        n = self.pt_t_star.shape[0]
+        idx = torch.randint(0, n, (min(self.config.point_rays_per_batch, n),), device=self.pt_t_star.device)
+        cams = self.pt_cameras[idx]
+        rays = RayBundle(self.pt_origins[idx], self.pt_directions[idx], self.pt_radius[idx], cams)
+        out = self._render_rays(rays, cams)
+        return line_of_sight_loss(out["weights"], out["t_mid"], out["accumulation"], self.pt_t_star[idx, None]).mean()
 
     def _ground_loss(self, outputs: dict[str, Any], ground: Tensor) -> Optional[Tensor]:
         """Line-of-sight loss of ground rays towards the ground plane (see the module docstring)."""
@@ -297,10 +339,7 @@ class StreetNeRFModel(Model):
         valid = (cos < -1e-3) & (t_star > self.config.near_plane) & (t_star < self.config.far_plane)
         if not bool(valid.any()):
             return None
-        t_star = t_star[valid, None]
-        rel = ((t_mid[valid] - t_star).abs() / t_star).clamp(max=1.0)
-        per_ray = (w[valid] * rel).sum(-1) + (1.0 - acc[valid, 0])
-        return per_ray.mean()
+        return line_of_sight_loss(w[valid], t_mid[valid], acc[valid], t_star[valid, None]).mean()
 
     @torch.no_grad()
     def _update_ground_height(self, o: Tensor, d: Tensor, w: Tensor, t_mid: Tensor, acc: Tensor) -> None:
