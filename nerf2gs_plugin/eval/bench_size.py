@@ -1,8 +1,8 @@
 """model-size: quality against primitives for each splatting method, sweeping its densification
 budget and threshold, and the smallest model within 0.5 dB of the best one.
 
-Splatfacto and 2DGS sweep ``max_gaussians`` (the soft budget of the densify/prune strategy) and
-``densify_grad_thresh``; Scaffold-GS sweeps ``max_anchors`` and ``grow_threshold``. Quality is the
+Splatfacto and 2DGS sweep ``strategy.max_gaussians`` (the soft budget of the densify/prune
+strategy) and ``strategy.densify_grad_thresh``; Scaffold-GS sweeps ``max_anchors`` and ``grow_threshold``. Quality is the
 mean PSNR over the eval splits the dataset has (street, bev_1, bev_2). With ``augment`` every run
 trains on StreetNeRF's views (the StreetNeRF run is shared with the paper table when the scale
 matches).
@@ -18,16 +18,30 @@ from nerf2gs_plugin.eval.bench_io import (EVAL_SPLITS, BenchLog, BenchProgress, 
 from nerf2gs_plugin.eval.bench_runs import RunSpec
 
 TOLERANCE_DB = 0.5
-# method -> [(model config field, values at quick scale, values at default scale)]; the default
-# value of each field is part of every sweep, the other fields stay at their defaults
+# method -> [(model config field (dotted into a nested config), values at quick scale, values at
+# default scale)]; the default value of each field is part of every sweep, the others stay default
 SWEEPS: dict[str, list[tuple[str, tuple, tuple]]] = {
-    "splatfacto": [("max_gaussians", (2000, 8000, 30000), (5000, 15000, 30000, 60000, 120000)),
-                   ("densify_grad_thresh", (0.0016,), (0.0004, 0.0016))],
-    "2dgs": [("max_gaussians", (2000, 8000, 30000), (5000, 15000, 30000, 60000)),
-             ("densify_grad_thresh", (0.0016,), (0.0004, 0.0016))],
+    "splatfacto": [("strategy.max_gaussians", (2000, 8000, 30000), (5000, 15000, 30000, 60000, 120000)),
+                   ("strategy.densify_grad_thresh", (0.0016,), (0.0004, 0.0016))],
+    "2dgs": [("strategy.max_gaussians", (2000, 8000, 30000), (5000, 15000, 30000, 60000)),
+             ("strategy.densify_grad_thresh", (0.0016,), (0.0004, 0.0016))],
     "scaffold-gs": [("max_anchors", (1000, 5000, 20000), (2000, 5000, 10000, 20000)),
                     ("grow_threshold", (0.0008,), (0.0001, 0.0008))],
 }
+
+
+def _get(cfg: Any, dotted: str) -> Any:
+    for part in dotted.split("."):
+        cfg = getattr(cfg, part)
+    return cfg
+
+
+def _nested(dotted: str, value: Any) -> dict:
+    """``"a.b"``, 1 -> ``{"a": {"b": 1}}`` (an override of a nested config field)."""
+    out: Any = value
+    for part in reversed(dotted.split(".")):
+        out = {part: out}
+    return out
 
 
 def size_plan(scale: str, methods=tuple(SWEEPS), augment: bool = False) -> list[RunSpec]:
@@ -52,9 +66,10 @@ def size_plan(scale: str, methods=tuple(SWEEPS), augment: bool = False) -> list[
                     continue
                 seen.add((fld, value))
                 # the method's own value adds no override: that run is the paper-table baseline (same key)
-                extra = {} if getattr(model_defaults, fld) == value else {"pipeline": {"model": {fld: value}}}
+                extra = {} if _get(model_defaults, fld) == value else {"pipeline": {"model": _nested(fld, value)}}
                 ov = _overrides(scale, m, extra)
-                plan.append(RunSpec(f"{m} {fld}={value:g}", m, ov, augment_from="StreetNeRF" if augment else None))
+                name = fld.rsplit(".", 1)[-1]
+                plan.append(RunSpec(f"{m} {name}={value:g}", m, ov, augment_from="StreetNeRF" if augment else None))
     return plan
 
 

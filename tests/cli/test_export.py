@@ -28,7 +28,8 @@ def run_dir(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("export")
     data = write_dataset(root / "data")
     base = splatfacto_method.config
-    model = dataclasses.replace(base.pipeline.model, warmup_length=5, refine_every=5, stop_screen_size_at=0)
+    strategy = dataclasses.replace(base.pipeline.model.strategy, warmup_length=5, refine_every=5, stop_screen_size_at=0)
+    model = dataclasses.replace(base.pipeline.model, strategy=strategy)
     cfg = dataclasses.replace(base, data=data, output_dir=root / "out", max_num_iterations=12, steps_per_save=100,
                               steps_per_eval_image=0, progress=False, optimizers=gaussian_optimizers(12),
                               pipeline=dataclasses.replace(base.pipeline, model=model))

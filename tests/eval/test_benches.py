@@ -174,7 +174,7 @@ def test_quick_scale_rescales_schedules_and_merges_extras(tmp_path):
     sf = apply_plain(get_method("splatfacto").config, _overrides("quick", "splatfacto"))
     default = get_method("splatfacto").config
     assert sf.max_num_iterations == 800 and sf.optimizers["means"].max_steps == 800
-    assert sf.pipeline.model.stop_split_at < sf.max_num_iterations < default.pipeline.model.stop_split_at
+    assert sf.pipeline.model.strategy.stop_split_at < sf.max_num_iterations < default.pipeline.model.strategy.stop_split_at
     nerf = next(s for s in ablation_plan("quick") if s.label == "StreetNeRF w/o sky")
     cfg = apply_plain(get_method("streetnerf").config, nerf.overrides)
     assert cfg.pipeline.model.sky is False and cfg.max_num_iterations == 1500 and cfg.optimizers["fields"].max_steps == 1500

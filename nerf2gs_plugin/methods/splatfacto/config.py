@@ -7,17 +7,18 @@ soft budget of 60k Gaussians.
 Paper scale (nerfstudio's splatfacto defaults, for a GPU)::
 
     ns2gs-train splatfacto --data DATA --max-num-iterations 30000 \\
-      --pipeline.model.sh-degree-interval 1000 --pipeline.model.warmup-length 500 \\
-      --pipeline.model.reset-alpha-every 3000 --pipeline.model.stop-split-at 15000 \\
-      --pipeline.model.stop-screen-size-at 4000 --pipeline.model.num-random 50000 \\
-      --pipeline.model.max-gaussians 0 --pipeline.model.max-pause-after-reset 1000 \\
+      --pipeline.model.sh-degree-interval 1000 --pipeline.model.num-random 50000 \\
+      --pipeline.model.strategy.warmup-length 500 --pipeline.model.strategy.reset-alpha-every 3000 \\
+      --pipeline.model.strategy.stop-split-at 15000 --pipeline.model.strategy.stop-screen-size-at 4000 \\
+      --pipeline.model.strategy.max-gaussians 0 --pipeline.model.strategy.max-pause-after-reset 1000 \\
       --optimizers.means.max-steps 30000 --optimizers.means.lr-final 1.6e-6 --steps-per-save 2000
 
 (:func:`paper_scale` applies the same changes in code; ``splatfacto_paper_method`` is that config.)
 :func:`with_steps` rescales every step-valued schedule (and the learning-rate decay) to another
 step budget, e.g. a quick 800-step run; overriding ``--max-num-iterations`` alone keeps the
 3000-step schedules.
-MCMC with a hard budget: ``--pipeline.model.strategy mcmc --pipeline.model.cap-max N``.
+MCMC with a hard budget: ``--pipeline.model.strategy-type mcmc --pipeline.model.mcmc.cap-max N``
+(at paper scale also ``--pipeline.model.mcmc.refine-start-iter 500 --pipeline.model.mcmc.refine-stop-iter 25000``).
 """
 
 from __future__ import annotations
@@ -48,34 +49,46 @@ def gaussian_optimizers(max_steps: int) -> dict[str, OptimizerConfig]:
     }
 
 
+# step-valued settings of a model config or of its nested strategy configs, scaled by with_steps
 SCHEDULE_FIELDS = ("sh_degree_interval", "warmup_length", "reset_alpha_every", "stop_split_at", "stop_screen_size_at",
-                   "max_pause_after_reset", "mcmc_refine_stop", "dist_start", "normal_start",
+                   "max_pause_after_reset", "refine_start_iter", "refine_stop_iter", "dist_start", "normal_start",
                    "start_stat", "update_from", "update_until")
+INTERVAL_FIELDS = ("refine_every", "update_interval")  # shrink with the budget, but stay >= 20 steps
+
+
+def _rescaled(cfg, ratio: float):
+    """``cfg`` with its schedule fields scaled by ``ratio``, nested config dataclasses included."""
+    changes = {f: max(1, int(round(getattr(cfg, f) * ratio))) for f in SCHEDULE_FIELDS if hasattr(cfg, f)}
+    for f in INTERVAL_FIELDS:
+        if hasattr(cfg, f):
+            changes[f] = max(20, min(getattr(cfg, f), int(round(getattr(cfg, f) * ratio))))
+    for f in dataclasses.fields(cfg):
+        value = getattr(cfg, f.name)
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            changes[f.name] = _rescaled(value, ratio)
+    return dataclasses.replace(cfg, **changes)
 
 
 def with_steps(config: TrainerConfig, steps: int, optimizers=None) -> TrainerConfig:
     """``config`` (at its own ``max_num_iterations``) with every schedule scaled to ``steps``;
     refinement intervals shrink with it (at least 20 steps apart)."""
     ratio = steps / max(config.max_num_iterations, 1)
-    model = config.pipeline.model
-    changes = {f: max(1, int(round(getattr(model, f) * ratio))) for f in SCHEDULE_FIELDS if hasattr(model, f)}
-    for f in ("refine_every", "update_interval"):
-        if hasattr(model, f):
-            changes[f] = max(20, min(getattr(model, f), int(round(getattr(model, f) * ratio))))
     opts = {name: dataclasses.replace(o, max_steps=steps) if o.lr_final is not None else o for name, o in config.optimizers.items()}
     return dataclasses.replace(
         config, max_num_iterations=steps, steps_per_save=min(config.steps_per_save, steps),
-        pipeline=dataclasses.replace(config.pipeline, model=dataclasses.replace(model, **changes)),
+        pipeline=dataclasses.replace(config.pipeline, model=_rescaled(config.pipeline.model, ratio)),
         optimizers=optimizers or opts,
     )
 
 
 def paper_scale(config: TrainerConfig) -> TrainerConfig:
     """The original step counts and schedules (30k steps) for a GPU."""
+    model = config.pipeline.model
     model = dataclasses.replace(
-        config.pipeline.model, sh_degree_interval=1000, warmup_length=500, reset_alpha_every=3000,
-        stop_split_at=15000, stop_screen_size_at=4000, num_random=50000, max_gaussians=0,
-        max_pause_after_reset=1000, cap_max=1_000_000, mcmc_refine_stop=25000,
+        model, sh_degree_interval=1000, num_random=50000,
+        strategy=dataclasses.replace(model.strategy, warmup_length=500, reset_alpha_every=3000, stop_split_at=15000,
+                                     stop_screen_size_at=4000, max_gaussians=0, max_pause_after_reset=1000),
+        mcmc=dataclasses.replace(model.mcmc, cap_max=1_000_000, refine_start_iter=500, refine_stop_iter=25000),
     )
     return dataclasses.replace(
         config, max_num_iterations=PAPER_STEPS, steps_per_save=2000, steps_per_eval_image=1000,

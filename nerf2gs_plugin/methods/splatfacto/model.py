@@ -53,35 +53,15 @@ class SplatfactoModelConfig(ModelConfig):
     backend: str = "auto"
     near_plane: float = 0.01
     far_plane: float = 1e10
-    strategy: Literal["default", "mcmc"] = "default"
-    # ---- default strategy (nerfstudio names; CPU-scale values, paper values in config.py)
-    warmup_length: int = 300
-    refine_every: int = 100
-    reset_alpha_every: int = 1000
-    stop_split_at: int = 1500
-    densify_grad_thresh: float = 0.0008
-    densify_size_thresh: float = 0.01
-    n_split_samples: int = 2
-    cull_alpha_thresh: float = 0.1
-    cull_scale_thresh: float = 0.5
-    cull_screen_size: float = 0.15
-    split_screen_size: float = 0.05
-    stop_screen_size_at: int = 400
-    continue_cull_post_densification: bool = True
-    max_pause_after_reset: int = 300
-    """Cap on nerfstudio's pause after an opacity reset (num_images + refine_every steps)."""
-    max_gaussians: int = 60000
-    """Soft budget for the default strategy on a CPU (0 = unlimited, as nerfstudio)."""
-    # ---- MCMC strategy
-    cap_max: int = 30000
-    """Hard budget of Gaussians with ``--pipeline.model.strategy mcmc``."""
-    mcmc_noise_lr: float = 5e5
-    mcmc_min_opacity: float = 0.005
-    mcmc_init_opacity: float = 0.5
-    mcmc_init_scale: float = 0.1
-    mcmc_refine_stop: int = 2500
-    opacity_reg: float = 0.01
-    scale_reg: float = 0.01
+    strategy_type: Literal["default", "mcmc"] = "default"
+    """Densification: ``default`` (clone / split / prune, settings in ``strategy``) or ``mcmc`` (in ``mcmc``)."""
+    strategy: DefaultStrategyConfig = field(default_factory=lambda: DefaultStrategyConfig(
+        warmup_length=300, reset_alpha_every=1000, stop_split_at=1500, stop_screen_size_at=400,
+        max_pause_after_reset=300, max_gaussians=60000))
+    """The default strategy at CPU scale (paper values in config.py): 60k-Gaussian soft budget."""
+    mcmc: MCMCStrategyConfig = field(default_factory=lambda: MCMCStrategyConfig(
+        cap_max=30000, refine_start_iter=300, refine_stop_iter=2500))
+    """The MCMC strategy at CPU scale (``--pipeline.model.strategy-type mcmc``): 30k-Gaussian hard budget."""
 
 
 class SplatfactoModel(Model):
@@ -92,14 +72,15 @@ class SplatfactoModel(Model):
         cfg = self.config
         gen = torch.Generator().manual_seed(0)
         means, colors = self._initial_points(train_data, gen)
-        if cfg.strategy == "mcmc" and means.shape[0] > cfg.cap_max:
-            sel = torch.randperm(means.shape[0], generator=gen)[: cfg.cap_max]
+        mcmc = cfg.strategy_type == "mcmc"
+        if mcmc and means.shape[0] > cfg.mcmc.cap_max:
+            sel = torch.randperm(means.shape[0], generator=gen)[: cfg.mcmc.cap_max]
             means, colors = means[sel], colors[sel]
         n = means.shape[0]
         dist = knn_mean_distance(means).clamp_min(1e-4)
-        init_op = cfg.mcmc_init_opacity if cfg.strategy == "mcmc" else cfg.init_opacity
-        if cfg.strategy == "mcmc":  # gsplat's MCMC recipe: opaque but small initial Gaussians
-            dist = dist * cfg.mcmc_init_scale
+        init_op = cfg.mcmc.init_opacity if mcmc else cfg.init_opacity
+        if mcmc:  # gsplat's MCMC recipe: opaque but small initial Gaussians
+            dist = dist * cfg.mcmc.init_scale
         k = num_sh_bases(cfg.sh_degree)
         self.gauss = nn.ParameterDict({
             "means": nn.Parameter(means),
@@ -126,22 +107,9 @@ class SplatfactoModel(Model):
 
     def _make_strategy(self) -> Any:
         c = self.config
-        if c.strategy == "mcmc":
-            return MCMCStrategy(MCMCStrategyConfig(
-                cap_max=c.cap_max, noise_lr=c.mcmc_noise_lr, refine_start_iter=c.warmup_length,
-                refine_stop_iter=c.mcmc_refine_stop, refine_every=c.refine_every, min_opacity=c.mcmc_min_opacity,
-            ))
-        return DefaultStrategy(DefaultStrategyConfig(
-            warmup_length=c.warmup_length, refine_every=c.refine_every, reset_alpha_every=c.reset_alpha_every,
-            stop_split_at=c.stop_split_at, densify_grad_thresh=c.densify_grad_thresh,
-            densify_size_thresh=c.densify_size_thresh, n_split_samples=c.n_split_samples,
-            cull_alpha_thresh=c.cull_alpha_thresh, cull_scale_thresh=c.cull_scale_thresh,
-            cull_screen_size=c.cull_screen_size, split_screen_size=c.split_screen_size,
-            stop_screen_size_at=c.stop_screen_size_at,
-            continue_cull_post_densification=c.continue_cull_post_densification,
-            max_pause_after_reset=c.max_pause_after_reset, max_gaussians=c.max_gaussians,
-            num_train_images=self.num_train_images,
-        ))
+        if c.strategy_type == "mcmc":
+            return MCMCStrategy(c.mcmc)
+        return DefaultStrategy(c.strategy, num_train_images=self.num_train_images)
 
     def get_param_groups(self) -> dict[str, list[nn.Parameter]]:
         groups = {name: [p] for name, p in self.gauss.items()}
@@ -196,10 +164,10 @@ class SplatfactoModel(Model):
         c = self.config
         sky_bg = outputs.get("background") if c.background == "random" else None
         losses = image_loss(outputs, batch, c.ssim_lambda, c.mask_transients, c.sky_alpha_weight, sky_bg)
-        if c.strategy == "mcmc":
+        if c.strategy_type == "mcmc":
             g = self.gauss
-            losses["opacity_reg"] = c.opacity_reg * torch.sigmoid(g["opacities"]).abs().mean()
-            losses["scale_reg"] = c.scale_reg * torch.exp(g["scales"]).abs().mean()
+            losses["opacity_reg"] = c.mcmc.opacity_reg * torch.sigmoid(g["opacities"]).abs().mean()
+            losses["scale_reg"] = c.mcmc.scale_reg * torch.exp(g["scales"]).abs().mean()
         return losses
 
     # ------------------------------------------------------------------ training callbacks

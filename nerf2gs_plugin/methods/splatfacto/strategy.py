@@ -74,6 +74,8 @@ def _scales3(log_scales: Tensor) -> Tensor:
 # ---------------------------------------------------------------------------------------- default
 @dataclass
 class DefaultStrategyConfig:
+    """nerfstudio's names and (30k-step) values; the model config sets the CPU-scale ones."""
+
     warmup_length: int = 500
     refine_every: int = 100
     reset_alpha_every: int = 3000
@@ -88,16 +90,18 @@ class DefaultStrategyConfig:
     stop_screen_size_at: int = 4000
     continue_cull_post_densification: bool = True
     max_pause_after_reset: int = 1000
+    """Cap on nerfstudio's pause after an opacity reset (num_images + refine_every steps)."""
     max_gaussians: int = 0
-    scene_scale: float = 1.0
-    num_train_images: int = 1
+    """Soft budget of Gaussians (0 = unlimited, as nerfstudio)."""
 
 
 class DefaultStrategy:
     """Clone / split / prune / opacity-reset; statistics come from ``meta["means2d"].grad``."""
 
-    def __init__(self, cfg: DefaultStrategyConfig) -> None:
+    def __init__(self, cfg: DefaultStrategyConfig, num_train_images: int = 1, scene_scale: float = 1.0) -> None:
         self.cfg = cfg
+        self.num_train_images = num_train_images  # of the dataset, not a setting: not in the config
+        self.scene_scale = scene_scale
         self.grad_accum: Optional[Tensor] = None  # [N] sum of NDC-space gradient norms
         self.count: Optional[Tensor] = None  # [N] times visible
         self.max_radii: Optional[Tensor] = None  # [N] max radius / max(W, H)
@@ -107,7 +111,7 @@ class DefaultStrategy:
         """Steps without refinement after an opacity reset: nerfstudio's ``num_images + refine_every``,
         capped so that it stays below the reset interval whatever the image count."""
         c = self.cfg
-        pause = min(c.num_train_images, c.max_pause_after_reset) + c.refine_every
+        pause = min(self.num_train_images, c.max_pause_after_reset) + c.refine_every
         return min(pause, max(c.reset_alpha_every // 2, 0))
 
     def _reset_stats(self, n: int, device: torch.device) -> None:
@@ -164,7 +168,7 @@ class DefaultStrategy:
         avg = self.grad_accum / self.count.clamp_min(1)
         high = (avg > c.densify_grad_thresh) & (self.count > 0)
         max_scale = torch.exp(params["scales"]).amax(-1)
-        small = max_scale <= c.densify_size_thresh * c.scene_scale
+        small = max_scale <= c.densify_size_thresh * self.scene_scale
         clone = high & small
         split = high & ~small
         if step < c.stop_screen_size_at:
@@ -195,7 +199,7 @@ class DefaultStrategy:
         c = self.cfg
         cull = torch.sigmoid(params["opacities"]) < c.cull_alpha_thresh
         if c.reset_alpha_every > 0 and step > c.reset_alpha_every:
-            cull |= torch.exp(params["scales"]).amax(-1) > c.cull_scale_thresh * c.scene_scale
+            cull |= torch.exp(params["scales"]).amax(-1) > c.cull_scale_thresh * self.scene_scale
             if step < c.stop_screen_size_at and self.max_radii is not None and self.max_radii.shape[0] == cull.shape[0]:
                 cull |= self.max_radii > c.cull_screen_size
         if bool(cull.all()):  # never empty the scene
@@ -228,13 +232,24 @@ def _limit(clone: Tensor, split: Tensor, score: Tensor, room: int, k: int) -> tu
 # ---------------------------------------------------------------------------------------- MCMC
 @dataclass
 class MCMCStrategyConfig:
+    """gsplat's MCMC recipe (30k-step values; the model config sets the CPU-scale ones)."""
+
     cap_max: int = 100_000
+    """Hard budget of Gaussians."""
     noise_lr: float = 5e5
     refine_start_iter: int = 500
     refine_stop_iter: int = 25_000
     refine_every: int = 100
     min_opacity: float = 0.005
     grow_factor: float = 0.05
+    init_opacity: float = 0.5
+    """Initial opacity (the model's; MCMC starts from opaque but small Gaussians)."""
+    init_scale: float = 0.1
+    """Initial scale as a fraction of the kNN distance (the model's)."""
+    opacity_reg: float = 0.01
+    """Weight of the mean-opacity loss (the model's)."""
+    scale_reg: float = 0.01
+    """Weight of the mean-scale loss (the model's)."""
 
 
 _N_MAX = 51

@@ -16,11 +16,12 @@ from nerf2gs_plugin.methods.splatfacto.model import SplatfactoModel
 from nerf2gs_plugin.methods.splatfacto.strategy import DefaultStrategy, DefaultStrategyConfig, MCMCStrategy, MCMCStrategyConfig, relocation_values
 
 
-def _cfg(**kw):
-    base = dict(warmup_length=20, refine_every=10, reset_alpha_every=60, stop_split_at=100, sh_degree_interval=15,
-                stop_screen_size_at=0, max_gaussians=4000)
-    base.update(kw)
-    return dataclasses.replace(splatfacto_config.pipeline.model, **base)
+def _cfg(strategy=None, mcmc=None, **kw):
+    model = splatfacto_config.pipeline.model
+    default = dict(warmup_length=20, refine_every=10, reset_alpha_every=60, stop_split_at=100, stop_screen_size_at=0, max_gaussians=4000)
+    return dataclasses.replace(model, sh_degree_interval=15, **kw,
+                               strategy=dataclasses.replace(model.strategy, **{**default, **(strategy or {})}),
+                               mcmc=dataclasses.replace(model.mcmc, **(mcmc or {})))
 
 
 @pytest.fixture(scope="module")
@@ -35,7 +36,7 @@ def test_registered_spec_and_paper_scale():
     assert splatfacto_method.config.method_name == "splatfacto"
     assert splatfacto_method.config.max_num_iterations <= 3000
     paper = paper_scale(splatfacto_method.config)
-    assert paper.max_num_iterations == 30000 and paper.pipeline.model.stop_split_at == 15000
+    assert paper.max_num_iterations == 30000 and paper.pipeline.model.strategy.stop_split_at == 15000
     assert paper.optimizers["means"].max_steps == 30000
 
 
@@ -125,8 +126,8 @@ def test_soft_budget_and_opacity_reset():
 
 
 def test_pause_after_reset_is_capped_for_large_image_sets():
-    cfg = DefaultStrategyConfig(refine_every=100, reset_alpha_every=3000, num_train_images=10000, max_pause_after_reset=1000)
-    strat = DefaultStrategy(cfg)
+    cfg = DefaultStrategyConfig(refine_every=100, reset_alpha_every=3000, max_pause_after_reset=1000)
+    strat = DefaultStrategy(cfg, num_train_images=10000)
     assert strat.pause_after_reset < cfg.reset_alpha_every
     assert not strat._in_pause(3000 + strat.pause_after_reset + 100)
     # nerfstudio's rule would pause 10100 steps: longer than the reset interval, i.e. never refine again
@@ -161,7 +162,7 @@ def test_relocation_preserves_single_gaussian():
 def test_mcmc_model_trains_within_budget(scene):
     cams, imgs, skies = scene
     torch.manual_seed(0)
-    model = _cfg(strategy="mcmc", cap_max=700, warmup_length=10, refine_every=5).setup(train_data=make_train_data(cams))
+    model = _cfg(strategy_type="mcmc", mcmc=dict(cap_max=700, refine_start_iter=10, refine_every=5)).setup(train_data=make_train_data(cams))
     p0 = psnr(model, cams, imgs)
     train(model, gaussian_optimizers(50), cams, imgs, skies, 50)
     assert model.num_primitives() == 700
@@ -218,11 +219,32 @@ def test_random_background_makes_sky_transparent():
     assert float(image_loss(out, batch, 0.2)["main_loss"]) > 1e-2
 
 
+def test_strategy_settings_are_one_nested_config_with_cli_flags():
+    """The model config nests the strategies' own configs (no copied fields); tyro makes
+    ``--pipeline.model.strategy.<field>`` and ``--pipeline.model.mcmc.<field>``."""
+    import tyro
+
+    from nerf2gs_plugin.engine.config import apply_plain, to_plain
+
+    model = splatfacto_config.pipeline.model
+    assert isinstance(model.strategy, DefaultStrategyConfig) and isinstance(model.mcmc, MCMCStrategyConfig)
+    flat = set(to_plain(model))
+    assert not flat & {f.name for f in dataclasses.fields(DefaultStrategyConfig)}  # no field repeated at model level
+    assert (model.strategy.warmup_length, model.strategy.max_gaussians, model.mcmc.cap_max, model.mcmc.refine_start_iter) == (300, 60000, 30000, 300)
+    args = ["--pipeline.model.strategy.max-gaussians", "7", "--pipeline.model.strategy-type", "mcmc", "--pipeline.model.mcmc.cap-max", "9"]
+    cfg = tyro.cli(type(splatfacto_config), default=splatfacto_config, args=args)
+    assert cfg.pipeline.model.strategy.max_gaussians == 7 and cfg.pipeline.model.strategy_type == "mcmc"
+    assert cfg.pipeline.model.mcmc.cap_max == 9 and cfg.pipeline.model.strategy.warmup_length == 300
+    over = apply_plain(splatfacto_config, {"pipeline": {"model": {"strategy": {"densify_grad_thresh": 0.002}}}})
+    assert over.pipeline.model.strategy.densify_grad_thresh == 0.002 and over.pipeline.model.strategy.max_gaussians == 60000
+
+
 def test_with_steps_rescales_schedules():
     from nerf2gs_plugin.methods.splatfacto.config import with_steps
 
     quick = with_steps(splatfacto_method.config, 750)
     m = quick.pipeline.model
     assert quick.max_num_iterations == 750 and quick.optimizers["means"].max_steps == 750
-    assert m.stop_split_at == 375 and m.warmup_length == 75 and m.reset_alpha_every == 250
-    assert m.refine_every == 25 and m.sh_degree_interval == 75
+    assert m.strategy.stop_split_at == 375 and m.strategy.warmup_length == 75 and m.strategy.reset_alpha_every == 250
+    assert m.strategy.refine_every == 25 and m.sh_degree_interval == 75
+    assert m.mcmc.refine_start_iter == 75 and m.mcmc.refine_stop_iter == 625 and m.mcmc.refine_every == 25

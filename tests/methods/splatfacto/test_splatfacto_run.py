@@ -18,7 +18,8 @@ pytestmark = needs_rasterizer
 
 def _config(data, out, steps, **model_kw):
     base = splatfacto_method.config
-    model = dataclasses.replace(base.pipeline.model, warmup_length=3, refine_every=3, stop_screen_size_at=0, **model_kw)
+    strategy = dataclasses.replace(base.pipeline.model.strategy, warmup_length=3, refine_every=3, stop_screen_size_at=0)
+    model = dataclasses.replace(base.pipeline.model, strategy=strategy, **model_kw)
     return dataclasses.replace(base, data=data, output_dir=out, max_num_iterations=steps, steps_per_save=6,
                                steps_per_eval_image=0, progress=False, keep_all_checkpoints=True, timestamp="run",
                                optimizers=gaussian_optimizers(steps), pipeline=dataclasses.replace(base.pipeline, model=model))

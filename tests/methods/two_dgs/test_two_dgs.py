@@ -18,10 +18,12 @@ from nerf2gs_plugin.methods.two_dgs.model import ZERO_LOG_SCALE
 
 
 def _cfg(**kw):
-    base = dict(warmup_length=20, refine_every=10, reset_alpha_every=60, stop_split_at=100, sh_degree_interval=15,
-                stop_screen_size_at=0, max_gaussians=4000, dist_start=10, normal_start=20)
+    model = two_dgs_method.config.pipeline.model
+    strategy = dataclasses.replace(model.strategy, warmup_length=20, refine_every=10, reset_alpha_every=60, stop_split_at=100,
+                                   stop_screen_size_at=0, max_gaussians=4000)
+    base = dict(sh_degree_interval=15, dist_start=10, normal_start=20, strategy=strategy)
     base.update(kw)
-    return dataclasses.replace(two_dgs_method.config.pipeline.model, **base)
+    return dataclasses.replace(model, **base)
 
 
 @pytest.fixture(scope="module")
