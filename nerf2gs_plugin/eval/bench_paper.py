@@ -88,7 +88,7 @@ def ablation_plan(scale: str, enhancer: Optional[str] = None) -> list[RunSpec]:
     if enhancer:
         plan.insert(3, RunSpec(f"{t} + views from {t} + enhancer", t, _overrides(scale, t), augment_from=t, augment={"enhancer": enhancer}))
         plan.append(RunSpec(f"{t} + views from StreetNeRF + enhancer", t, _overrides(scale, t), augment_from="StreetNeRF", augment={"enhancer": enhancer}))
-    for flag in ("sky", "ground_reg", "transient_mask", "appearance"):
+    for flag in ("sky", "ground_reg", "transient_mask", "appearance", "point_depth"):
         plan.append(RunSpec(f"StreetNeRF w/o {flag}", "streetnerf", _overrides(scale, "streetnerf", {"pipeline": {"model": {flag: False}}})))
     return plan
 

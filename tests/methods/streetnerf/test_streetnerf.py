@@ -51,7 +51,7 @@ def trained(tiny_scene, tmp_path_factory):
 
 def test_registered_config_has_the_ablation_flags():
     model = streetnerf_method.config.pipeline.model
-    for flag in ("sky", "ground_reg", "transient_mask", "appearance"):
+    for flag in ("sky", "ground_reg", "transient_mask", "appearance", "point_depth"):
         assert getattr(model, flag) is True
     assert set(streetnerf_method.config.optimizers) == {"fields", "proposal_networks", "sky_appearance"}
 
