@@ -1,8 +1,9 @@
 """2DGS surfel rasterization: the public entry :func:`rasterize_surfels` and its backends.
 
 Backends: ``torch`` (the pure-torch reference in :mod:`surfels_torch`, autograd), ``cpu`` (the
-C++/OpenMP compositing kernel in :mod:`surfels_cpu` when it builds; otherwise the torch path with
-a one-line warning) and ``gsplat`` (``gsplat.rasterization_2dgs`` on CUDA; imported only there).
+C++/OpenMP kernels in :mod:`surfels_cpu` when they build: projection + SH, tile lists and
+compositing, differentiable; projection stays in torch when the cameras need gradients;
+otherwise the torch path with a one-line warning) and ``gsplat`` (``gsplat.rasterization_2dgs`` on CUDA; imported only there).
 ``"auto"`` picks gsplat on CUDA when importable, else cpu/torch as above.
 
 Differences of the gsplat backend, which follows its own conventions: its depth channel is the
@@ -22,7 +23,14 @@ from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.rendering.backend import resolve_backend
 from nerf2gs_plugin.rendering.projection import camera_centers
 from nerf2gs_plugin.rendering.sh import eval_sh
-from nerf2gs_plugin.rendering.surfels_cpu import EXT_HEADERS, EXT_NAME, EXT_SOURCES, composite_surfels_cpu
+from nerf2gs_plugin.rendering.surfels_cpu import (
+    EXT_HEADERS,
+    EXT_NAME,
+    EXT_SOURCES,
+    composite_surfels_cpu,
+    project_surfels_cpu,
+    tile_lists_cpu,
+)
 from nerf2gs_plugin.rendering.surfels_torch import (
     build_tile_lists,
     composite_surfels_torch,
@@ -91,13 +99,23 @@ def rasterize_surfels(
         return _rasterize_gsplat(means, quats, scales, opacities, colors, viewmats, Ks, width, height, near_plane,
                                  far_plane, sh_degree, backgrounds, render_mode, tile_size)
     C, N = viewmats.shape[0], means.shape[0]
-    proj = project_surfels(means, quats, scales, opacities, viewmats, Ks, width, height, near_plane, far_plane)
-    if sh_degree is not None:
-        dirs = means[None, :, :] - camera_centers(viewmats)[:, None, :]
-        feats = eval_sh(sh_degree, colors[None], dirs)  # [C,N,3]
+    cams_grad = torch.is_grad_enabled() and (viewmats.requires_grad or Ks.requires_grad)
+    if chosen == "cpu" and not cams_grad and (sh_degree is None or sh_degree <= 3):
+        # projection + SH + tile lists in C++ (with a C++ backward): the torch ops cost more than compositing
+        use_sh = sh_degree is not None
+        proj, feats = project_surfels_cpu(means, quats, scales, opacities, viewmats, Ks, width, height, near_plane,
+                                          far_plane, sh=colors if use_sh else None, sh_degree=sh_degree or 0)
+        if not use_sh:
+            feats = colors if colors.dim() == 3 else colors[None].expand(C, -1, -1)
+        lists = tile_lists_cpu(proj, width, height, tile_size)
     else:
-        feats = colors if colors.dim() == 3 else colors[None].expand(C, -1, -1)
-    lists = build_tile_lists(proj, width, height, tile_size)
+        proj = project_surfels(means, quats, scales, opacities, viewmats, Ks, width, height, near_plane, far_plane)
+        if sh_degree is not None:
+            dirs = means[None, :, :] - camera_centers(viewmats)[:, None, :]
+            feats = eval_sh(sh_degree, colors[None], dirs)  # [C,N,3]
+        else:
+            feats = colors if colors.dim() == 3 else colors[None].expand(C, -1, -1)
+        lists = build_tile_lists(proj, width, height, tile_size)
     grad_on = torch.is_grad_enabled() and any(
         t.requires_grad for t in (means, quats, scales, opacities, colors, viewmats))
     densify = torch.zeros(C, N, 2, device=means.device, dtype=means.dtype, requires_grad=True) if grad_on else None

@@ -1,12 +1,16 @@
-"""The C++/OpenMP 2DGS compositing kernel (``csrc/surfels.cpp``) behind a torch autograd Function.
+"""The C++/OpenMP 2DGS kernels (``csrc/surfels.cpp``) behind torch autograd Functions.
 
-Projection, SH and tile binning stay in torch (per surfel, cheap); only the per-pixel loop, where
-the time goes, runs in C++, forward and backward. It computes exactly what
-:func:`surfels_torch.composite_surfels_torch` computes (the tests compare values and gradients).
+Compositing (forward and backward) computes exactly what
+:func:`surfels_torch.composite_surfels_torch` computes; projection fused with SH colours (forward
+and backward, ``csrc/surfels_proj_core.h``) computes what :func:`surfels_torch.project_surfels` and
+:func:`sh.eval_sh` compute, and the tile lists what :func:`surfels_torch.build_tile_lists` builds
+(the tests compare values and gradients). Without them a training step spent most of its time in
+~150 small autograd ops of the projection.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Optional
 
 import torch
@@ -17,7 +21,7 @@ from nerf2gs_plugin.rendering.surfels_torch import SurfelProjection, TileLists, 
 
 EXT_NAME = "nerf2gs_surfels"
 EXT_SOURCES = ["surfels.cpp"]
-EXT_HEADERS: list[str] = []  # the kernel is self-contained
+EXT_HEADERS = ["surfels_proj_core.h", "binning_core.h", "projection_bwd.h", "projection_core.h", "sh_core.h"]
 
 
 def extension() -> Optional[Any]:
@@ -53,17 +57,83 @@ class _Composite(torch.autograd.Function):
                 None, None, None, None, None)
 
 
-def composite_surfels_cpu(proj: SurfelProjection, lists: TileLists, opacities: Tensor, colors: Tensor,
+@dataclass
+class SurfelProjectionCPU:
+    """What the C++ projection gives the compositor (C cameras, N surfels; shapes as SurfelProjection)."""
+
+    adj: Tensor  # [C*N, 9] adjugate of the homography T, row-major (differentiable)
+    det: Tensor  # [C*N] det(T) (differentiable)
+    means2d: Tensor  # [C, N, 2] (differentiable)
+    depths: Tensor  # [C, N] centre camera z (differentiable)
+    normals: Tensor  # [C, N, 3] camera-facing unit normals (differentiable)
+    radii: Tensor  # [C, N] int32, 0 = culled
+    bbox: Tensor  # [C, N, 4] footprint box (no grad)
+
+
+class _Project(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx: Any, means: Tensor, quats: Tensor, scales: Tensor, opac: Tensor, sh: Tensor, viewmats: Tensor,
+                Ks: Tensor, args: tuple) -> tuple:
+        ctx.set_materialize_grads(False)
+        ctx.args = args
+        ctx.save_for_backward(means, quats, scales, sh, viewmats, Ks)
+        out = extension().project(means, quats, scales, opac, sh, viewmats, Ks, *args)
+        ctx.mark_non_differentiable(out[5], out[6])
+        return tuple(out)
+
+    @staticmethod
+    def backward(ctx: Any, v_adj, v_det, v_m2, v_dep, v_nrm, _v_radii, _v_box, v_col) -> tuple:
+        means, quats, scales, sh, viewmats, Ks = ctx.saved_tensors
+        cn = viewmats.shape[0] * means.shape[0]
+        z = means.new_zeros
+
+        def c(t: Optional[Tensor], *shape: int) -> Tensor:
+            return t.contiguous() if t is not None else z(*shape)
+
+        v_col = v_col.contiguous() if v_col is not None and sh.numel() > 0 else z(0)
+        gm, gq, gs, gsh = extension().project_backward(means, quats, scales, sh, viewmats, Ks, *ctx.args,
+                                                       c(v_adj, cn, 9), c(v_det, cn), c(v_m2, cn, 2), c(v_dep, cn),
+                                                       c(v_nrm, cn, 3), v_col)
+        return gm, gq, gs, None, (gsh if sh.numel() > 0 else None), None, None, None
+
+
+def project_surfels_cpu(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, viewmats: Tensor, Ks: Tensor,
+                        width: int, height: int, near_plane: float, far_plane: float, sh: Optional[Tensor] = None,
+                        sh_degree: int = 0) -> tuple[SurfelProjectionCPU, Optional[Tensor]]:
+    """:func:`surfels_torch.project_surfels` (+ SH colours ``[C,N,3]`` of ``sh [N,K,3]`` at degree <= 3)
+    by the extension; differentiable w.r.t. means, quats, scales and SH (not the cameras)."""
+    dt = means.dtype
+    sh_t = sh.to(dt).contiguous() if sh is not None else means.new_zeros(0)
+    args = (int(width), int(height), float(near_plane), float(far_plane), int(sh_degree) if sh is not None else 0)
+    adj, det, m2, dep, nrm, radii, bbox, cols = _Project.apply(
+        means.contiguous(), quats.to(dt).contiguous(), scales.to(dt).contiguous(), opacities.detach().to(dt).contiguous(),
+        sh_t, viewmats.to(dt).contiguous(), Ks.to(dt).contiguous(), args)
+    return SurfelProjectionCPU(adj, det, m2, dep, nrm, radii, bbox), (cols if sh is not None else None)
+
+
+def tile_lists_cpu(proj: Any, width: int, height: int, tile_size: int) -> TileLists:
+    """:func:`surfels_torch.build_tile_lists` by the extension (same lists, same order)."""
+    C, N = proj.radii.shape
+    ids, starts, counts = extension().tile_lists(proj.bbox.detach().contiguous(), proj.depths.detach().contiguous(),
+                                                 proj.radii.contiguous(), int(width), int(height), int(tile_size))
+    return TileLists(flat_ids=ids, starts=starts, counts=counts, tiles_w=-(-width // tile_size),
+                     tiles_h=-(-height // tile_size), tile_size=tile_size)
+
+
+def composite_surfels_cpu(proj: SurfelProjection | SurfelProjectionCPU, lists: TileLists, opacities: Tensor, colors: Tensor,
                           width: int, height: int, near_plane: float,
                           densify: Optional[Tensor] = None) -> dict[str, Tensor]:
     """Same contract as :func:`surfels_torch.composite_surfels_torch`, computed by the C++ kernel."""
     C, N = proj.radii.shape
     D = colors.shape[-1]
-    T = proj.T.reshape(C * N, 3, 3)
-    dt = T.dtype
-    adj3 = _adjugate(T)
-    det = _det(T, adj3).contiguous()
-    adj = adj3.reshape(C * N, 9).contiguous()
+    if isinstance(proj, SurfelProjectionCPU):
+        adj, det, dt = proj.adj, proj.det, proj.adj.dtype
+    else:
+        T = proj.T.reshape(C * N, 3, 3)
+        dt = T.dtype
+        adj3 = _adjugate(T)
+        det = _det(T, adj3).contiguous()
+        adj = adj3.reshape(C * N, 9).contiguous()
     m2 = proj.means2d.reshape(C * N, 2).contiguous()
     zc = proj.depths.reshape(C * N).contiguous()
     op = opacities.to(dt)[None, :].expand(C, N).reshape(C * N).contiguous()

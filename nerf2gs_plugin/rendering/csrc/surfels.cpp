@@ -1,4 +1,5 @@
-// 2DGS surfel compositing on the CPU: forward and backward, OpenMP over tiles.
+// 2DGS surfel compositing on the CPU: forward and backward, OpenMP over tiles. The fused
+// projection + SH op and the tile lists (surfels_proj_core.h) are bound here too.
 //
 // Per surfel row m (camera-major, C*N rows) the caller gives the adjugate H of its homography T
 // (row-major 3x3), det(T), the projected centre, the centre depth, the opacity and F features
@@ -11,10 +12,13 @@
 // Output channels per pixel: F features, accumulated depth, alpha, distortion, median depth.
 // Distortion = sum_i w_i sum_{j<i} w_j (z_i - z_j)^2 (the 2DGS code's L2 form on camera z).
 #include <torch/extension.h>
+#include <ATen/Parallel.h>
 #include <omp.h>
 
 #include <cmath>
 #include <vector>
+
+#include "surfels_proj_core.h"
 
 namespace {
 
@@ -306,7 +310,88 @@ torch::Tensor surfels_backward(torch::Tensor adj, torch::Tensor det, torch::Tens
   return grads;
 }
 
+std::vector<torch::Tensor> surfels_project(torch::Tensor means, torch::Tensor quats, torch::Tensor scales,
+                                           torch::Tensor opac, torch::Tensor sh, torch::Tensor viewmats, torch::Tensor Ks,
+                                           int64_t width, int64_t height, double near_plane, double far_plane,
+                                           int64_t sh_degree) {
+  // sh [N,K,3] or empty -> adj [C*N,9], det [C*N], means2d [C,N,2], depths [C,N], normals [C,N,3],
+  // radii [C,N] int32, bbox [C,N,4], colors [C,N,3] (empty without SH)
+  for (auto* x : {&means, &quats, &scales, &opac, &sh, &viewmats, &Ks})
+    TORCH_CHECK(x->device().is_cpu() && x->is_contiguous(), "surfel projection inputs must be contiguous CPU tensors");
+  const int64_t C = viewmats.size(0), N = means.size(0), K = sh.numel() > 0 ? sh.size(1) : 0;
+  TORCH_CHECK(sh_degree >= 0 && sh_degree <= 3 && (K == 0 || K >= (sh_degree + 1) * (sh_degree + 1)), "bad SH degree");
+  auto o = means.options();
+  auto adj = torch::empty({C * N, 9}, o), det = torch::empty({C * N}, o), m2 = torch::empty({C, N, 2}, o);
+  auto depths = torch::empty({C, N}, o), normals = torch::empty({C, N, 3}, o);
+  auto radii = torch::empty({C, N}, o.dtype(torch::kInt32)), bbox = torch::empty({C, N, 4}, o);
+  auto colors = torch::empty({C, N, K > 0 ? 3 : 0}, o);
+  const surf2d::SurfArgs a{C, N, width, height, K, static_cast<int>(sh_degree), near_plane, far_plane};
+  const int nt = std::max(1, at::get_num_threads());
+  AT_DISPATCH_FLOATING_TYPES(means.scalar_type(), "surfels_project", [&] {
+    surf2d::project_forward<scalar_t>(means.data_ptr<scalar_t>(), quats.data_ptr<scalar_t>(), scales.data_ptr<scalar_t>(),
+                                      opac.data_ptr<scalar_t>(), K > 0 ? sh.data_ptr<scalar_t>() : nullptr,
+                                      viewmats.data_ptr<scalar_t>(), Ks.data_ptr<scalar_t>(), a, nt, adj.data_ptr<scalar_t>(),
+                                      det.data_ptr<scalar_t>(), m2.data_ptr<scalar_t>(), depths.data_ptr<scalar_t>(),
+                                      normals.data_ptr<scalar_t>(), radii.data_ptr<int32_t>(), bbox.data_ptr<scalar_t>(),
+                                      K > 0 ? colors.data_ptr<scalar_t>() : nullptr);
+  });
+  return {adj, det, m2, depths, normals, radii, bbox, colors};
+}
+
+std::vector<torch::Tensor> surfels_project_backward(torch::Tensor means, torch::Tensor quats, torch::Tensor scales,
+                                                    torch::Tensor sh, torch::Tensor viewmats, torch::Tensor Ks,
+                                                    int64_t width, int64_t height, double near_plane, double far_plane,
+                                                    int64_t sh_degree, torch::Tensor v_adj, torch::Tensor v_det,
+                                                    torch::Tensor v_m2, torch::Tensor v_depths, torch::Tensor v_normals,
+                                                    torch::Tensor v_colors) {
+  // v_colors may be empty; returns v_means, v_quats, v_scales, v_sh
+  for (auto* x : {&means, &quats, &scales, &sh, &viewmats, &Ks, &v_adj, &v_det, &v_m2, &v_depths, &v_normals, &v_colors})
+    TORCH_CHECK(x->device().is_cpu() && x->is_contiguous(), "surfel projection gradients must be contiguous CPU tensors");
+  const int64_t C = viewmats.size(0), N = means.size(0), K = sh.numel() > 0 ? sh.size(1) : 0;
+  TORCH_CHECK(v_adj.numel() == C * N * 9 && v_det.numel() == C * N && v_m2.numel() == C * N * 2 &&
+                  v_depths.numel() == C * N && v_normals.numel() == C * N * 3,
+              "surfel projection gradients have the wrong size");
+  auto v_means = torch::empty_like(means), v_quats = torch::empty_like(quats), v_scales = torch::empty_like(scales);
+  auto v_sh = torch::empty_like(sh);
+  const surf2d::SurfArgs a{C, N, width, height, K, static_cast<int>(sh_degree), near_plane, far_plane};
+  const int nt = std::max(1, at::get_num_threads());
+  AT_DISPATCH_FLOATING_TYPES(means.scalar_type(), "surfels_project_backward", [&] {
+    surf2d::project_backward<scalar_t>(
+        means.data_ptr<scalar_t>(), quats.data_ptr<scalar_t>(), scales.data_ptr<scalar_t>(),
+        K > 0 ? sh.data_ptr<scalar_t>() : nullptr, viewmats.data_ptr<scalar_t>(), Ks.data_ptr<scalar_t>(), a, nt,
+        v_adj.data_ptr<scalar_t>(), v_det.data_ptr<scalar_t>(), v_m2.data_ptr<scalar_t>(), v_depths.data_ptr<scalar_t>(),
+        v_normals.data_ptr<scalar_t>(), (K > 0 && v_colors.numel() > 0) ? v_colors.data_ptr<scalar_t>() : nullptr,
+        v_means.data_ptr<scalar_t>(), v_quats.data_ptr<scalar_t>(), v_scales.data_ptr<scalar_t>(),
+        K > 0 ? v_sh.data_ptr<scalar_t>() : nullptr);
+  });
+  return {v_means, v_quats, v_scales, v_sh};
+}
+
+std::vector<torch::Tensor> surfels_tile_lists(torch::Tensor bbox, torch::Tensor depths, torch::Tensor radii, int64_t width,
+                                              int64_t height, int64_t ts) {
+  // bbox [C,N,4], depths [C,N], radii [C,N] int32 -> flat_ids, starts, counts (int64), as build_tile_lists
+  for (auto* x : {&bbox, &depths, &radii})
+    TORCH_CHECK(x->device().is_cpu() && x->is_contiguous(), "tile list inputs must be contiguous CPU tensors");
+  TORCH_CHECK(radii.scalar_type() == torch::kInt32, "radii must be int32");
+  const int64_t C = depths.size(0), N = depths.size(1);
+  const int tw = static_cast<int>((width + ts - 1) / ts), th = static_cast<int>((height + ts - 1) / ts);
+  std::vector<int64_t> ids, starts, counts;
+  AT_DISPATCH_FLOATING_TYPES(depths.scalar_type(), "surfels_tile_lists", [&] {
+    surf2d::tile_lists<scalar_t>(bbox.data_ptr<scalar_t>(), depths.data_ptr<scalar_t>(), radii.data_ptr<int32_t>(), C, N,
+                                 static_cast<int>(ts), tw, th, ids, starts, counts);
+  });
+  auto to_t = [](const std::vector<int64_t>& v) {
+    auto t = torch::empty({static_cast<int64_t>(v.size())}, torch::kInt64);
+    std::copy(v.begin(), v.end(), t.data_ptr<int64_t>());
+    return t;
+  };
+  return {to_t(ids), to_t(starts), to_t(counts)};
+}
+
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
+  m.def("project", &surfels_project, "2DGS surfel projection + SH colours (CPU)");
+  m.def("project_backward", &surfels_project_backward, "backward of project (CPU)");
+  m.def("tile_lists", &surfels_tile_lists, "per-tile depth-sorted surfel lists (CPU)");
   m.def("forward", &surfels_forward, "2DGS surfel compositing forward (CPU)");
   m.def("backward", &surfels_backward, "2DGS surfel compositing backward (CPU)");
 }
