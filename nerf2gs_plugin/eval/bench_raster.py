@@ -1,10 +1,11 @@
-"""``ns2gs-bench raster``: the 3DGS rasterizer's ``cpu`` kernel against the ``torch`` reference.
+"""``ns2gs-bench raster``: the 3DGS and 2DGS rasterizers' ``cpu`` kernels against the ``torch`` reference.
 
 Random street-like scenes (road, two facades, clutter, in front of a car-height camera looking
 down the street): forward+backward time of both backends on the same scene in one run (their
 ratio is the figure that matters on a shared machine), forward-only FPS of a 50k-Gaussian model
-at 200x112, and pixel x Gaussian pairs composited per second. Writes ``raster.json``,
-``raster.md`` (with the machine) and ``raster.png`` under ``out``.
+at 200x112, and pixel x Gaussian pairs composited per second; the same for 2DGS surfels (the
+same scene rendered as surfels). Writes ``raster.json``, ``raster.md`` (with the machine) and
+``raster.png`` under ``out``.
 """
 
 from __future__ import annotations
@@ -26,10 +27,13 @@ SCALES = {
     # fwd+bwd scenes (gaussians, width, height); the torch reference runs only on those up to
     # torch_max_pixels x torch_max_gaussians (it takes minutes beyond, on a shared 2-core machine)
     "quick": {"fwdbwd": [(20_000, 200, 112), (20_000, 640, 360)], "fps": (50_000, 200, 112), "repeats": 5,
-              "torch_max_pixels": 640 * 360, "torch_max_gaussians": 20_000},
+              "torch_max_pixels": 640 * 360, "torch_max_gaussians": 20_000,
+              "surfels_fwdbwd": [(20_000, 200, 112)], "surfels_torch_max_pixels": 200 * 112},
     "full": {"fwdbwd": [(20_000, 200, 112), (20_000, 640, 360), (50_000, 200, 112), (200_000, 200, 112),
                         (200_000, 640, 360)], "fps": (50_000, 200, 112), "repeats": 5,
-             "torch_max_pixels": 640 * 360, "torch_max_gaussians": 50_000},
+             "torch_max_pixels": 640 * 360, "torch_max_gaussians": 50_000,
+             "surfels_fwdbwd": [(20_000, 200, 112), (43_000, 200, 112), (20_000, 640, 360)],
+             "surfels_torch_max_pixels": 200 * 112},
 }
 
 
@@ -68,6 +72,30 @@ def _fwd_bwd(scene: dict[str, Any], backend: str) -> Callable[[], dict[str, Any]
     return step
 
 
+def _surfels_fwd_bwd(scene: dict[str, Any], backend: str) -> Callable[[], dict[str, Any]]:
+    from nerf2gs_plugin.rendering import rasterize_surfels  # noqa: PLC0415
+
+    def step() -> dict[str, Any]:
+        params = {k: scene[k].clone().requires_grad_(True) for k in ("means", "quats", "scales", "opacities", "colors")}
+        render, alpha, normals, _, distort, _, meta = rasterize_surfels(
+            **params, **{k: scene[k] for k in ("viewmats", "Ks", "width", "height", "sh_degree")},
+            render_mode="RGB+ED", backend=backend)
+        (render.sum() + alpha.sum() + normals.sum() + distort.sum()).backward()
+        return meta
+
+    return step
+
+
+def _surfels_forward(scene: dict[str, Any], backend: str) -> Callable[[], dict[str, Any]]:
+    from nerf2gs_plugin.rendering import rasterize_surfels  # noqa: PLC0415
+
+    def render() -> dict[str, Any]:
+        with torch.no_grad():
+            return rasterize_surfels(**scene, render_mode="RGB", backend=backend)[-1]
+
+    return render
+
+
 def _time(fn: Callable[[], Any], repeats: int, cpu: Optional[list[float]] = None) -> tuple[float, Any]:
     """Best wall time of ``repeats`` runs after a warm-up; ``cpu`` receives the best process CPU time
     (all threads), which a loaded shared machine inflates far less than wall time."""
@@ -84,7 +112,8 @@ def _time(fn: Callable[[], Any], repeats: int, cpu: Optional[list[float]] = None
 
 def _pairs(meta: dict[str, Any]) -> int:
     """Pixel x Gaussian pairs a full (non-terminated) pass would visit: list length x tile pixels."""
-    return int(meta["flat_ids"].numel()) * int(meta["tile_size"]) ** 2
+    listed = meta["n_pairs"] if "n_pairs" in meta else int(meta["flat_ids"].numel())
+    return int(listed) * int(meta["tile_size"]) ** 2
 
 
 def run(out: Path, scale: str = "quick") -> dict[str, Any]:
@@ -132,13 +161,53 @@ def run(out: Path, scale: str = "quick") -> dict[str, Any]:
             fps.setdefault("pairs", _pairs(meta))
             fps[f"{backend}_pairs_per_s"] = fps["pairs"] / sec
 
+    surfel_rows, surfel_fps = _surfels(cfg)
     result = {"scale": scale, "machine": machine_info(), "threads": torch.get_num_threads(), "load_average": os.getloadavg(),
               "compile_or_load_s": compile_s, "fwd_bwd": rows, "forward_fps": fps,
+              "surfels_fwd_bwd": surfel_rows, "surfels_forward_fps": surfel_fps,
               "targets": {"speedup_fwd_bwd": 10.0, "fps_50k_200x112": 20.0}}
     atomic_write_text(out / "raster.json", json.dumps(result, indent=2))
     atomic_write_text(out / "raster.md", _markdown(result))
     _chart(result, out / "raster.png")
     return result
+
+
+def _surfels(cfg: dict[str, Any]) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """2DGS rows: fwd+bwd cpu vs torch on the street scenes as surfels, and forward FPS at the fps size."""
+    from nerf2gs_plugin.rendering.surfels_cpu import available  # noqa: PLC0415
+
+    have_cpu = available()
+    rows: list[dict[str, Any]] = []
+    for n, w, h in cfg["surfels_fwdbwd"]:
+        scene = street_scene(n, w, h)
+        row: dict[str, Any] = {"gaussians": n, "width": w, "height": h}
+        if have_cpu:
+            cpu: list[float] = []
+            row["cpu_s"], meta = _time(_surfels_fwd_bwd(scene, "cpu"), max(2, cfg["repeats"] // 2), cpu)
+            row["cpu_cpu_s"] = cpu[0]
+            row["visible"] = int((meta["radii"] > 0).sum())
+            row["pairs"] = _pairs(meta)
+            row["cpu_pairs_per_s"] = row["pairs"] / row["cpu_s"]
+        if w * h <= cfg["surfels_torch_max_pixels"]:
+            cpu = []
+            row["torch_s"], meta = _time(_surfels_fwd_bwd(scene, "torch"), 1, cpu)
+            row["torch_cpu_s"] = cpu[0]
+            row.setdefault("pairs", _pairs(meta))
+        if "cpu_s" in row and "torch_s" in row:
+            row["speedup"] = row["torch_s"] / row["cpu_s"]
+            row["speedup_cpu_time"] = row["torch_cpu_s"] / row["cpu_cpu_s"]
+        rows.append(row)
+    n, w, h = cfg["fps"]
+    scene = street_scene(n, w, h)
+    fps: dict[str, Any] = {"gaussians": n, "width": w, "height": h}
+    for backend in (["cpu"] if have_cpu else []) + ["torch"]:
+        cpu_t: list[float] = []
+        sec, meta = _time(_surfels_forward(scene, backend), cfg["repeats"] * 2 if backend == "cpu" else 1, cpu_t)
+        fps[f"{backend}_fps"] = 1.0 / sec
+        fps[f"{backend}_cpu_s_per_frame"] = cpu_t[0]
+        fps.setdefault("pairs", _pairs(meta))
+        fps[f"{backend}_pairs_per_s"] = fps["pairs"] / sec
+    return rows, fps
 
 
 def _fmt(v: Any, spec: str) -> str:
@@ -147,7 +216,7 @@ def _fmt(v: Any, spec: str) -> str:
 
 def _markdown(r: dict[str, Any]) -> str:
     lines = [
-        "# 3DGS rasterizer: cpu (C++/OpenMP) vs torch reference",
+        "# Rasterizers (3DGS Gaussians, 2DGS surfels): cpu (C++/OpenMP) vs torch reference",
         "",
         f"Machine: {machine_line(r['machine'])}; {r['threads']} torch threads; scale `{r['scale']}`; "
         f"load average at the end {', '.join(f'{v:.1f}' for v in r['load_average'])} (a shared machine: wall times are inflated).",
@@ -175,6 +244,31 @@ def _markdown(r: dict[str, Any]) -> str:
         f"fwd+bwd speedup target >= {r['targets']['speedup_fwd_bwd']:.0f}x).",
         "",
     ]
+    if r.get("surfels_fwd_bwd"):
+        lines += [
+            "## 2DGS surfels: cpu vs torch reference",
+            "",
+            "The same scenes as surfels; forward+backward of RGB+expected depth, normals and distortion.",
+            "",
+            "| surfels | image | visible | pairs (M) | cpu fwd+bwd (s) | torch fwd+bwd (s) | speedup (wall / CPU time) | cpu pairs/s (M) |",
+            "|---:|---:|---:|---:|---:|---:|---:|---:|",
+        ]
+        for row in r["surfels_fwd_bwd"]:
+            lines.append(
+                f"| {row['gaussians']:,} | {row['width']}x{row['height']} | {_fmt(row.get('visible'), ',')} | "
+                f"{_fmt(row.get('pairs', 0) / 1e6, '.1f')} | {_fmt(row.get('cpu_s'), '.3f')} | {_fmt(row.get('torch_s'), '.2f')} | "
+                f"{_fmt(row.get('speedup'), '.1f')}x / {_fmt(row.get('speedup_cpu_time'), '.1f')}x | "
+                f"{_fmt(row.get('cpu_pairs_per_s', 0) / 1e6, '.0f')} |"
+            )
+        f = r["surfels_forward_fps"]
+        lines += [
+            "",
+            f"Forward only, {f['gaussians']:,} surfels at {f['width']}x{f['height']}: "
+            f"cpu {_fmt(f.get('cpu_fps'), '.1f')} FPS ({_fmt(f.get('cpu_pairs_per_s', 0) / 1e6, '.0f')} M pairs/s; "
+            f"{_fmt(f.get('cpu_cpu_s_per_frame', 0) * 1e3, '.0f')} ms of process CPU time per frame), "
+            f"torch {_fmt(f.get('torch_fps'), '.2f')} FPS.",
+            "",
+        ]
     return "\n".join(lines)
 
 
