@@ -135,7 +135,8 @@ def markdown(points: list[dict]) -> str:
                      f"{fmt(p['train_seconds'], 0)} | {p['primitives'] if p['primitives'] is not None else 'n/a'} | "
                      f"{'yes' if i in f_fps else ''} | {'yes' if i in f_time else ''} |")
     lines += ["", "Front (FPS): no other run renders faster with a higher BEV PSNR. Front (time): no other run "
-              "trains faster with a higher BEV PSNR. Runs without a BEV split or FPS are listed but not ranked."]
+              "trains faster with a higher BEV PSNR. Runs without a BEV split or FPS are listed but not ranked. "
+              "Training time is the run's own: a run with NeRF views also needs its reference (the StreetNeRF row's time)."]
     return "\n".join(lines)
 
 
