@@ -32,8 +32,13 @@ class Train(EnhancerTrainConfig):
         from nerf2gs_plugin.enhance.train import report_path, train_enhancer
 
         report = train_enhancer(self)
-        print(f"enhancer saved to {report.out} ({report.seconds:.0f} s, {report.steps} steps, "
-              f"L1 {report.losses[0]:.4f} -> {report.losses[-1]:.4f})")
+        print(f"enhancer saved to {report.out} ({report.seconds:.0f} s, {report.steps} steps, {report.threads} threads, "
+              f"loss {report.losses[0]:.4f} -> {report.losses[-1]:.4f})")
+        if report.validation:
+            first, chosen = report.validation[0], next(v for v in report.validation if v["step"] == report.selected_step)
+            lp = lambda v: f", LPIPS {v['lpips']:.4f}" if v["lpips"] is not None else ""  # noqa: E731
+            print(f"held-out training views: identity PSNR {first['psnr']:.2f} dB{lp(first)}; exported step {report.selected_step}: "
+                  f"PSNR {chosen['psnr']:.2f} dB{lp(chosen)}")
         if report.heldout:
             h = report.heldout
             print(f"held-out {'/'.join(h['splits'])} ({h['images']} images, synthetic degradations): "
@@ -75,7 +80,7 @@ class Apply:
 
 @dataclass
 class Eval:
-    """PSNR before/after enhancement on held-out views (renders of --reference, else degraded images)."""
+    """PSNR and LPIPS before/after enhancement on held-out views (renders of --reference, else degraded images)."""
 
     model: str
     data: Path
@@ -90,7 +95,8 @@ class Eval:
     def main(self) -> None:
         result = evaluate_enhancer(_spec(self.model), self.data, self.reference, self.splits, self.max_images)
         for split, r in result["splits"].items():
-            print(f"{split:>8}: {r['images']:3d} images  PSNR {r['psnr_before']:.2f} -> {r['psnr_after']:.2f} dB")
+            lp = f"  LPIPS {r['lpips_before']:.4f} -> {r['lpips_after']:.4f}" if r.get("lpips_before") is not None else ""
+            print(f"{split:>8}: {r['images']:3d} images  PSNR {r['psnr_before']:.2f} -> {r['psnr_after']:.2f} dB{lp}")
         if self.out is not None:
             from nerf2gs_plugin.engine.config import atomic_write_text
 
@@ -98,7 +104,8 @@ class Eval:
 
 
 def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: tuple[str, ...] = (), max_images: Optional[int] = None) -> dict:
-    """Per split: mean PSNR of the held-out inputs (reference renders or degraded images) and of their enhancement."""
+    """Per split: mean PSNR (and LPIPS, when its weights are installed) of the held-out inputs
+    (reference renders or degraded images) and of their enhancement."""
     import torch
 
     from nerf2gs_plugin.data import list_splits
@@ -119,8 +126,10 @@ def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: 
             result["splits"][s] = {"images": r["images"], "psnr_before": r["psnr_degraded"], "psnr_after": r["psnr_enhanced"]}
         return result
     from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.eval.metrics import LPIPS
     from nerf2gs_plugin.progress import make_progress
 
+    lpips = LPIPS.load_default()
     run = load_run(reference, data=data)
     dm = run.pipeline.datamanager
     train = dm.train_images
@@ -130,7 +139,7 @@ def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: 
             _, imgs = dm.eval_split(s)
             n = len(imgs) if max_images is None else min(len(imgs), max_images)
             task = bar.add_task(f"enhance {s}", total=n, stats="")
-            before, after = [], []
+            before, after, lp_before, lp_after = [], [], [], []
             for i in range(n):
                 gt = imgs.image(i).cpu()
                 render = run.model.render_camera(imgs.cameras[i])["rgb"].detach().cpu()
@@ -138,8 +147,13 @@ def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: 
                 out = enh.enhance(render, reference=train.image(k).cpu())
                 before.append(psnr(render, gt))
                 after.append(psnr(out, gt))
+                if lpips is not None:
+                    lp_before.append(float(lpips(render, gt)))
+                    lp_after.append(float(lpips(out, gt)))
                 bar.update(task, advance=1, stats=f"{before[-1]:.2f} -> {after[-1]:.2f}")
-            result["splits"][s] = {"images": n, "psnr_before": sum(before) / max(n, 1), "psnr_after": sum(after) / max(n, 1)}
+            result["splits"][s] = {"images": n, "psnr_before": sum(before) / max(n, 1), "psnr_after": sum(after) / max(n, 1),
+                                   "lpips_before": sum(lp_before) / n if lp_before else None,
+                                   "lpips_after": sum(lp_after) / n if lp_after else None}
     return result
 
 

@@ -1,11 +1,15 @@
 """Train the built-in enhancer (our small residual U-Net, not Difix) on this dataset's own images.
 
-Training pairs are (degraded, ground truth) crops of the training images:
-* with ``reference`` runs/checkpoints (e.g. a partially trained StreetNeRF checkpoint), the
-  degraded side is that model's render at the training pose (transient pixels left out of the
-  loss, since the NeRF removes cars the ground truth still shows), half of the time further
-  degraded synthetically;
-* always, synthetic degradations (:mod:`nerf2gs_plugin.enhance.degrade`) of the real images.
+Training pairs (degraded, ground truth) come from the training images only:
+* with ``reference`` runs (the StreetNeRF reference), real renders: at the training poses, and from
+  cameras raised and pitched down from them with the training image warped in through the rendered
+  depth (:mod:`nerf2gs_plugin.enhance.pairs`); transient and occluded pixels are left out of the loss;
+* without, synthetic degradations (:mod:`nerf2gs_plugin.enhance.degrade`) of the real images, which
+  do NOT look like real NeRF artifacts: on real bird's-eye renders such a model made PSNR worse.
+The loss is L1 plus an LPIPS term (when LPIPS weights are installed). Every ``holdout_every``-th
+training image is held out: the network is scored on it ``checkpoints`` times during training and the
+best state is exported, the untrained network (the identity: its last layer starts at zero) included,
+so the exported model never scores worse than no enhancement on those held-out training views.
 The trained network is exported to ONNX with its I/O convention in the metadata and is run, like
 any other model, through :mod:`nerf2gs_plugin.enhance.onnx_runtime`.
 """
@@ -16,28 +20,33 @@ import json
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 import torch
 import torch.nn.functional as F
 from torch import Tensor
 
 from nerf2gs_plugin.enhance.degrade import KINDS, degrade
+from nerf2gs_plugin.enhance.pairs import Pair, split_indices
 from nerf2gs_plugin.enhance.unet import MULTIPLE, ResidualUNet, export_onnx
 from nerf2gs_plugin.errors import ConfigError, DataError
+
+# Checkpoint selection score: PSNR - LPIPS_DB * LPIPS (0.01 LPIPS weighs like 0.2 dB).
+LPIPS_DB = 20.0
 
 
 @dataclass
 class EnhancerTrainConfig:
-    """``ns2gs-enhance train``: defaults train in a few minutes on 2 CPU cores."""
+    """``ns2gs-enhance train``: defaults train in under 10 minutes on 2 CPU cores (one thread, busy machine), rendering included."""
 
     data: Path
     """Dataset (nerfstudio transforms.json or COLMAP) whose training images make the pairs."""
     out: Path = Path("outputs/enhancer/enhancer.onnx")
     """Where the ONNX model goes (a training report is written next to it, ``*.report.json``)."""
     reference: tuple[Path, ...] = ()
-    """Runs or checkpoints (ideally partially trained) whose renders at training poses are degraded inputs."""
-    steps: int = 3000
+    """Reference runs or checkpoints (the StreetNeRF reference): their renders make the real training
+    pairs. Without one, only synthetic degradations are used (they do not help on real renders)."""
+    steps: int = 800
     batch_size: int = 8
     crop: int = 64
     """Training crop size (rounded to a multiple of 4, at most the smallest image)."""
@@ -46,11 +55,22 @@ class EnhancerTrainConfig:
     """Channels of the first U-Net level (x2, x4 below)."""
     condition: bool = False
     """Also feed the nearest other training view (channel concatenation) as a reference input."""
+    perturbed: bool = True
+    """With a reference: also pairs from cameras raised 1-4 m and pitched down 5-20 deg from the
+    training poses (novel-view artifacts), with the training image warped in as ground truth."""
+    pair_fraction: float = 1.0
+    """With a reference: share of the batch's crops cut from real pairs (the rest synthetic)."""
+    lpips_weight: float = 0.2
+    """Weight of the LPIPS term of the loss (skipped when no LPIPS weights are installed)."""
+    holdout_every: int = 8
+    """Every k-th training image is held out for checkpoint selection (0: none, keep the last state)."""
+    checkpoints: int = 10
+    """How many times during training the held-out images score the network (best state is exported)."""
     degradations: tuple[str, ...] = KINDS
     strength: float = 1.0
     downscale: float = 1.0
     max_renders: int = 64
-    """At most this many reference renders (they are made once, before training)."""
+    """At most this many training poses rendered per reference (once, before training), held-out ones aside."""
     eval_splits: tuple[str, ...] = ()
     """Held-out splits for the before/after PSNR in the report (default: all eval splits)."""
     seed: int = 0
@@ -65,10 +85,13 @@ class TrainReport:
     out: str
     steps: int
     seconds: float
-    losses: list[float] = field(default_factory=list)  # mean L1 per logging window
+    losses: list[float] = field(default_factory=list)  # mean loss per logging window
     heldout: dict = field(default_factory=dict)  # {"psnr_degraded", "psnr_enhanced", "images", "splits"}
     config: dict = field(default_factory=dict)
     threads: int = 1  # torch threads used for training
+    validation: list = field(default_factory=list)  # [{"step", "psnr", "lpips"}] on held-out training views; step 0 = identity
+    selected_step: Optional[int] = None  # the exported state (0: the identity won)
+    pairs: dict = field(default_factory=dict)  # {"pose": n, "perturbed": n} real pairs used for training
 
 
 def psnr(a: Tensor, b: Tensor) -> float:
@@ -96,28 +119,15 @@ def load_split_images(data: Path, split: str, downscale: float = 1.0) -> tuple[l
     return [_chw(images.image(i)) for i in range(len(images))], outputs.cameras.camera_to_worlds[:, :3, 3].float()
 
 
-def reference_pairs(refs: Sequence[Path], data: Path, max_renders: int, gen: torch.Generator, progress: bool = True) -> list[tuple[Tensor, Tensor, Tensor, int]]:
-    """(render, ground truth, loss mask, image index) at training poses, from each reference."""
-    from nerf2gs_plugin.engine.reference import load_run
-    from nerf2gs_plugin.progress import make_progress
+def reference_pairs(refs: Sequence[Path], data: Path, max_renders: int, gen: torch.Generator, progress: bool = True,
+                    perturbed: bool = False) -> list[Pair]:
+    """Real pairs at up to ``max_renders`` random training poses per reference (see :mod:`~nerf2gs_plugin.enhance.pairs`)."""
+    from nerf2gs_plugin.data import parse_dataset
+    from nerf2gs_plugin.enhance.pairs import reference_pairs as render_pairs
 
-    runs = [load_run(Path(r), data=data) for r in refs]
-    per_run = max(1, max_renders // max(len(runs), 1))
-    pairs = []
-    with make_progress(progress) as bar, torch.no_grad():
-        jobs = [(run, idx) for run in runs for idx in torch.randperm(len(run.pipeline.datamanager.train_images), generator=gen)[:per_run].tolist()]
-        task = bar.add_task("render reference views", total=len(jobs), stats="")
-        for run, i in jobs:
-            imgs = run.pipeline.datamanager.train_images
-            render = run.model.render_camera(imgs.cameras[i])["rgb"].detach().cpu()
-            mask = torch.ones(imgs.hw(i) + (1,))
-            transient = imgs.mask("transient", i)
-            if transient is not None:
-                t = F.max_pool2d(transient.float().cpu().permute(2, 0, 1)[None], 5, 1, 2)[0].permute(1, 2, 0)
-                mask = 1 - t
-            pairs.append((_chw(render), _chw(imgs.image(i)), _chw(mask), i))
-            bar.update(task, advance=1, stats=f"{run.config.method_name} step {run.step}")
-    return pairs
+    n = len(parse_dataset(data, "train").image_filenames)
+    indices = sorted(torch.randperm(n, generator=gen)[:max_renders].tolist())
+    return render_pairs(refs, data, indices, gen, perturbed=perturbed, progress=progress)
 
 
 class _CropSampler:
@@ -187,55 +197,125 @@ def training_threads(requested: int) -> int:
     return 1 if busy else torch.get_num_threads()
 
 
+class _Validator:
+    """Scores a network on held-out training views: mean masked PSNR and LPIPS (pixels outside the
+    mask are taken from the target, so they do not count)."""
+
+    def __init__(self, items: list[tuple[Tensor, Tensor, Tensor, Optional[Tensor]]], lpips) -> None:
+        self.items, self.lpips = items, lpips
+
+    @torch.no_grad()
+    def __call__(self, net: ResidualUNet) -> dict:
+        net.eval()
+        p, l = [], []
+        for inp, tgt, mask, ref in self.items:
+            h, w = inp.shape[-2:]
+            pad = (0, (-w) % MULTIPLE, 0, (-h) % MULTIPLE)
+            x = F.pad(inp[None], pad, mode="replicate")
+            r = F.pad(ref[None], pad, mode="replicate") if ref is not None else None
+            out = net(x, r)[0, :, :h, :w]
+            mse = (((out - tgt) ** 2) * mask).sum() / (mask.sum() * 3).clamp_min(1)
+            p.append(float(-10 * torch.log10(mse.clamp_min(1e-12))))
+            if self.lpips is not None:
+                l.append(float(self.lpips(out * mask + tgt * (1 - mask), tgt)))
+        net.train()
+        res = {"psnr": sum(p) / max(len(p), 1), "lpips": sum(l) / len(l) if l else None}
+        res["score"] = res["psnr"] - (LPIPS_DB * res["lpips"] if res["lpips"] is not None else 0.0)
+        return res
+
+
+def _lpips_loss(lpips, weight: float) -> Optional[Callable[[Tensor, Tensor], Tensor]]:
+    """LPIPS as a differentiable loss term (frozen AlexNet), or None when not used."""
+    if lpips is None or weight <= 0:
+        return None
+    from nerf2gs_plugin.eval.lpips import to_nchw
+
+    for prm in lpips.net.parameters():
+        prm.requires_grad_(False)
+    return lambda out, tgt: weight * lpips.net(to_nchw(out), to_nchw(tgt)).mean()
+
+
 def _train(config: EnhancerTrainConfig, gen: torch.Generator) -> TrainReport:
     from nerf2gs_plugin.data import list_splits
     from nerf2gs_plugin.engine.config import atomic_write_bytes, atomic_write_text
     from nerf2gs_plugin.enhance import OnnxModelEnhancer
+    from nerf2gs_plugin.enhance.pairs import reference_pairs as render_pairs
+    from nerf2gs_plugin.eval.metrics import LPIPS
     from nerf2gs_plugin.progress import make_progress
 
+    if not 0 <= config.pair_fraction <= 1:
+        raise ConfigError(f"--pair-fraction must be in [0, 1] (got {config.pair_fraction})")
     t0 = time.time()
     images, centres = load_split_images(config.data, "train", config.downscale)
-    neighbour = _nearest_other(centres)
-    pairs = reference_pairs(config.reference, config.data, config.max_renders, gen, config.progress) if config.reference else []
-    sizes = [tuple(im.shape[-2:]) for im in images] + [tuple(p[0].shape[-2:]) for p in pairs]
-    sampler = _CropSampler(config.crop, sizes, gen)
+    fit, held = split_indices(len(images), config.holdout_every, None, gen)
+    if not fit:
+        raise DataError(f"no training images left to train on (holdout_every={config.holdout_every}, {len(images)} images)", config.data)
+    # the reference view of an image: the nearest training image that is not held out
+    fit_t = torch.tensor(fit)
+    d = torch.cdist(centres, centres[fit_t])
+    d[fit_t, torch.arange(len(fit))] = float("inf")
+    neighbour = fit_t[d.argmin(1)] if len(fit) > 1 else torch.full((len(images),), fit[0])
 
+    lpips = LPIPS.load_default() if (config.lpips_weight > 0 or config.reference) else None
+    pairs: list[Pair] = []
+    if config.reference:
+        rendered = sorted(fit[k] for k in torch.randperm(len(fit), generator=gen)[: config.max_renders].tolist())
+        pairs = render_pairs(config.reference, config.data, rendered + held, gen, perturbed=config.perturbed, progress=config.progress)
+        if config.downscale != 1.0 and pairs and pairs[0].render.shape[-2:] != images[pairs[0].index].shape[-2:]:
+            raise ConfigError("--downscale must match the reference run's image size when --reference is given")
+    held_set = set(held)
+    train_pairs = [q for q in pairs if q.index not in held_set]
+    ref_of = lambda i: images[int(neighbour[i])] if config.condition else None  # noqa: E731
+    if pairs:
+        val_items = [(q.render, q.target, q.mask, ref_of(q.index)) for q in pairs if q.index in held_set]
+    else:  # held-out training images, degraded synthetically with a fixed seed
+        vgen = torch.Generator().manual_seed(config.seed + 7919)
+        val_items = [(degrade(images[i][None], vgen, config.degradations, config.strength)[0], images[i],
+                      torch.ones(1, *images[i].shape[-2:]), ref_of(i)) for i in held]
+    validate = _Validator(val_items, lpips) if val_items else None
+
+    sizes = [tuple(images[i].shape[-2:]) for i in fit] + [tuple(q.render.shape[-2:]) for q in train_pairs]
+    sampler = _CropSampler(config.crop, sizes, gen)
     net = ResidualUNet(config.width, config.condition)
+    lpips_term = _lpips_loss(lpips, config.lpips_weight)
     opt = torch.optim.Adam(net.parameters(), lr=config.lr)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=config.lr, total_steps=config.steps, pct_start=0.05)
-    losses, window = [], []
+    losses, window, history = [], [], []
+    best = None
+    if validate is not None:  # the untrained network is the identity: the baseline to beat
+        history.append({"step": 0} | validate(net))
+        best = (history[-1]["score"], 0, {k: v.clone() for k, v in net.state_dict().items()})
+    every = max(1, config.steps // max(config.checkpoints, 1))
     log_every = max(1, config.steps // 50)
     with make_progress(config.progress) as bar:
         task = bar.add_task("train enhancer", total=config.steps, stats="")
         for step in range(config.steps):
             inp, tgt, msk, ref = [], [], [], []
             for _ in range(config.batch_size):  # builds the batch; per-sample crops, not pixels
-                use_pair = pairs and float(torch.rand((), generator=gen)) < 0.5
-                if use_pair:
-                    render, gt, mask, i = pairs[int(torch.randint(len(pairs), (), generator=gen))]
-                    h, w = render.shape[-2:]
+                if train_pairs and float(torch.rand((), generator=gen)) < config.pair_fraction:
+                    q = train_pairs[int(torch.randint(len(train_pairs), (), generator=gen))]
+                    h, w = q.render.shape[-2:]
                     y = int(torch.randint(0, h - sampler.crop + 1, (), generator=gen))
                     x = int(torch.randint(0, w - sampler.crop + 1, (), generator=gen))
-                    src = sampler.cut(render, y, x)
-                    if float(torch.rand((), generator=gen)) < 0.5:
-                        src = degrade(src[None], gen, config.degradations, 0.5 * config.strength)[0]
-                    inp.append(src)
-                    tgt.append(sampler.cut(gt, y, x))
-                    msk.append(sampler.cut(mask, y, x))
-                    j = int(neighbour[i]) if i < len(images) else 0
+                    inp.append(sampler.cut(q.render, y, x))
+                    tgt.append(sampler.cut(q.target, y, x))
+                    msk.append(sampler.cut(q.mask, y, x))
+                    i = q.index
                 else:
-                    i = int(torch.randint(len(images), (), generator=gen))
-                    y, x = sampler.window(i)
+                    k = int(torch.randint(len(fit), (), generator=gen))
+                    i = fit[k]
+                    y, x = sampler.window(k)
                     clean = sampler.cut(images[i], y, x)
                     inp.append(degrade(clean[None], gen, config.degradations, config.strength)[0])
                     tgt.append(clean)
                     msk.append(torch.ones(1, sampler.crop, sampler.crop))
-                    j = int(neighbour[i])
                 if config.condition:
-                    ref.append(sampler.cut(images[j], y, x))
+                    ref.append(sampler.cut(images[int(neighbour[i])], y, x))
             inp_t, tgt_t, msk_t = torch.stack(inp), torch.stack(tgt), torch.stack(msk)
             out = net(inp_t, torch.stack(ref) if config.condition else None)
             loss = ((out - tgt_t).abs() * msk_t).sum() / (msk_t.sum() * 3).clamp_min(1)
+            if lpips_term is not None:
+                loss = loss + lpips_term(out * msk_t + tgt_t * (1 - msk_t), tgt_t)
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
@@ -244,13 +324,20 @@ def _train(config: EnhancerTrainConfig, gen: torch.Generator) -> TrainReport:
             if len(window) == log_every or step == config.steps - 1:
                 losses.append(sum(window) / len(window))
                 window = []
-                bar.update(task, stats=f"L1 {losses[-1]:.4f}")
+                bar.update(task, stats=f"loss {losses[-1]:.4f}" + (f" val {history[-1]['psnr']:.2f} dB" if history else ""))
+            if validate is not None and ((step + 1) % every == 0 or step == config.steps - 1):
+                history.append({"step": step + 1} | validate(net))
+                if history[-1]["score"] > best[0]:
+                    best = (history[-1]["score"], step + 1, {k: v.clone() for k, v in net.state_dict().items()})
             bar.update(task, advance=1)
+    if best is not None:
+        net.load_state_dict(best[2])
     train_seconds = time.time() - t0
 
     # The U-Net's receptive radius is ~24 px: an overlap of 96 gives tiles a 24 px zero-weight margin.
     meta = {"tile_size": "512", "overlap": "96", "description": "nerf2gs built-in residual U-Net (not Difix)",
-            "nerf2gs.steps": str(config.steps), "nerf2gs.width": str(config.width)}
+            "nerf2gs.steps": str(config.steps), "nerf2gs.width": str(config.width),
+            "nerf2gs.selected_step": str(best[1] if best is not None else config.steps)}
     out = Path(config.out)
     atomic_write_bytes(out, export_onnx(net, out, meta))
 
@@ -258,18 +345,20 @@ def _train(config: EnhancerTrainConfig, gen: torch.Generator) -> TrainReport:
     splits = list(config.eval_splits) or [s for s in list_splits(config.data) if s != "train"]
     if splits:
         enh = OnnxModelEnhancer(out)
-        held, refs = [], []
+        held_imgs, refs = [], []
         for s in splits:
             imgs, cents = load_split_images(config.data, s, config.downscale)
-            held += imgs
+            held_imgs += imgs
             if config.condition:
-                near = torch.cdist(cents, centres).argmin(1)
-                refs += [images[int(k)] for k in near]
-        heldout = heldout_psnr(enh.enhance, held, config.degradations, config.strength, config.seed, refs if config.condition else None)
+                near = torch.cdist(cents, centres[fit_t]).argmin(1)
+                refs += [images[fit[int(k)]] for k in near]
+        heldout = heldout_psnr(enh.enhance, held_imgs, config.degradations, config.strength, config.seed, refs if config.condition else None)
         heldout["splits"] = splits
+    counts = {kind: sum(q.kind == kind for q in train_pairs) for kind in ("pose", "perturbed")}
     report = TrainReport(str(out), config.steps, train_seconds, losses, heldout,
                          {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(config).items() if k != "reference"}
-                         | {"reference": [str(r) for r in config.reference]}, threads=torch.get_num_threads())
+                         | {"reference": [str(r) for r in config.reference]}, threads=torch.get_num_threads(),
+                         validation=history, selected_step=best[1] if best is not None else None, pairs=counts)
     atomic_write_text(report_path(out), json.dumps(asdict(report), indent=1))
     return report
 

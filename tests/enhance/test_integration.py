@@ -62,14 +62,18 @@ def test_reference_pairs_from_a_partially_trained_run(tiny_scene, tmp_path):
     t.setup()
     run = t.train()
     pairs = reference_pairs([run], tiny_scene, max_renders=3, gen=torch.Generator().manual_seed(0), progress=False)
-    assert len(pairs) == 3
-    for render, gt, mask, i in pairs:
-        assert render.shape == gt.shape == (3, 24, 32) and mask.shape == (1, 24, 32)
-        assert (render - gt).abs().mean() > 0.01  # an early reference is visibly off: a real degraded input
-        assert (mask == 0).any() == (i % 2 == 0)  # transient pixels (even images in the tiny scene) leave the loss
+    assert len(pairs) == 3 and {q.kind for q in pairs} == {"pose"}
+    for q in pairs:
+        assert q.render.shape == q.target.shape == (3, 24, 32) and q.mask.shape == (1, 24, 32)
+        assert (q.render - q.target).abs().mean() > 0.01  # an early reference is visibly off: a real degraded input
+        assert (q.mask == 0).any() == (q.index % 2 == 0)  # transient pixels (even images in the tiny scene) leave the loss
     report = train_enhancer(EnhancerTrainConfig(data=tiny_scene, out=tmp_path / "e.onnx", reference=(run,), steps=4, batch_size=4,
-                                                crop=16, max_renders=4, progress=False, eval_splits=("street",)))
+                                                crop=16, max_renders=4, progress=False, eval_splits=("street",), holdout_every=2,
+                                                checkpoints=2))
     assert report.config["reference"] == [str(run)] and len(report.losses) >= 2
+    # pose and perturbed-pose pairs of the 4 rendered non-held-out images; the identity (step 0) and 2 checkpoints scored
+    assert report.pairs == {"pose": 4, "perturbed": 4}, report.pairs
+    assert [v["step"] for v in report.validation] == [0, 2, 4] and report.selected_step in (0, 2, 4)
     # ns2gs-enhance eval --reference: the run's renders of held-out cameras, before/after enhancement
     from nerf2gs_plugin.cli.enhance import evaluate_enhancer
 

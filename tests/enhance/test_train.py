@@ -35,6 +35,11 @@ def test_train_lowers_loss_and_improves_heldout_psnr(tiny_scene, tmp_path):
     assert saved["steps"] == 150 and saved["heldout"]["splits"] == ["street", "bev_1"]
     first, last = sum(report.losses[:5]) / 5, sum(report.losses[-5:]) / 5
     assert last < 0.85 * first, (first, last)
+    # checkpoint selection on the held-out training image (every 8th): the identity (step 0) is a
+    # candidate, and the exported state is the best-scoring one
+    scores = {v["step"]: v["score"] for v in report.validation}
+    assert report.validation[0]["step"] == 0 and len(scores) == 11 and report.selected_step == max(scores, key=scores.get)
+    assert scores[report.selected_step] > scores[0] + 1.0  # denoising a held-out image beats leaving it noisy
     # held-out eval-split images, never seen in training, degraded the same way (fixed seed):
     h = report.heldout
     assert h["images"] == 4 and h["psnr_enhanced"] > h["psnr_degraded"] + 1.0, h

@@ -1,0 +1,150 @@
+"""Real training pairs for the built-in enhancer, made from a reference run and the training images.
+
+Two kinds, both with a loss mask:
+
+* ``pose``: the reference's render at a training pose vs. that training image (transient objects
+  masked out: the NeRF removes the cars the ground truth still shows);
+* ``perturbed``: the reference's render from a camera raised and pitched down from a training pose
+  (toward the bird's-eye views the enhancer is for) vs. the training image warped into that camera
+  through the reference's rendered depth. Pixels whose warped depth disagrees with the depth the
+  reference renders at the training pose (occluded there), that fall outside the training image,
+  or that land on a transient object are masked out. These are real novel-view artifacts
+  (stretched texture, floaters seen from a new angle) with a ground truth, which renders at the
+  training poses alone do not show.
+
+Everything is vectorised over pixels; the loops run over images.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional, Sequence
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+# Camera perturbation for ``perturbed`` pairs, in metres and degrees (uniform ranges).
+RAISE_M = (1.0, 4.0)
+PITCH_DEG = (5.0, 20.0)
+SIDE_M = 1.0
+DEPTH_TOLERANCE = 0.03  # relative depth disagreement that counts as occluded
+
+
+@dataclass
+class Pair:
+    """One training pair: ``[3, H, W]`` input and target, ``[1, H, W]`` loss mask, training image index."""
+
+    render: Tensor
+    target: Tensor
+    mask: Tensor
+    index: int
+    kind: str  # "pose" or "perturbed"
+
+
+def _chw(img: Tensor) -> Tensor:
+    return img.permute(2, 0, 1).contiguous().float().cpu()
+
+
+def metres_per_unit(run_dir: Path) -> float:
+    """Metres per world unit of a run (``dataparser_transforms.json``), 1 when unknown."""
+    from nerf2gs_plugin.data.normalize import load_dataparser_transform
+
+    path = Path(run_dir) / "dataparser_transforms.json"
+    if not path.is_file():
+        return 1.0
+    tf = load_dataparser_transform(path)
+    return float(tf.metres_per_unit / tf.scale) if tf.scale > 0 else 1.0
+
+
+def _pitch(angle: float) -> Tensor:
+    """Rotation about the camera's x axis (OpenGL camera: positive looks up)."""
+    c, s = math.cos(angle), math.sin(angle)
+    return torch.tensor([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def perturb_pose(c2w: Tensor, up: Tensor, gen: torch.Generator, metres: float) -> Tensor:
+    """``[3, 4]`` camera raised by RAISE_M along ``up``, shifted sideways by up to SIDE_M and pitched down by PITCH_DEG."""
+    u = lambda lo, hi: lo + (hi - lo) * float(torch.rand((), generator=gen))  # noqa: E731
+    out = c2w.clone().float()
+    out[:, :3] = c2w[:, :3].float() @ _pitch(-math.radians(u(*PITCH_DEG))).to(c2w.device)
+    out[:, 3] = out[:, 3] + up.to(out) * (u(*RAISE_M) / metres) + out[:, 0] * (u(-SIDE_M, SIDE_M) / metres)
+    return out
+
+
+def warp_into(camera, depth: Tensor, source_c2w: Tensor, fx: float, fy: float, cx: float, cy: float,
+              source_depth: Tensor, source_image: Tensor, source_mask: Tensor) -> tuple[Tensor, Tensor]:
+    """Warp ``source_image`` ``[3, h, w]`` (seen by the source camera) into ``camera`` through its
+    rendered ray ``depth`` ``[H, W, 1]``: (warped image ``[3, H, W]``, valid mask ``[1, H, W]``)."""
+    h, w = int(camera.height[0]), int(camera.width[0])
+    sh, sw = source_image.shape[-2:]
+    rays = camera.generate_rays(0)
+    points = rays.origins + rays.directions * depth.reshape(-1, 1).to(rays.origins)
+    rot, origin = source_c2w[:, :3].to(points), source_c2w[:, 3].to(points)
+    local = (points - origin) @ rot  # camera frame (OpenGL: looks down -z)
+    z = -local[:, 2]
+    zc = z.clamp_min(1e-6)
+    u = cx + fx * local[:, 0] / zc
+    v = cy - fy * local[:, 1] / zc
+    grid = torch.stack([2 * u / sw - 1, 2 * v / sh - 1], -1).reshape(1, h, w, 2).float().cpu()
+    sample = lambda img, mode: F.grid_sample(img[None].float().cpu(), grid, mode=mode, align_corners=False, padding_mode="border")[0]  # noqa: E731
+    warped = sample(source_image, "bilinear")
+    seen_depth = sample(source_depth, "nearest")[0]
+    dist = (points - origin).norm(dim=-1).reshape(h, w).float().cpu()
+    inside = (grid.abs() <= 1).all(-1)[0] & (z.reshape(h, w).cpu() > 1e-3)
+    visible = (dist - seen_depth).abs() < DEPTH_TOLERANCE * seen_depth + 1e-3 * seen_depth.median()
+    clear = sample(source_mask, "nearest")[0] > 0.5
+    return warped, (inside & visible & clear).float()[None]
+
+
+def _loss_mask(images, i: int) -> Tensor:
+    """``[1, H, W]``: 1 where the ground truth may be compared with a render (transients grown by 2 px are 0)."""
+    transient = images.mask("transient", i)
+    if transient is None:
+        h, w = images.hw(i)
+        return torch.ones(1, h, w)
+    t = F.max_pool2d(transient.float().cpu().permute(2, 0, 1)[None], 5, 1, 2)[0]
+    return 1 - t
+
+
+def reference_pairs(refs: Sequence[Path], data: Path, indices: Sequence[int], gen: torch.Generator,
+                    perturbed: bool = True, progress: bool = True) -> list[Pair]:
+    """``pose`` pairs (and ``perturbed`` ones when asked) at the training images ``indices``, from each reference."""
+    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.progress import make_progress
+
+    pairs: list[Pair] = []
+    runs = [load_run(Path(r), data=data) for r in refs]
+    with make_progress(progress) as bar, torch.no_grad():
+        task = bar.add_task("render reference views", total=len(runs) * len(indices), stats="")
+        for run in runs:
+            imgs = run.pipeline.datamanager.train_images
+            cams = imgs.cameras
+            up = F.normalize(cams.camera_to_worlds[:, :3, 1].float().mean(0), dim=0)
+            metres = metres_per_unit(run.run_dir)
+            for i in indices:
+                cam = cams[i]
+                out = run.model.render_camera(cam)
+                gt, mask = _chw(imgs.image(i)), _loss_mask(imgs, i)
+                pairs.append(Pair(_chw(out["rgb"]), gt, mask, i, "pose"))
+                if perturbed:
+                    c2w = perturb_pose(cam.camera_to_worlds[0], up, gen, metres)
+                    moved = dataclasses.replace(cam, camera_to_worlds=c2w[None])
+                    novel = run.model.render_camera(moved)
+                    target, valid = warp_into(moved, novel["depth"], cam.camera_to_worlds[0], float(cam.fx[0]), float(cam.fy[0]),
+                                              float(cam.cx[0]), float(cam.cy[0]), _chw(out["depth"]), gt, mask)
+                    pairs.append(Pair(_chw(novel["rgb"]), target, valid, i, "perturbed"))
+                bar.update(task, advance=1, stats=f"{run.config.method_name} step {run.step}")
+    return pairs
+
+
+def split_indices(n: int, holdout_every: int, max_train: Optional[int], gen: torch.Generator) -> tuple[list[int], list[int]]:
+    """(pair indices, held-out validation indices): every ``holdout_every``-th image is held out (0 = none)."""
+    held = list(range(0, n, holdout_every)) if holdout_every > 0 and n > 1 else []
+    rest = [i for i in range(n) if i not in set(held)]
+    if max_train is not None and len(rest) > max_train:
+        rest = sorted(rest[k] for k in torch.randperm(len(rest), generator=gen)[:max_train].tolist())
+    return rest, held
