@@ -72,6 +72,16 @@ def _fwd_bwd(scene: dict[str, Any], backend: str) -> Callable[[], dict[str, Any]
     return step
 
 
+def _forward(scene: dict[str, Any], backend: str) -> Callable[[], dict[str, Any]]:
+    from nerf2gs_plugin.rendering import rasterize_gaussians  # noqa: PLC0415
+
+    def render() -> dict[str, Any]:
+        with torch.no_grad():
+            return rasterize_gaussians(**scene, render_mode="RGB", backend=backend)[2]
+
+    return render
+
+
 def _surfels_fwd_bwd(scene: dict[str, Any], backend: str) -> Callable[[], dict[str, Any]]:
     from nerf2gs_plugin.rendering import rasterize_surfels  # noqa: PLC0415
 
@@ -116,9 +126,48 @@ def _pairs(meta: dict[str, Any]) -> int:
     return int(listed) * int(meta["tile_size"]) ** 2
 
 
+Step = Callable[[dict[str, Any], str], Callable[[], dict[str, Any]]]  # (scene, backend) -> timed call returning meta
+
+
+def _fwd_bwd_row(step: Step, n: int, w: int, h: int, have_cpu: bool, cpu_repeats: int, with_torch: bool) -> dict[str, Any]:
+    """One fwd+bwd row: both backends on the same street scene (torch only ``with_torch``: it is slow)."""
+    scene = street_scene(n, w, h)
+    row: dict[str, Any] = {"gaussians": n, "width": w, "height": h}
+    if have_cpu:
+        cpu: list[float] = []
+        row["cpu_s"], meta = _time(step(scene, "cpu"), cpu_repeats, cpu)
+        row["cpu_cpu_s"] = cpu[0]
+        row["visible"] = int((meta["radii"] > 0).sum())
+        row["pairs"] = _pairs(meta)
+        row["cpu_pairs_per_s"] = row["pairs"] / row["cpu_s"]
+    if with_torch:
+        cpu = []
+        row["torch_s"], meta = _time(step(scene, "torch"), 1, cpu)
+        row["torch_cpu_s"] = cpu[0]
+        row.setdefault("pairs", _pairs(meta))
+    if "cpu_s" in row and "torch_s" in row:
+        row["speedup"] = row["torch_s"] / row["cpu_s"]
+        row["speedup_cpu_time"] = row["torch_cpu_s"] / row["cpu_cpu_s"]
+    return row
+
+
+def _forward_fps(forward: Step, size: tuple[int, int, int], have_cpu: bool, cpu_repeats: int) -> dict[str, Any]:
+    """Forward-only frames per second of each backend on the street scene of ``size`` (n, w, h)."""
+    n, w, h = size
+    scene = street_scene(n, w, h)
+    fps: dict[str, Any] = {"gaussians": n, "width": w, "height": h}
+    for backend in (["cpu"] if have_cpu else []) + ["torch"]:
+        cpu_t: list[float] = []
+        sec, meta = _time(forward(scene, backend), cpu_repeats if backend == "cpu" else 1, cpu_t)
+        fps[f"{backend}_fps"] = 1.0 / sec
+        fps[f"{backend}_cpu_s_per_frame"] = cpu_t[0]
+        fps.setdefault("pairs", _pairs(meta))
+        fps[f"{backend}_pairs_per_s"] = fps["pairs"] / sec
+    return fps
+
+
 def run(out: Path, scale: str = "quick") -> dict[str, Any]:
     """Run the benchmark at ``scale`` (``quick`` or ``full``) and write the results under ``out``."""
-    from nerf2gs_plugin.rendering import rasterize_gaussians  # noqa: PLC0415
     from nerf2gs_plugin.rendering.rasterization import load_kernel  # noqa: PLC0415
 
     cfg = SCALES[scale]
@@ -127,40 +176,10 @@ def run(out: Path, scale: str = "quick") -> dict[str, Any]:
     t0 = time.perf_counter()
     have_cpu = load_kernel() is not None
     compile_s = time.perf_counter() - t0
-    rows: list[dict[str, Any]] = []
-    for n, w, h in cfg["fwdbwd"]:
-        scene = street_scene(n, w, h)
-        row: dict[str, Any] = {"gaussians": n, "width": w, "height": h}
-        if have_cpu:
-            cpu: list[float] = []
-            row["cpu_s"], meta = _time(_fwd_bwd(scene, "cpu"), cfg["repeats"], cpu)
-            row["cpu_cpu_s"] = cpu[0]
-            row["visible"] = int((meta["radii"] > 0).sum())
-            row["pairs"] = _pairs(meta)
-            row["cpu_pairs_per_s"] = row["pairs"] / row["cpu_s"]
-        if n <= cfg["torch_max_gaussians"] and w * h <= cfg["torch_max_pixels"]:
-            cpu = []
-            row["torch_s"], meta = _time(_fwd_bwd(scene, "torch"), 1, cpu)
-            row["torch_cpu_s"] = cpu[0]
-            row.setdefault("pairs", _pairs(meta))
-        if "cpu_s" in row and "torch_s" in row:
-            row["speedup"] = row["torch_s"] / row["cpu_s"]
-            row["speedup_cpu_time"] = row["torch_cpu_s"] / row["cpu_cpu_s"]
-        rows.append(row)
-
-    n, w, h = cfg["fps"]
-    scene = street_scene(n, w, h)
-    fps: dict[str, Any] = {"gaussians": n, "width": w, "height": h}
-    with torch.no_grad():
-        for backend in (["cpu"] if have_cpu else []) + ["torch"]:
-            cpu_t: list[float] = []
-            reps = cfg["repeats"] * 3 if backend == "cpu" else 1
-            sec, meta = _time(lambda b=backend: rasterize_gaussians(**scene, render_mode="RGB", backend=b)[2], reps, cpu_t)
-            fps[f"{backend}_fps"] = 1.0 / sec
-            fps[f"{backend}_cpu_s_per_frame"] = cpu_t[0]
-            fps.setdefault("pairs", _pairs(meta))
-            fps[f"{backend}_pairs_per_s"] = fps["pairs"] / sec
-
+    rows = [_fwd_bwd_row(_fwd_bwd, n, w, h, have_cpu, cfg["repeats"],
+                         n <= cfg["torch_max_gaussians"] and w * h <= cfg["torch_max_pixels"])
+            for n, w, h in cfg["fwdbwd"]]
+    fps = _forward_fps(_forward, cfg["fps"], have_cpu, cfg["repeats"] * 3)
     surfel_rows, surfel_fps = _surfels(cfg)
     result = {"scale": scale, "machine": machine_info(), "threads": torch.get_num_threads(), "load_average": os.getloadavg(),
               "compile_or_load_s": compile_s, "fwd_bwd": rows, "forward_fps": fps,
@@ -177,37 +196,10 @@ def _surfels(cfg: dict[str, Any]) -> tuple[list[dict[str, Any]], dict[str, Any]]
     from nerf2gs_plugin.rendering.surfels_cpu import available  # noqa: PLC0415
 
     have_cpu = available()
-    rows: list[dict[str, Any]] = []
-    for n, w, h in cfg["surfels_fwdbwd"]:
-        scene = street_scene(n, w, h)
-        row: dict[str, Any] = {"gaussians": n, "width": w, "height": h}
-        if have_cpu:
-            cpu: list[float] = []
-            row["cpu_s"], meta = _time(_surfels_fwd_bwd(scene, "cpu"), max(2, cfg["repeats"] // 2), cpu)
-            row["cpu_cpu_s"] = cpu[0]
-            row["visible"] = int((meta["radii"] > 0).sum())
-            row["pairs"] = _pairs(meta)
-            row["cpu_pairs_per_s"] = row["pairs"] / row["cpu_s"]
-        if w * h <= cfg["surfels_torch_max_pixels"]:
-            cpu = []
-            row["torch_s"], meta = _time(_surfels_fwd_bwd(scene, "torch"), 1, cpu)
-            row["torch_cpu_s"] = cpu[0]
-            row.setdefault("pairs", _pairs(meta))
-        if "cpu_s" in row and "torch_s" in row:
-            row["speedup"] = row["torch_s"] / row["cpu_s"]
-            row["speedup_cpu_time"] = row["torch_cpu_s"] / row["cpu_cpu_s"]
-        rows.append(row)
-    n, w, h = cfg["fps"]
-    scene = street_scene(n, w, h)
-    fps: dict[str, Any] = {"gaussians": n, "width": w, "height": h}
-    for backend in (["cpu"] if have_cpu else []) + ["torch"]:
-        cpu_t: list[float] = []
-        sec, meta = _time(_surfels_forward(scene, backend), cfg["repeats"] * 2 if backend == "cpu" else 1, cpu_t)
-        fps[f"{backend}_fps"] = 1.0 / sec
-        fps[f"{backend}_cpu_s_per_frame"] = cpu_t[0]
-        fps.setdefault("pairs", _pairs(meta))
-        fps[f"{backend}_pairs_per_s"] = fps["pairs"] / sec
-    return rows, fps
+    rows = [_fwd_bwd_row(_surfels_fwd_bwd, n, w, h, have_cpu, max(2, cfg["repeats"] // 2),
+                         w * h <= cfg["surfels_torch_max_pixels"])
+            for n, w, h in cfg["surfels_fwdbwd"]]
+    return rows, _forward_fps(_surfels_forward, cfg["fps"], have_cpu, cfg["repeats"] * 2)
 
 
 def _fmt(v: Any, spec: str) -> str:
@@ -224,23 +216,9 @@ def _markdown(r: dict[str, Any]) -> str:
         "both backends in the same run; speedup from wall time and from process CPU time.",
         "Pairs = per-tile list entries x tile pixels (the work without early termination or row skipping).",
         "",
-        "| Gaussians | image | visible | pairs (M) | cpu fwd+bwd (s) | torch fwd+bwd (s) | speedup (wall / CPU time) | cpu pairs/s (M) |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|",
-    ]
-    for row in r["fwd_bwd"]:
-        lines.append(
-            f"| {row['gaussians']:,} | {row['width']}x{row['height']} | {_fmt(row.get('visible'), ',')} | "
-            f"{_fmt(row.get('pairs', 0) / 1e6, '.1f')} | {_fmt(row.get('cpu_s'), '.3f')} | {_fmt(row.get('torch_s'), '.2f')} | "
-            f"{_fmt(row.get('speedup'), '.1f')}x / {_fmt(row.get('speedup_cpu_time'), '.1f')}x | "
-            f"{_fmt(row.get('cpu_pairs_per_s', 0) / 1e6, '.0f')} |"
-        )
-    f = r["forward_fps"]
-    lines += [
+        *_table(r["fwd_bwd"], "Gaussians"),
         "",
-        f"Forward only, {f['gaussians']:,} Gaussians at {f['width']}x{f['height']}: "
-        f"cpu {_fmt(f.get('cpu_fps'), '.1f')} FPS ({_fmt(f.get('cpu_pairs_per_s', 0) / 1e6, '.0f')} M pairs/s; "
-        f"{_fmt(f.get('cpu_cpu_s_per_frame', 0) * 1e3, '.0f')} ms of process CPU time per frame), "
-        f"torch {_fmt(f.get('torch_fps'), '.2f')} FPS (target: cpu >= {r['targets']['fps_50k_200x112']:.0f} FPS; "
+        _fps_sentence(r["forward_fps"], "Gaussians") + f" (target: cpu >= {r['targets']['fps_50k_200x112']:.0f} FPS; "
         f"fwd+bwd speedup target >= {r['targets']['speedup_fwd_bwd']:.0f}x).",
         "",
     ]
@@ -250,26 +228,36 @@ def _markdown(r: dict[str, Any]) -> str:
             "",
             "The same scenes as surfels; forward+backward of RGB+expected depth, normals and distortion.",
             "",
-            "| surfels | image | visible | pairs (M) | cpu fwd+bwd (s) | torch fwd+bwd (s) | speedup (wall / CPU time) | cpu pairs/s (M) |",
-            "|---:|---:|---:|---:|---:|---:|---:|---:|",
-        ]
-        for row in r["surfels_fwd_bwd"]:
-            lines.append(
-                f"| {row['gaussians']:,} | {row['width']}x{row['height']} | {_fmt(row.get('visible'), ',')} | "
-                f"{_fmt(row.get('pairs', 0) / 1e6, '.1f')} | {_fmt(row.get('cpu_s'), '.3f')} | {_fmt(row.get('torch_s'), '.2f')} | "
-                f"{_fmt(row.get('speedup'), '.1f')}x / {_fmt(row.get('speedup_cpu_time'), '.1f')}x | "
-                f"{_fmt(row.get('cpu_pairs_per_s', 0) / 1e6, '.0f')} |"
-            )
-        f = r["surfels_forward_fps"]
-        lines += [
+            *_table(r["surfels_fwd_bwd"], "surfels"),
             "",
-            f"Forward only, {f['gaussians']:,} surfels at {f['width']}x{f['height']}: "
-            f"cpu {_fmt(f.get('cpu_fps'), '.1f')} FPS ({_fmt(f.get('cpu_pairs_per_s', 0) / 1e6, '.0f')} M pairs/s; "
-            f"{_fmt(f.get('cpu_cpu_s_per_frame', 0) * 1e3, '.0f')} ms of process CPU time per frame), "
-            f"torch {_fmt(f.get('torch_fps'), '.2f')} FPS.",
+            _fps_sentence(r["surfels_forward_fps"], "surfels") + ".",
             "",
         ]
     return "\n".join(lines)
+
+
+def _table(rows: list[dict[str, Any]], what: str) -> list[str]:
+    """The markdown table of fwd+bwd rows; ``what`` names the primitives (Gaussians, surfels)."""
+    lines = [
+        f"| {what} | image | visible | pairs (M) | cpu fwd+bwd (s) | torch fwd+bwd (s) | speedup (wall / CPU time) | cpu pairs/s (M) |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for row in rows:
+        lines.append(
+            f"| {row['gaussians']:,} | {row['width']}x{row['height']} | {_fmt(row.get('visible'), ',')} | "
+            f"{_fmt(row.get('pairs', 0) / 1e6, '.1f')} | {_fmt(row.get('cpu_s'), '.3f')} | {_fmt(row.get('torch_s'), '.2f')} | "
+            f"{_fmt(row.get('speedup'), '.1f')}x / {_fmt(row.get('speedup_cpu_time'), '.1f')}x | "
+            f"{_fmt(row.get('cpu_pairs_per_s', 0) / 1e6, '.0f')} |"
+        )
+    return lines
+
+
+def _fps_sentence(f: dict[str, Any], what: str) -> str:
+    """The sentence on a forward-FPS result, without its closing punctuation (the 3DGS one adds targets)."""
+    return (f"Forward only, {f['gaussians']:,} {what} at {f['width']}x{f['height']}: "
+            f"cpu {_fmt(f.get('cpu_fps'), '.1f')} FPS ({_fmt(f.get('cpu_pairs_per_s', 0) / 1e6, '.0f')} M pairs/s; "
+            f"{_fmt(f.get('cpu_cpu_s_per_frame', 0) * 1e3, '.0f')} ms of process CPU time per frame), "
+            f"torch {_fmt(f.get('torch_fps'), '.2f')} FPS")
 
 
 def _chart(r: dict[str, Any], path: Path) -> None:

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import pytest
 import torch
 
@@ -11,29 +9,15 @@ from nerf2gs_plugin.rendering.projection import camera_centers, project_gaussian
 from nerf2gs_plugin.rendering.rasterization import load_kernel, project_cpu
 from nerf2gs_plugin.rendering.sh import eval_sh
 from nerf2gs_plugin.rendering.tiles import bin_gaussians
+from projection_cases import assert_same_gradients, random_geometry, three_cameras
 
 pytestmark = pytest.mark.skipif(load_kernel() is None, reason="C++ rasterizer could not be built here")
 
 
-def _cameras(dtype=torch.float64):
-    """Three cameras: identity, shifted, and tilted about x and pushed forward."""
-    vm = torch.eye(4, dtype=dtype).repeat(3, 1, 1)
-    vm[1, 0, 3] = 0.4
-    c, s = math.cos(0.3), math.sin(0.3)
-    vm[2, :3, :3] = torch.tensor([[1, 0, 0], [0, c, -s], [0, s, c]], dtype=dtype)
-    vm[2, 2, 3] = 0.5
-    ks = torch.tensor([[30.0, 0, 20], [0, 30, 15], [0, 0, 1]], dtype=dtype).repeat(3, 1, 1)
-    return vm, ks
-
-
 def _gaussians(n: int, dtype=torch.float64, seed: int = 0):
     g = torch.Generator().manual_seed(seed)
-    means = torch.randn(n, 3, generator=g, dtype=dtype) * torch.tensor([1.5, 1.0, 1.0], dtype=dtype)
-    means[:, 2] += 3.0
-    means[0, 2] = -1.0  # behind every camera: culled, zs = 1
+    means, quats, scales = random_geometry(n, dtype, g)  # quats not normalised: the op uses them as given
     means[1, 0] = 40.0  # far off to the side: the clamped Jacobian
-    quats = torch.randn(n, 4, generator=g, dtype=dtype)  # not normalised: the op uses them as given
-    scales = torch.rand(n, 3, generator=g, dtype=dtype) * 0.3 + 0.05
     sh = torch.randn(n, 16, 3, generator=g, dtype=dtype) * 0.4
     return means, quats, scales, sh
 
@@ -44,7 +28,7 @@ def _outputs(proj, cols):
 
 @pytest.mark.parametrize("degree", [0, 1, 2, 3])
 def test_projection_op_matches_torch_values_and_gradients(degree: int) -> None:
-    vm, ks = _cameras()
+    vm, ks = three_cameras()
     base = _gaussians(40, seed=degree)
     a = [t.clone().requires_grad_(True) for t in base]
     b = [t.clone().requires_grad_(True) for t in base]
@@ -53,20 +37,14 @@ def test_projection_op_matches_torch_values_and_gradients(degree: int) -> None:
     ct = eval_sh(degree, b[3], b[0][None] - camera_centers(vm)[:, None])
     assert torch.equal(pc.radii, pt.radii) and int((pt.radii == 0).sum()) >= 3  # culled pairs are exercised
     assert torch.allclose(pc.cov2d, pt.cov2d, rtol=1e-12, atol=1e-12)
-    g = torch.Generator().manual_seed(99)
-    weights = [torch.randn(x.shape, generator=g, dtype=x.dtype) for x in _outputs(pt, ct)]
     for x, y in zip(_outputs(pc, cc), _outputs(pt, ct)):
         assert torch.allclose(x, y, rtol=1e-12, atol=1e-12)
-    ga = torch.autograd.grad(sum((x * w).sum() for x, w in zip(_outputs(pc, cc), weights)), a)
-    gb = torch.autograd.grad(sum((x * w).sum() for x, w in zip(_outputs(pt, ct), weights)), b)
-    for x, y in zip(ga, gb):
-        assert float(y.abs().max()) > 0
-        assert float((x - y).abs().max()) <= 1e-10 * float(y.abs().max())
+    assert_same_gradients(_outputs(pc, cc), _outputs(pt, ct), a, b, seed=99)
 
 
 @pytest.mark.parametrize("degree", [0, 3])
 def test_projection_op_gradcheck_double(degree: int) -> None:
-    vm, ks = _cameras()
+    vm, ks = three_cameras()
     inputs = [t[2:10].clone().requires_grad_(True) for t in _gaussians(12, seed=5)]
 
     def f(m, q, s, c):
@@ -77,7 +55,7 @@ def test_projection_op_gradcheck_double(degree: int) -> None:
 
 
 def test_projection_op_without_sh_and_float32_matches_torch() -> None:
-    vm, ks = _cameras(torch.float32)
+    vm, ks = three_cameras(torch.float32)
     means, quats, scales, _ = _gaussians(200, dtype=torch.float32, seed=3)
     quats = torch.nn.functional.normalize(quats, dim=-1)
     pc, cols = project_cpu(means, quats, scales, vm, ks, 40, 30)
@@ -91,7 +69,7 @@ def test_projection_op_without_sh_and_float32_matches_torch() -> None:
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
 def test_radix_sorted_binning_matches_torch_with_depth_ties(dtype) -> None:
     """Binning's depth order (C++ radix sort) equals torch's stable argsort, ties included."""
-    vm, ks = _cameras(dtype)
+    vm, ks = three_cameras(dtype)
     means, quats, scales, _ = _gaussians(400, dtype=dtype, seed=4)
     means[::4, 2] = 3.0  # many exact depth ties in the first camera
     proj = project_gaussians(means, torch.nn.functional.normalize(quats, dim=-1), scales, vm, ks, 40, 30)

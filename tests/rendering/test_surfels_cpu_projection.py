@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import pytest
 import torch
 
@@ -11,26 +9,17 @@ from nerf2gs_plugin.rendering.projection import camera_centers
 from nerf2gs_plugin.rendering.sh import eval_sh
 from nerf2gs_plugin.rendering.surfels_cpu import available, project_surfels_cpu, tile_lists_cpu
 from nerf2gs_plugin.rendering.surfels_torch import _adjugate, _det, build_tile_lists, project_surfels
+from projection_cases import assert_same_gradients, random_geometry, three_cameras
 
 pytestmark = pytest.mark.skipif(not available(), reason="C++ surfel kernel could not be built here")
 
 
 def _scene(n: int, dtype=torch.float64, seed: int = 0):
     g = torch.Generator().manual_seed(seed)
-    means = torch.randn(n, 3, generator=g, dtype=dtype) * torch.tensor([1.5, 1.0, 1.0], dtype=dtype)
-    means[:, 2] += 3.0
-    means[0, 2] = -1.0  # behind the cameras
-    quats = torch.randn(n, 4, generator=g, dtype=dtype)  # normalised inside, as the reference
-    scales = torch.rand(n, 3, generator=g, dtype=dtype) * 0.3 + 0.05
+    means, quats, scales = random_geometry(n, dtype, g)  # quats normalised inside, as the reference
     opac = torch.rand(n, generator=g, dtype=dtype)
     sh = torch.randn(n, 16, 3, generator=g, dtype=dtype) * 0.4
-    vm = torch.eye(4, dtype=dtype).repeat(3, 1, 1)
-    vm[1, 0, 3] = 0.4
-    c, s = math.cos(0.3), math.sin(0.3)
-    vm[2, :3, :3] = torch.tensor([[1, 0, 0], [0, c, -s], [0, s, c]], dtype=dtype)
-    vm[2, 2, 3] = 0.5
-    ks = torch.tensor([[30.0, 0, 20], [0, 30, 15], [0, 0, 1]], dtype=dtype).repeat(3, 1, 1)
-    return means, quats, scales, opac, sh, vm, ks
+    return means, quats, scales, opac, sh, *three_cameras(dtype)
 
 
 def _reference(means, quats, scales, opac, sh, vm, ks, degree):
@@ -53,13 +42,7 @@ def test_surfel_projection_op_matches_torch(degree: int) -> None:
     assert torch.allclose(pc.bbox, pt.bbox, rtol=1e-12, atol=1e-10)
     for x, y in zip(ours, ref):
         assert torch.allclose(x, y, rtol=1e-12, atol=1e-10)
-    g = torch.Generator().manual_seed(7)
-    weights = [torch.randn(y.shape, generator=g, dtype=y.dtype) for y in ref]
-    ga = torch.autograd.grad(sum((x * w).sum() for x, w in zip(ours, weights)), a)
-    gb = torch.autograd.grad(sum((y * w).sum() for y, w in zip(ref, weights)), b)
-    for x, y in zip(ga, gb):
-        assert float(y.abs().max()) > 0
-        assert float((x - y).abs().max()) <= 1e-10 * float(y.abs().max())
+    assert_same_gradients(ours, ref, a, b, seed=7)
     lc, lt = tile_lists_cpu(pc, 40, 30, 8), build_tile_lists(pt, 40, 30, 8)
     assert lt.flat_ids.numel() > 60
     assert torch.equal(lc.flat_ids, lt.flat_ids) and torch.equal(lc.starts, lt.starts) and torch.equal(lc.counts, lt.counts)

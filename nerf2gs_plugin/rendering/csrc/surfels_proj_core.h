@@ -13,7 +13,7 @@
 #include <vector>
 
 #include "binning_core.h"    // radix_sort_by_depth
-#include "projection_bwd.h"  // quat_rotmat(+_vjp), sh_basis(+_vjp)
+#include "projection_bwd.h"  // quat_rotmat(+_vjp), view_dir, sh_color(+_vjp)
 
 namespace surf2d {
 
@@ -71,7 +71,6 @@ template <typename T>
 void project_forward(const T* means, const T* quats, const T* scales, const T* opac, const T* sh, const T* viewmats,
                      const T* Ks, const SurfArgs a, int n_threads, T* adj, T* det, T* means2d, T* depths, T* normals,
                      int32_t* radii, T* bbox, T* colors) {
-  const int nb = (a.sh_degree + 1) * (a.sh_degree + 1);
   const T Wd = T(a.width), Hd = T(a.height), big = T(std::max(a.width, a.height)) * T(4);
 #pragma omp parallel for num_threads(n_threads) schedule(static)
   for (int64_t g = 0; g < a.n; ++g) {
@@ -128,19 +127,9 @@ void project_forward(const T* means, const T* quats, const T* scales, const T* o
       bbox[4 * i + 2] = vis ? x1 : T(0);
       bbox[4 * i + 3] = vis ? y1 : T(0);
       if (a.K > 0) {
-        const T* V = viewmats + 16 * c;
-        const T dx0 = m[0] + (V[0] * V[3] + V[4] * V[7] + V[8] * V[11]);
-        const T dy0 = m[1] + (V[1] * V[3] + V[5] * V[7] + V[9] * V[11]);
-        const T dz0 = m[2] + (V[2] * V[3] + V[6] * V[7] + V[10] * V[11]);
-        const T nr = std::max(std::sqrt(dx0 * dx0 + dy0 * dy0 + dz0 * dz0), T(1e-12));
-        T b[16];
-        gs3d::sh_basis<T>(a.sh_degree, dx0 / nr, dy0 / nr, dz0 / nr, b);
-        const T* cf = sh + g * a.K * 3;
-        for (int ch = 0; ch < 3; ++ch) {
-          T acc = 0;
-          for (int k = 0; k < nb; ++k) acc += b[k] * cf[3 * k + ch];
-          colors[3 * i + ch] = std::max(acc + T(0.5), T(0));
-        }
+        T d[3];
+        gs3d::view_dir<T>(viewmats + 16 * c, m, d);
+        gs3d::sh_color<T>(a.sh_degree, d, sh + g * a.K * 3, colors + 3 * i);
       }
     }
   }
@@ -154,7 +143,6 @@ void project_backward(const T* means, const T* quats, const T* scales, const T* 
                       const SurfArgs a, int n_threads, const T* v_adj, const T* v_det, const T* v_means2d,
                       const T* v_depths, const T* v_normals, const T* v_colors, T* v_means, T* v_quats, T* v_scales,
                       T* v_sh) {
-  const int nb = (a.sh_degree + 1) * (a.sh_degree + 1);
 #pragma omp parallel for num_threads(n_threads) schedule(static)
   for (int64_t g = 0; g < a.n; ++g) {
     const T* m = means + 3 * g;
@@ -163,9 +151,7 @@ void project_backward(const T* means, const T* quats, const T* scales, const T* 
     normalize_quat(quats + 4 * g, qn, len);
     gs3d::quat_rotmat<T>(qn, R);
     T gm[3] = {0, 0, 0}, gR[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0}, gs0 = 0, gs1 = 0;
-    T* vsh = a.K > 0 ? v_sh + g * a.K * 3 : nullptr;
-    if (vsh)
-      for (int64_t k = 0; k < a.K * 3; ++k) vsh[k] = 0;
+    T* vsh = gs3d::sh_grad_rows<T>(v_sh, g, a.K);
     for (int64_t c = 0; c < a.n_cams; ++c) {
       const int64_t i = c * a.n + g;
       const T* V = viewmats + 16 * c;
@@ -219,35 +205,9 @@ void project_backward(const T* means, const T* quats, const T* scales, const T* 
         gs1 += wv * R[3 * k + 1];
       }
       if (vsh != nullptr && v_colors != nullptr) {
-        const T dx0 = m[0] + (V[0] * V[3] + V[4] * V[7] + V[8] * V[11]);
-        const T dy0 = m[1] + (V[1] * V[3] + V[5] * V[7] + V[9] * V[11]);
-        const T dz0 = m[2] + (V[2] * V[3] + V[6] * V[7] + V[10] * V[11]);
-        const T nr = std::max(std::sqrt(dx0 * dx0 + dy0 * dy0 + dz0 * dz0), T(1e-12));
-        const T x = dx0 / nr, y = dy0 / nr, z = dz0 / nr;
-        T b[16];
-        gs3d::sh_basis<T>(a.sh_degree, x, y, z, b);
-        const T* cf = sh + g * a.K * 3;
-        T gc[3];
-        for (int ch = 0; ch < 3; ++ch) {
-          T acc = 0;
-          for (int k = 0; k < nb; ++k) acc += b[k] * cf[3 * k + ch];
-          gc[ch] = acc + T(0.5) >= T(0) ? v_colors[3 * i + ch] : T(0);
-        }
-        T Gk[16];
-        for (int k = 0; k < nb; ++k) {
-          Gk[k] = 0;
-          for (int ch = 0; ch < 3; ++ch) {
-            vsh[3 * k + ch] += b[k] * gc[ch];
-            Gk[k] += cf[3 * k + ch] * gc[ch];
-          }
-        }
-        T gx, gy, gz;
-        gs3d::sh_basis_vjp<T>(a.sh_degree, x, y, z, Gk, gx, gy, gz);
-        const T dot = gx * x + gy * y + gz * z;
-        const T inv = nr > T(1e-12) ? T(1) / nr : T(0);
-        gm[0] += (gx - x * dot) * inv;
-        gm[1] += (gy - y * dot) * inv;
-        gm[2] += (gz - z * dot) * inv;
+        T d[3];
+        gs3d::view_dir<T>(V, m, d);
+        gs3d::sh_color_vjp<T>(a.sh_degree, d, sh + g * a.K * 3, v_colors + 3 * i, vsh, gm);
       }
     }
     for (int k = 0; k < 3; ++k) v_means[3 * g + k] = gm[k];
