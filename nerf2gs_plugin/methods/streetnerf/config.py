@@ -4,9 +4,10 @@ Default (CPU scale: the synthetic street at ~200x112 px on 2 CPU cores, well und
 see ``DEFAULT_STEPS``, 1024 rays per batch, a 12-level 2^15 hash grid, proposal rounds 48 -> 24 ->
 24 fine samples. The learning rates decay over ``max_num_iterations`` whatever it is set to.
 Measured on the synthetic street (ns2gs-data synth-street defaults, 200x112, 60 views; shared 2-core
-Xeon, 1 torch thread, load 3-6): 3000 steps in 710 s; street / bev_1 / bev_2 PSNR 22.85 / 15.36 /
-14.90 (all eval views). At step 2000 (4 views per split) ground regularisation on vs off:
-23.20 / 15.15 / 14.75 vs 22.20 / 14.85 / 14.47, bev SSIM 0.40 vs 0.30 (flat road, no dark blotches).
+Xeon, load 3-5, `ns2gs-bench paper-table --scale default`): 3000 steps in 753 s; street / bev_1 / bev_2
+PSNR 26.47 / 23.69 / 21.93 (Splatfacto's default run in the same bench: 24.36 / 19.68 / 19.02). Without
+the sparse-point depth loss (quick bench, 1500 steps) bev_1 was 18.28 dB: the upper facades stay
+half-built. Ground regularisation on vs off: see `ns2gs-bench ablation`.
 
 Paper scale (``streetnerf_paper_method``, :func:`paper_scale`): Zip-NeRF/nerfacto-like capacity for
 a GPU: 16 levels x 2^19 entries up to 4096, proposal samples 256 -> 96 -> 48, 4096 rays, 25k steps.
