@@ -28,8 +28,8 @@ import torch.nn.functional as F
 from torch import Tensor
 
 # Camera perturbation for ``perturbed`` pairs, in metres and degrees (uniform ranges).
-RAISE_M = (1.0, 4.0)
-PITCH_DEG = (5.0, 20.0)
+RAISE_M = (2.0, 8.0)
+PITCH_DEG = (10.0, 35.0)
 SIDE_M = 1.0
 DEPTH_TOLERANCE = 0.03  # relative depth disagreement that counts as occluded
 

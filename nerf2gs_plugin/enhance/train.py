@@ -46,7 +46,7 @@ class EnhancerTrainConfig:
     reference: tuple[Path, ...] = ()
     """Reference runs or checkpoints (the StreetNeRF reference): their renders make the real training
     pairs. Without one, only synthetic degradations are used (they do not help on real renders)."""
-    steps: int = 800
+    steps: int = 600
     batch_size: int = 8
     crop: int = 64
     """Training crop size (rounded to a multiple of 4, at most the smallest image)."""
@@ -56,7 +56,7 @@ class EnhancerTrainConfig:
     condition: bool = False
     """Also feed the nearest other training view (channel concatenation) as a reference input."""
     perturbed: bool = True
-    """With a reference: also pairs from cameras raised 1-4 m and pitched down 5-20 deg from the
+    """With a reference: also pairs from cameras raised 2-8 m and pitched down 10-35 deg from the
     training poses (novel-view artifacts), with the training image warped in as ground truth."""
     pair_fraction: float = 1.0
     """With a reference: share of the batch's crops cut from real pairs (the rest synthetic)."""
