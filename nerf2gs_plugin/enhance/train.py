@@ -60,7 +60,7 @@ class EnhancerTrainConfig:
     training poses (novel-view artifacts), with the training image warped in as ground truth."""
     pair_fraction: float = 1.0
     """With a reference: share of the batch's crops cut from real pairs (the rest synthetic)."""
-    lpips_weight: float = 0.2
+    lpips_weight: float = 0.3
     """Weight of the LPIPS term of the loss (skipped when no LPIPS weights are installed)."""
     holdout_every: int = 8
     """Every k-th training image is held out for checkpoint selection (0: none, keep the last state)."""
