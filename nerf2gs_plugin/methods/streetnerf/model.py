@@ -185,7 +185,7 @@ class StreetNeRFModel(Model):
         if len(pr) == 0:
             warnings.warn("StreetNeRF: no sparse point is visible in a training view; training without the point depth loss", stacklevel=3)
             return
-        rays = train_data.cameras.generate_rays(pr.camera_indices, pr.coords)
+        rays = pr.rays
         for name, value in (("pt_origins", rays.origins), ("pt_directions", rays.directions), ("pt_radius", rays.pixel_radius),
                             ("pt_cameras", pr.camera_indices), ("pt_t_star", pr.t_star)):
             self.register_buffer(name, value.clone(), persistent=False)

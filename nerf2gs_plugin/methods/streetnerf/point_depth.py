@@ -20,26 +20,30 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from nerf2gs_plugin.cameras import Cameras
+from nerf2gs_plugin.cameras import Cameras, RayBundle
 
 
 @dataclass
 class PointRays:
     """One row per (camera, visible point): the pixel to cast and the point's distance along it."""
 
-    camera_indices: Tensor  # [N] long
+    rays: RayBundle  # [N] rays through the pixel centres (camera_indices says whose)
     coords: Tensor  # [N, 2] long pixel (u, v)
     t_star: Tensor  # [N] distance from the camera centre to the point along the pixel's unit ray
 
+    @property
+    def camera_indices(self) -> Tensor:
+        return self.rays.camera_indices
+
     def __len__(self) -> int:
-        return int(self.camera_indices.shape[0])
+        return int(self.t_star.shape[0])
 
 
 @torch.no_grad()
 def visible_point_rays(cameras: Cameras, points: Tensor, cell: int = 8, tolerance: float = 0.1,
                        min_depth: float = 1e-3) -> PointRays:
     """Every (camera, point) pair where ``points [P, 3]`` (normalised world) is visible; see the module doc."""
-    cams, uvs, ts = [], [], []
+    bundles, uvs, ts = [], [], []
     points = points.float().to(cameras.device)
     for i in range(len(cameras)):  # one vectorised projection per camera
         uv, z = cameras.project(points, i)
@@ -59,12 +63,15 @@ def visible_point_rays(cameras: Cameras, points: Tensor, cell: int = 8, toleranc
         coords = torch.stack([u, v], dim=-1)
         rays = cameras.generate_rays(torch.full((len(idx),), i, dtype=torch.long, device=z.device), coords)
         t = ((points[idx] - rays.origins) * rays.directions).sum(-1)
-        cams.append(torch.full((len(idx),), i, dtype=torch.long))
-        uvs.append(coords.cpu())
-        ts.append(t.cpu())
-    if not cams:
-        return PointRays(torch.zeros(0, dtype=torch.long), torch.zeros(0, 2, dtype=torch.long), torch.zeros(0))
-    return PointRays(torch.cat(cams), torch.cat(uvs), torch.cat(ts))
+        bundles.append(rays)
+        uvs.append(coords)
+        ts.append(t)
+    if not bundles:
+        empty = torch.zeros(0, 3, device=points.device)
+        return PointRays(RayBundle(empty, empty, torch.zeros(0, 1, device=points.device), torch.zeros(0, dtype=torch.long, device=points.device)),
+                         torch.zeros(0, 2, dtype=torch.long), torch.zeros(0))
+    rays = RayBundle(*(torch.cat([getattr(b, k) for b in bundles]) for k in ("origins", "directions", "pixel_radius", "camera_indices")))
+    return PointRays(rays, torch.cat(uvs), torch.cat(ts))
 
 
 def line_of_sight_loss(weights: Tensor, t_mid: Tensor, accumulation: Tensor, t_star: Tensor) -> Tensor:
