@@ -174,15 +174,17 @@ def bench_enhancer(data: Path, runs_root: Path, scale: str) -> str:
 
 @dataclass
 class Raster:
-    """Rasterizer speed: cpu extension vs torch reference (and gsplat on a GPU)."""
+    """Rasterizer speed: cpu extension vs torch reference (``raster.*``), or with ``--device cuda``
+    gsplat vs the torch reference on the GPU (``raster_cuda.*``)."""
 
     scale: Literal["quick", "full"] = "quick"
+    device: Literal["cpu", "cuda"] = "cpu"
     out: Path = RESULTS
 
     def main(self) -> None:
         from nerf2gs_plugin.eval.bench_raster import run
 
-        run(self.out, self.scale)
+        run(self.out, self.scale, self.device)
 
 
 @dataclass

@@ -110,4 +110,5 @@ class DataManager:
 
     def load_state_dict(self, state: dict) -> None:
         if "generator" in state:
-            self.generator.set_state(state["generator"])
+            # a checkpoint loaded with map_location="cuda" moves the (CPU) generator's state there
+            self.generator.set_state(state["generator"].cpu())

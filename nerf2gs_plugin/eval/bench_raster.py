@@ -106,14 +106,22 @@ def _surfels_forward(scene: dict[str, Any], backend: str) -> Callable[[], dict[s
     return render
 
 
+def _sync() -> None:
+    if torch.cuda.is_available():
+        torch.cuda.synchronize()
+
+
 def _time(fn: Callable[[], Any], repeats: int, cpu: Optional[list[float]] = None) -> tuple[float, Any]:
     """Best wall time of ``repeats`` runs after a warm-up; ``cpu`` receives the best process CPU time
-    (all threads), which a loaded shared machine inflates far less than wall time."""
+    (all threads), which a loaded shared machine inflates far less than wall time. GPU work is
+    synchronised before each clock read."""
     out = fn()  # warm-up (and compile on first use)
     best, best_cpu = math.inf, math.inf
     for _ in range(repeats):
+        _sync()
         t0, c0 = time.perf_counter(), time.process_time()
         out = fn()
+        _sync()
         best, best_cpu = min(best, time.perf_counter() - t0), min(best_cpu, time.process_time() - c0)
     if cpu is not None:
         cpu.append(best_cpu)
@@ -129,86 +137,105 @@ def _pairs(meta: dict[str, Any]) -> int:
 Step = Callable[[dict[str, Any], str], Callable[[], dict[str, Any]]]  # (scene, backend) -> timed call returning meta
 
 
-def _fwd_bwd_row(step: Step, n: int, w: int, h: int, have_cpu: bool, cpu_repeats: int, with_torch: bool) -> dict[str, Any]:
-    """One fwd+bwd row: both backends on the same street scene (torch only ``with_torch``: it is slow)."""
-    scene = street_scene(n, w, h)
+def _on(scene: dict[str, Any], device: str) -> dict[str, Any]:
+    return {k: (v.to(device) if torch.is_tensor(v) else v) for k, v in scene.items()}
+
+
+def _fwd_bwd_row(step: Step, n: int, w: int, h: int, fast: Optional[str], repeats: int, with_torch: bool,
+                 device: str = "cpu") -> dict[str, Any]:
+    """One fwd+bwd row: the ``fast`` backend (cpu or gsplat; None when unavailable) and the torch
+    reference (only ``with_torch``: it is slow on a CPU) on the same street scene."""
+    scene = _on(street_scene(n, w, h), device)
     row: dict[str, Any] = {"gaussians": n, "width": w, "height": h}
-    if have_cpu:
+    if fast:
         cpu: list[float] = []
-        row["cpu_s"], meta = _time(step(scene, "cpu"), cpu_repeats, cpu)
-        row["cpu_cpu_s"] = cpu[0]
+        row[f"{fast}_s"], meta = _time(step(scene, fast), repeats, cpu)
+        row[f"{fast}_cpu_s"] = cpu[0]
         row["visible"] = int((meta["radii"] > 0).sum())
-        row["pairs"] = _pairs(meta)
-        row["cpu_pairs_per_s"] = row["pairs"] / row["cpu_s"]
+        row["pairs"] = _pairs(meta) if fast == "cpu" else None  # gsplat does not report its list length
+        if row["pairs"]:
+            row["cpu_pairs_per_s"] = row["pairs"] / row["cpu_s"]
     if with_torch:
         cpu = []
         row["torch_s"], meta = _time(step(scene, "torch"), 1, cpu)
         row["torch_cpu_s"] = cpu[0]
-        row.setdefault("pairs", _pairs(meta))
-    if "cpu_s" in row and "torch_s" in row:
-        row["speedup"] = row["torch_s"] / row["cpu_s"]
-        row["speedup_cpu_time"] = row["torch_cpu_s"] / row["cpu_cpu_s"]
+        row["pairs"] = row.get("pairs") or _pairs(meta)
+    if fast and f"{fast}_s" in row and "torch_s" in row:
+        row["speedup"] = row["torch_s"] / row[f"{fast}_s"]
+        row["speedup_cpu_time"] = row["torch_cpu_s"] / row[f"{fast}_cpu_s"]
     return row
 
 
-def _forward_fps(forward: Step, size: tuple[int, int, int], have_cpu: bool, cpu_repeats: int) -> dict[str, Any]:
+def _forward_fps(forward: Step, size: tuple[int, int, int], fast: Optional[str], repeats: int,
+                 device: str = "cpu") -> dict[str, Any]:
     """Forward-only frames per second of each backend on the street scene of ``size`` (n, w, h)."""
     n, w, h = size
-    scene = street_scene(n, w, h)
+    scene = _on(street_scene(n, w, h), device)
     fps: dict[str, Any] = {"gaussians": n, "width": w, "height": h}
-    for backend in (["cpu"] if have_cpu else []) + ["torch"]:
+    for backend in ([fast] if fast else []) + ["torch"]:
         cpu_t: list[float] = []
-        sec, meta = _time(forward(scene, backend), cpu_repeats if backend == "cpu" else 1, cpu_t)
+        sec, meta = _time(forward(scene, backend), repeats if backend == fast or device != "cpu" else 1, cpu_t)
         fps[f"{backend}_fps"] = 1.0 / sec
         fps[f"{backend}_cpu_s_per_frame"] = cpu_t[0]
-        fps.setdefault("pairs", _pairs(meta))
-        fps[f"{backend}_pairs_per_s"] = fps["pairs"] / sec
+        if backend != "gsplat":
+            fps.setdefault("pairs", _pairs(meta))
+            fps[f"{backend}_pairs_per_s"] = fps["pairs"] / sec
     return fps
 
 
-def run(out: Path, scale: str = "quick") -> dict[str, Any]:
-    """Run the benchmark at ``scale`` (``quick`` or ``full``) and write the results under ``out``."""
+def run(out: Path, scale: str = "quick", device: str = "cpu") -> dict[str, Any]:
+    """Run the benchmark at ``scale`` (``quick`` or ``full``) and write the results under ``out``:
+    ``raster.*`` on the CPU (cpu kernel vs torch), ``raster_cuda.*`` on a GPU (gsplat vs torch)."""
+    from nerf2gs_plugin.rendering.backend import gsplat_available  # noqa: PLC0415
     from nerf2gs_plugin.rendering.rasterization import load_kernel  # noqa: PLC0415
+    from nerf2gs_plugin.rendering.surfels_cpu import available  # noqa: PLC0415
 
     cfg = SCALES[scale]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    have_cpu = load_kernel() is not None
+    if device == "cuda":
+        fast = surfel_fast = "gsplat" if gsplat_available() else None
+        # the torch reference is fast enough on a GPU for every size
+        torch_max_pixels = torch_max_gaussians = surfels_torch_max_pixels = math.inf
+    else:
+        fast = "cpu" if load_kernel() is not None else None
+        surfel_fast = "cpu" if available() else None
+        torch_max_pixels, torch_max_gaussians = cfg["torch_max_pixels"], cfg["torch_max_gaussians"]
+        surfels_torch_max_pixels = cfg["surfels_torch_max_pixels"]
     compile_s = time.perf_counter() - t0
-    rows = [_fwd_bwd_row(_fwd_bwd, n, w, h, have_cpu, cfg["repeats"],
-                         n <= cfg["torch_max_gaussians"] and w * h <= cfg["torch_max_pixels"])
+    rows = [_fwd_bwd_row(_fwd_bwd, n, w, h, fast, cfg["repeats"],
+                         n <= torch_max_gaussians and w * h <= torch_max_pixels, device)
             for n, w, h in cfg["fwdbwd"]]
-    fps = _forward_fps(_forward, cfg["fps"], have_cpu, cfg["repeats"] * 3)
-    surfel_rows, surfel_fps = _surfels(cfg)
-    result = {"scale": scale, "machine": machine_info(), "threads": torch.get_num_threads(), "load_average": os.getloadavg(),
+    fps = _forward_fps(_forward, cfg["fps"], fast, cfg["repeats"] * 3, device)
+    surfel_rows = [_fwd_bwd_row(_surfels_fwd_bwd, n, w, h, surfel_fast, max(2, cfg["repeats"] // 2),
+                                w * h <= surfels_torch_max_pixels, device)
+                   for n, w, h in cfg["surfels_fwdbwd"]]
+    surfel_fps = _forward_fps(_surfels_forward, cfg["fps"], surfel_fast, cfg["repeats"] * 2, device)
+    result = {"scale": scale, "device": device, "fast_backend": fast or "none", "machine": machine_info(),
+              "threads": torch.get_num_threads(), "load_average": os.getloadavg(),
               "compile_or_load_s": compile_s, "fwd_bwd": rows, "forward_fps": fps,
               "surfels_fwd_bwd": surfel_rows, "surfels_forward_fps": surfel_fps,
               "targets": {"speedup_fwd_bwd": 10.0, "fps_50k_200x112": 20.0}}
-    atomic_write_text(out / "raster.json", json.dumps(result, indent=2))
-    atomic_write_text(out / "raster.md", _markdown(result))
-    _chart(result, out / "raster.png")
+    stem = "raster" if device == "cpu" else f"raster_{device}"
+    atomic_write_text(out / f"{stem}.json", json.dumps(result, indent=2))
+    atomic_write_text(out / f"{stem}.md", _markdown(result))
+    _chart(result, out / f"{stem}.png")
     return result
-
-
-def _surfels(cfg: dict[str, Any]) -> tuple[list[dict[str, Any]], dict[str, Any]]:
-    """2DGS rows: fwd+bwd cpu vs torch on the street scenes as surfels, and forward FPS at the fps size."""
-    from nerf2gs_plugin.rendering.surfels_cpu import available  # noqa: PLC0415
-
-    have_cpu = available()
-    rows = [_fwd_bwd_row(_surfels_fwd_bwd, n, w, h, have_cpu, max(2, cfg["repeats"] // 2),
-                         w * h <= cfg["surfels_torch_max_pixels"])
-            for n, w, h in cfg["surfels_fwdbwd"]]
-    return rows, _forward_fps(_surfels_forward, cfg["fps"], have_cpu, cfg["repeats"] * 2)
 
 
 def _fmt(v: Any, spec: str) -> str:
     return format(v, spec) if isinstance(v, (int, float)) else "-"
 
 
+_LABELS = {"cpu": "cpu (C++/OpenMP)", "gsplat": "gsplat (CUDA)", "none": "none available"}
+
+
 def _markdown(r: dict[str, Any]) -> str:
+    fast = r.get("fast_backend", "cpu")
+    where = "on the GPU (CUDA tensors)" if r.get("device", "cpu") != "cpu" else "on the CPU"
     lines = [
-        "# Rasterizers (3DGS Gaussians, 2DGS surfels): cpu (C++/OpenMP) vs torch reference",
+        f"# Rasterizers (3DGS Gaussians, 2DGS surfels) {where}: {_LABELS.get(fast, fast)} vs torch reference",
         "",
         f"Machine: {machine_line(r['machine'])}; {r['threads']} torch threads; scale `{r['scale']}`; "
         f"load average at the end {', '.join(f'{v:.1f}' for v in r['load_average'])} (a shared machine: wall times are inflated).",
@@ -216,47 +243,49 @@ def _markdown(r: dict[str, Any]) -> str:
         "both backends in the same run; speedup from wall time and from process CPU time.",
         "Pairs = per-tile list entries x tile pixels (the work without early termination or row skipping).",
         "",
-        *_table(r["fwd_bwd"], "Gaussians"),
+        *_table(r["fwd_bwd"], "Gaussians", fast),
         "",
-        _fps_sentence(r["forward_fps"], "Gaussians") + f" (target: cpu >= {r['targets']['fps_50k_200x112']:.0f} FPS; "
+        _fps_sentence(r["forward_fps"], "Gaussians", fast) + f" (target: {fast} >= {r['targets']['fps_50k_200x112']:.0f} FPS; "
         f"fwd+bwd speedup target >= {r['targets']['speedup_fwd_bwd']:.0f}x).",
         "",
     ]
     if r.get("surfels_fwd_bwd"):
         lines += [
-            "## 2DGS surfels: cpu vs torch reference",
+            f"## 2DGS surfels: {_LABELS.get(fast, fast)} vs torch reference",
             "",
             "The same scenes as surfels; forward+backward of RGB+expected depth, normals and distortion.",
             "",
-            *_table(r["surfels_fwd_bwd"], "surfels"),
+            *_table(r["surfels_fwd_bwd"], "surfels", fast),
             "",
-            _fps_sentence(r["surfels_forward_fps"], "surfels") + ".",
+            _fps_sentence(r["surfels_forward_fps"], "surfels", fast) + ".",
             "",
         ]
     return "\n".join(lines)
 
 
-def _table(rows: list[dict[str, Any]], what: str) -> list[str]:
+def _table(rows: list[dict[str, Any]], what: str, fast: str = "cpu") -> list[str]:
     """The markdown table of fwd+bwd rows; ``what`` names the primitives (Gaussians, surfels)."""
     lines = [
-        f"| {what} | image | visible | pairs (M) | cpu fwd+bwd (s) | torch fwd+bwd (s) | speedup (wall / CPU time) | cpu pairs/s (M) |",
+        f"| {what} | image | visible | pairs (M) | {fast} fwd+bwd (s) | torch fwd+bwd (s) | speedup (wall / CPU time) | {fast} pairs/s (M) |",
         "|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for row in rows:
         lines.append(
             f"| {row['gaussians']:,} | {row['width']}x{row['height']} | {_fmt(row.get('visible'), ',')} | "
-            f"{_fmt(row.get('pairs', 0) / 1e6, '.1f')} | {_fmt(row.get('cpu_s'), '.3f')} | {_fmt(row.get('torch_s'), '.2f')} | "
+            f"{_fmt((row.get('pairs') or 0) / 1e6, '.1f')} | {_fmt(row.get(f'{fast}_s'), '.4f')} | {_fmt(row.get('torch_s'), '.3f')} | "
             f"{_fmt(row.get('speedup'), '.1f')}x / {_fmt(row.get('speedup_cpu_time'), '.1f')}x | "
-            f"{_fmt(row.get('cpu_pairs_per_s', 0) / 1e6, '.0f')} |"
+            f"{_fmt(row[f'{fast}_pairs_per_s'] / 1e6, '.0f') if f'{fast}_pairs_per_s' in row else '-'} |"
         )
     return lines
 
 
-def _fps_sentence(f: dict[str, Any], what: str) -> str:
+def _fps_sentence(f: dict[str, Any], what: str, fast: str = "cpu") -> str:
     """The sentence on a forward-FPS result, without its closing punctuation (the 3DGS one adds targets)."""
+    pairs = f.get(f"{fast}_pairs_per_s")
+    pairs_txt = f"{pairs / 1e6:.0f} M pairs/s; " if pairs else ""
     return (f"Forward only, {f['gaussians']:,} {what} at {f['width']}x{f['height']}: "
-            f"cpu {_fmt(f.get('cpu_fps'), '.1f')} FPS ({_fmt(f.get('cpu_pairs_per_s', 0) / 1e6, '.0f')} M pairs/s; "
-            f"{_fmt(f.get('cpu_cpu_s_per_frame', 0) * 1e3, '.0f')} ms of process CPU time per frame), "
+            f"{fast} {_fmt(f.get(f'{fast}_fps'), '.1f')} FPS ({pairs_txt}"
+            f"{_fmt(f.get(f'{fast}_cpu_s_per_frame', 0) * 1e3, '.0f')} ms of process CPU time per frame), "
             f"torch {_fmt(f.get('torch_fps'), '.2f')} FPS")
 
 
@@ -266,19 +295,21 @@ def _chart(r: dict[str, Any], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # noqa: PLC0415
 
-    rows = r["fwd_bwd"]
-    labels = [f"{row['gaussians'] // 1000}k\n{row['width']}x{row['height']}" for row in rows]
-    x = range(len(rows))
-    fig, ax = plt.subplots(figsize=(max(5, 1.4 * len(rows) + 2), 3.5))
-    ax.bar([i - 0.2 for i in x], [row.get("cpu_s", 0) for row in rows], 0.4, label="cpu (C++)")
-    ax.bar([i + 0.2 for i in x], [row.get("torch_s", 0) for row in rows], 0.4, label="torch reference")
-    for i, row in enumerate(rows):
+    fast = r.get("fast_backend", "cpu")
+    groups = [("3DGS", row) for row in r["fwd_bwd"]] + [("2DGS", row) for row in r.get("surfels_fwd_bwd", [])]
+    labels = [f"{kind} {row['gaussians'] // 1000}k\n{row['width']}x{row['height']}" for kind, row in groups]
+    x = range(len(groups))
+    fig, ax = plt.subplots(figsize=(max(5, 1.4 * len(groups) + 2), 3.5))
+    ax.bar([i - 0.2 for i in x], [row.get(f"{fast}_s", 0) for _, row in groups], 0.4, label=_LABELS.get(fast, fast))
+    ax.bar([i + 0.2 for i in x], [row.get("torch_s", 0) for _, row in groups], 0.4, label="torch reference")
+    for i, (_, row) in enumerate(groups):
         if "speedup" in row:
-            ax.text(i, max(row["cpu_s"], row["torch_s"]), f"{row['speedup']:.0f}x", ha="center", va="bottom")
+            ax.text(i, max(row[f"{fast}_s"], row["torch_s"]), f"{row['speedup']:.0f}x", ha="center", va="bottom")
     ax.set_xticks(list(x), labels)
     ax.set_yscale("log")
     ax.set_ylabel("forward+backward (s)")
-    ax.set_title("3DGS rasterization on the CPU")
+    where = "the GPU" if r.get("device", "cpu") != "cpu" else "the CPU"
+    ax.set_title(f"Gaussian (3DGS) and surfel (2DGS) rasterization on {where}")
     ax.legend(loc="upper left")
     ax.margins(y=0.3)
     fig.tight_layout()

@@ -33,7 +33,8 @@ def test_enhanced_views_are_cached_per_model_content(tiny_scene, tmp_path):
     graph = helper.make_graph([node], "invert", [helper.make_tensor_value_info("image", onnx.TensorProto.FLOAT, ["b", 3, "h", "w"])],
                               [helper.make_tensor_value_info("out", onnx.TensorProto.FLOAT, ["b", 3, "h", "w"])],
                               [helper.make_tensor("one", onnx.TensorProto.FLOAT, [], [1.0])])
-    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    # IR 9 (what torch's exporter writes at opset 17): older onnxruntime builds refuse newer IR versions
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)], ir_version=9)
     path = tmp_path / "invert.onnx"
     onnx.save(model, str(path))
     cfg = AugmentConfig(composites=False, delta_h=3.0, enhancer=f"onnx:{path}")

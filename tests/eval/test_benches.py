@@ -216,3 +216,20 @@ def test_run_key_follows_the_resolved_config(monkeypatch):
         real.config.pipeline, model=dataclasses.replace(real.config.pipeline.model, sh_degree=1)))
     monkeypatch.setattr(registry, "get_method", lambda name: registry.MethodSpecification(changed, real.description))
     assert bench_runs.run_key("data", spec, None) != k0
+
+
+def test_raster_bench_writes_tables_on_a_tiny_scale(tmp_path, monkeypatch):
+    """Both backends time the same scenes; the files name the fast backend and the speedup is real."""
+    from nerf2gs_plugin.eval import bench_raster
+
+    tiny = {"fwdbwd": [(300, 48, 32)], "fps": (300, 48, 32), "repeats": 1, "torch_max_pixels": 48 * 32,
+            "torch_max_gaussians": 300, "surfels_fwdbwd": [(300, 48, 32)], "surfels_torch_max_pixels": 48 * 32}
+    monkeypatch.setitem(bench_raster.SCALES, "tiny", tiny)
+    r = bench_raster.run(tmp_path, "tiny")
+    row = r["fwd_bwd"][0]
+    assert r["fast_backend"] == "cpu" and row["visible"] > 0 and row["pairs"] > 0
+    assert row["speedup"] == pytest.approx(row["torch_s"] / row["cpu_s"])
+    assert r["surfels_fwd_bwd"][0]["torch_s"] > 0 and r["forward_fps"]["cpu_fps"] > 0
+    md = (tmp_path / "raster.md").read_text()
+    assert "cpu fwd+bwd (s)" in md and "## 2DGS surfels" in md
+    assert (tmp_path / "raster.png").stat().st_size > 1000

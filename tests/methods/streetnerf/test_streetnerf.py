@@ -71,7 +71,7 @@ def test_training_raises_psnr_and_empties_the_sky(trained):
     assert float(torch.cat(accs_sky).mean()) < 0.1
     assert float(torch.cat(accs_ground).mean()) > 0.9
     # the ground plane was estimated at the data's ground height (z = 0 before normalisation)
-    pts_h = dm.train_data.points3D_xyz @ model.up
+    pts_h = dm.train_data.points3D_xyz.to(model.up) @ model.up
     assert abs(float(model.ground_height) - float(pts_h.median())) < 0.05
 
 
@@ -130,7 +130,8 @@ def test_ground_loss_prefers_mass_on_the_plane(trained):
     for w in (on_plane, spread):
         w = 0.99 * w / w.sum()
         outputs = {"origins": o, "directions": d, "weights": w, "t_mid": t_mid, "accumulation": w.sum(-1, keepdim=True)}
-        losses.append(float(model._ground_loss(outputs, torch.tensor([True]))))
+        outputs = {k: v.to(model.up) for k, v in outputs.items()}  # the model is on CUDA where there is one
+        losses.append(float(model._ground_loss(outputs, torch.tensor([True], device=model.up.device))))
     assert losses[0] < 0.05 and losses[1] > 5 * losses[0]
     assert float(median_depth(on_plane, t_mid)) == pytest.approx(t_star, abs=0.05)
 
