@@ -76,6 +76,7 @@ def rasterize_surfels(
     render_mode: str = "RGB+ED",
     backend: str = "auto",
     tile_size: int = 16,
+    densify_signal: str = "lowpass",
 ) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor, dict[str, Any]]:
     """Render 2D Gaussian surfels into C cameras (differentiable w.r.t. all surfel parameters).
 
@@ -92,7 +93,15 @@ def rasterize_surfels(
     (projected centres, in the graph), ``gradient_2dgs [C,N,2]`` (zeros whose ``.grad`` is 2DGS's
     densification signal; None without autograd), ``radii [C,N]``, ``depths [C,N]``, ``width``,
     ``height``, ``tile_size``, ``n_cameras``, ``backend``.
+
+    ``densify_signal`` defines ``gradient_2dgs`` on the cpu/torch backends: ``"lowpass"`` as if each
+    surfel were the screen-space low-pass Gaussian about its centre (large for large surfels),
+    ``"screen"`` the gradient of the surfel moved rigidly on screen (the projected centre's gradient
+    in 3DGS's sense; 2DGS and gsplat take ``dL/dT`` of the centre column times depth, the same
+    quantity). gsplat always uses its own.
     """
+    if densify_signal not in ("lowpass", "screen"):
+        raise ValueError(f"densify_signal must be 'lowpass' or 'screen', got {densify_signal!r}")
     _check(means, quats, scales, opacities, colors, viewmats, Ks, sh_degree, render_mode)
     chosen = resolve_backend(backend, means.device.type, EXT_NAME, EXT_SOURCES, EXT_HEADERS)
     if chosen == "gsplat":
@@ -120,9 +129,9 @@ def rasterize_surfels(
         t.requires_grad for t in (means, quats, scales, opacities, colors, viewmats))
     densify = torch.zeros(C, N, 2, device=means.device, dtype=means.dtype, requires_grad=True) if grad_on else None
     if chosen == "cpu":
-        maps = composite_surfels_cpu(proj, lists, opacities, feats, width, height, near_plane, densify)
+        maps = composite_surfels_cpu(proj, lists, opacities, feats, width, height, near_plane, densify, densify_signal)
     else:
-        maps = composite_surfels_torch(proj, lists, opacities, feats, width, height, near_plane, densify)
+        maps = composite_surfels_torch(proj, lists, opacities, feats, width, height, near_plane, densify, densify_signal)
     alpha = maps["alpha"]
     rgb = maps["colors"]
     if backgrounds is not None:

@@ -40,21 +40,22 @@ def error() -> Optional[str]:
 class _Composite(torch.autograd.Function):
     @staticmethod
     def forward(ctx: Any, adj: Tensor, det: Tensor, m2: Tensor, zc: Tensor, op: Tensor, feats: Tensor,
-                densify: Tensor, box: Tensor, ids: Tensor, starts: Tensor, counts: Tensor, dims: tuple) -> Tensor:
+                densify: Tensor, box: Tensor, ids: Tensor, starts: Tensor, counts: Tensor, dims: tuple,
+                screen_signal: bool) -> Tensor:
         ext = extension()
         out, auxf, auxi = ext.forward(adj, det, m2, zc, op, box, feats, ids, starts, counts, *dims)
         ctx.save_for_backward(adj, det, m2, zc, op, box, feats, ids, starts, counts, out, auxf, auxi)
-        ctx.dims = dims
+        ctx.dims, ctx.screen_signal = dims, screen_signal
         return out
 
     @staticmethod
     def backward(ctx: Any, gout: Tensor) -> tuple:
         adj, det, m2, zc, op, box, feats, ids, starts, counts, out, auxf, auxi = ctx.saved_tensors
         g = extension().backward(adj, det, m2, zc, op, box, feats, ids, starts, counts, *ctx.dims, out, auxf, auxi,
-                                 gout.contiguous())
+                                 gout.contiguous(), ctx.screen_signal)
         F = feats.shape[1]
         return (g[:, 0:9], g[:, 9], g[:, 10:12], g[:, 12], g[:, 13], g[:, 16:16 + F], g[:, 14:16],
-                None, None, None, None, None)
+                None, None, None, None, None, None)
 
 
 @dataclass
@@ -122,7 +123,7 @@ def tile_lists_cpu(proj: Any, width: int, height: int, tile_size: int) -> TileLi
 
 def composite_surfels_cpu(proj: SurfelProjection | SurfelProjectionCPU, lists: TileLists, opacities: Tensor, colors: Tensor,
                           width: int, height: int, near_plane: float,
-                          densify: Optional[Tensor] = None) -> dict[str, Tensor]:
+                          densify: Optional[Tensor] = None, densify_signal: str = "lowpass") -> dict[str, Tensor]:
     """Same contract as :func:`surfels_torch.composite_surfels_torch`, computed by the C++ kernel."""
     C, N = proj.radii.shape
     D = colors.shape[-1]
@@ -142,6 +143,6 @@ def composite_surfels_cpu(proj: SurfelProjection | SurfelProjectionCPU, lists: T
     dims = (C, height, width, lists.tile_size, lists.tiles_w, lists.tiles_h, float(near_plane))
     box = proj.bbox.reshape(C * N, 4).to(dt).contiguous()
     out = _Composite.apply(adj, det, m2, zc, op, feats, dens, box, lists.flat_ids.contiguous(),
-                           lists.starts.contiguous(), lists.counts.contiguous(), dims)
+                           lists.starts.contiguous(), lists.counts.contiguous(), dims, densify_signal == "screen")
     parts = out.split([D, 3, 1, 1, 1, 1], dim=-1)  # one backward node for all six maps
     return dict(zip(("colors", "normals", "depth", "alpha", "distort", "median"), parts))

@@ -159,7 +159,7 @@ def _excl_cumsum(x: Tensor) -> Tensor:
 
 
 def _composite_batch(ids: Tensor, valid: Tensor, pix: Tensor, attr: dict[str, Tensor], near_plane: float,
-                     densify: Optional[Tensor]) -> Tensor:
+                     densify: Optional[Tensor], screen_signal: bool = False) -> Tensor:
     """Composite B tiles. ``ids [B,K]`` surfel rows, ``valid [B,K]``, ``pix [B,P,2]`` pixel centres.
 
     Returns ``[B, P, D + 7]``: colours (D), accumulated depth, alpha, normals (3), distortion, median.
@@ -184,9 +184,18 @@ def _composite_batch(ids: Tensor, valid: Tensor, pix: Tensor, attr: dict[str, Te
     depth = torch.where(use3, attr["det"][ids][:, None] * inv, zc)
     g = torch.exp(-0.5 * rho)
     if densify is not None:
-        # 2DGS's densification proxy: the gradient a screen-space Gaussian about the centre would get
+        # 2DGS's densification signal, dG/dc for the projected centre c (its gradient is the signal):
+        # "lowpass" as if every surfel were the screen-space low-pass Gaussian about c; "screen" the
+        # surfel moved rigidly on screen, -grad_x G = G (u grad_x u + v grad_x v) where the surfel wins
         dn = densify[ids][:, None]  # [B,1,K,2], all zeros
-        g = g - (LOWPASS_INV_SQ * g.detach()) * (dx.detach() * dn[..., 0] + dy.detach() * dn[..., 1])
+        sx, sy = -LOWPASS_INV_SQ * dx.detach(), -LOWPASS_INV_SQ * dy.detach()
+        if screen_signal:
+            h = attr["adj"][ids].detach()[:, None]  # [B,1,K,3,3]
+            ud, vd, invd = u.detach(), v.detach(), inv.detach()
+            sx3 = (ud * (h[..., 0, 0] - ud * h[..., 2, 0]) + vd * (h[..., 1, 0] - vd * h[..., 2, 0])) * invd
+            sy3 = (ud * (h[..., 0, 1] - ud * h[..., 2, 1]) + vd * (h[..., 1, 1] - vd * h[..., 2, 1])) * invd
+            sx, sy = torch.where(use3, sx3, sx), torch.where(use3, sy3, sy)
+        g = g + g.detach() * (sx * dn[..., 0] + sy * dn[..., 1])
     alpha = (attr["opacities"][ids][:, None] * g).clamp(max=ALPHA_MAX)
     ok = ok & (alpha >= ALPHA_MIN) & (depth > near_plane) & torch.isfinite(depth)
     alpha = torch.where(ok, alpha, torch.zeros_like(alpha))
@@ -219,11 +228,11 @@ def _composite_batch(ids: Tensor, valid: Tensor, pix: Tensor, attr: dict[str, Te
 
 def composite_surfels_torch(proj: SurfelProjection, lists: TileLists, opacities: Tensor, colors: Tensor,
                             width: int, height: int, near_plane: float,
-                            densify: Optional[Tensor] = None) -> dict[str, Tensor]:
+                            densify: Optional[Tensor] = None, densify_signal: str = "lowpass") -> dict[str, Tensor]:
     """Per-pixel compositing of the tile lists (autograd through everything).
 
     ``opacities [N]``; ``colors [C,N,D]``; ``densify [C,N,2]`` zeros (or None) whose gradient becomes
-    2DGS's densification signal. Returns per-camera maps: ``colors [C,H,W,D]``, ``depth [C,H,W,1]``
+    2DGS's densification signal, as defined by ``densify_signal`` (see :func:`_composite_batch`). Returns per-camera maps: ``colors [C,H,W,D]``, ``depth [C,H,W,1]``
     (accumulated, not normalised), ``alpha``, ``normals [C,H,W,3]``, ``distort``, ``median``.
     """
     C, N = proj.radii.shape
@@ -242,6 +251,7 @@ def composite_surfels_torch(proj: SurfelProjection, lists: TileLists, opacities:
         "colors": colors.reshape(C * N, D),
     }
     dens = densify.reshape(C * N, 2) if densify is not None else None
+    screen = densify_signal == "screen"
     n_pix = ts * ts
     nonempty = torch.nonzero(lists.counts > 0).flatten()
     out = torch.zeros(C * th * tw, n_pix, D + 7, device=dev, dtype=dt)
@@ -271,9 +281,10 @@ def composite_surfels_torch(proj: SurfelProjection, lists: TileLists, opacities:
             origin = torch.stack([(t_in_cam % tw) * ts, (t_in_cam // tw) * ts], dim=-1).to(dt)  # [B,2]
             pix = origin[:, None, :] + offs[None]
             if recompute:  # bounded memory: keep only the batch inputs, redo the batch in backward
-                results.append(checkpoint(_composite_batch, ids, valid, pix, attr, near_plane, dens, use_reentrant=False))
+                results.append(checkpoint(_composite_batch, ids, valid, pix, attr, near_plane, dens, screen,
+                                          use_reentrant=False))
             else:
-                results.append(_composite_batch(ids, valid, pix, attr, near_plane, dens))
+                results.append(_composite_batch(ids, valid, pix, attr, near_plane, dens, screen))
             done_tiles.append(tiles)
             i = j
         out = out.index_copy(0, torch.cat(done_tiles), torch.cat(results, 0))

@@ -197,11 +197,11 @@ def _cpu_or_skip():
         pytest.skip(f"surfel C++ kernel not buildable here: {surfels_cpu.error()}")
 
 
-def _outputs_and_grads(scene, backend, sh_degree, dtype):
+def _outputs_and_grads(scene, backend, sh_degree, dtype, densify_signal="lowpass"):
     ins = [t.clone().requires_grad_() for t in scene]
     V, K = _cam(dtype)
     out = rasterize_surfels(*ins, V, K, W, H, sh_degree=sh_degree, backend=backend,
-                            backgrounds=torch.tensor([[0.1, 0.2, 0.3]], dtype=dtype))
+                            backgrounds=torch.tensor([[0.1, 0.2, 0.3]], dtype=dtype), densify_signal=densify_signal)
     assert out[6]["backend"] == backend
     g = torch.Generator().manual_seed(7)
     loss = sum((o * torch.rand(o.shape, generator=g, dtype=dtype)).sum() for o in out[:6])
@@ -227,6 +227,48 @@ def test_cpu_kernel_matches_torch_reference(dtype, sh_degree):
     for name, a, b in zip(["means", "quats", "scales", "opacities", "colors", "gradient_2dgs"], ref_g, g):
         assert float(a.abs().max()) > 0, name
         assert float((a - b).abs().max()) <= rel * float(a.abs().max()), name
+
+
+def test_cpu_kernel_matches_torch_reference_for_the_screen_signal():
+    _cpu_or_skip()
+    scene = _random_scene(60, seed=5, dtype=torch.float64)
+    _, ref_g = _outputs_and_grads(scene, "torch", 1, torch.float64, "screen")
+    _, g = _outputs_and_grads(scene, "cpu", 1, torch.float64, "screen")
+    _, low = _outputs_and_grads(scene, "cpu", 1, torch.float64, "lowpass")
+    assert float(ref_g[-1].abs().max()) > 0
+    assert float((ref_g[-1] - g[-1]).abs().max()) <= 1e-10 * float(ref_g[-1].abs().max())
+    # only the densification signal changes, and these 0.1-0.4 m surfels at 3 m (2-8 px) get a weaker one
+    for a, b in zip(g[:-1], low[:-1]):
+        assert torch.equal(a, b)
+    assert float(g[-1].norm(dim=-1).mean()) < 0.5 * float(low[-1].norm(dim=-1).mean())
+
+
+def test_screen_signal_is_the_gradient_of_a_rigid_screen_translation():
+    """Moving each surfel's footprint by d pixels (homography S(d) T, low-pass centre c + d) and
+    differentiating colours and alpha w.r.t. d gives the "screen" signal exactly."""
+    import dataclasses
+
+    from nerf2gs_plugin.rendering.surfels_torch import build_tile_lists, composite_surfels_torch, project_surfels
+
+    means, quats, scales, opac, sh = _random_scene(40, seed=9, dtype=torch.float64)
+    V, K = _cam(torch.float64)
+    proj = project_surfels(means, quats, scales, opac, V, K, W, H, 0.01, 1e10)
+    lists = build_tile_lists(proj, W, H, 16)
+    colors = sh[None, :, 0, :]
+    C, N = proj.radii.shape
+    d = torch.zeros(C, N, 2, dtype=torch.float64, requires_grad=True)
+    S = torch.eye(3, dtype=torch.float64).repeat(C, N, 1, 1)
+    S = torch.cat([S[..., :2], torch.cat([d, torch.ones(C, N, 1, dtype=torch.float64)], -1)[..., None]], -1)
+    moved = dataclasses.replace(proj, T=S @ proj.T, means2d=proj.means2d + d)
+    dens = torch.zeros(C, N, 2, dtype=torch.float64, requires_grad=True)
+    g = torch.Generator().manual_seed(3)
+    wc, wa = torch.rand(C, H, W, 3, generator=g, dtype=torch.float64), torch.rand(C, H, W, 1, generator=g, dtype=torch.float64)
+    ref = composite_surfels_torch(moved, lists, opac, colors, W, H, 0.01)
+    ((ref["colors"] * wc).sum() + (ref["alpha"] * wa).sum()).backward()
+    ours = composite_surfels_torch(proj, lists, opac, colors, W, H, 0.01, dens, "screen")
+    ((ours["colors"] * wc).sum() + (ours["alpha"] * wa).sum()).backward()
+    assert float(d.grad.abs().max()) > 0
+    assert torch.allclose(dens.grad, d.grad, rtol=1e-8, atol=1e-10 * float(d.grad.abs().max()))
 
 
 def test_missing_kernel_falls_back_to_torch_with_a_warning(monkeypatch):

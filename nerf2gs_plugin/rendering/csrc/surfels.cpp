@@ -172,7 +172,7 @@ template <typename T>
 void backward_impl(const T* adj, const T* det, const T* m2, const T* zc, const T* op, const T* box, const T* feats, int64_t F,
                    const int64_t* ids, const int64_t* starts, const int64_t* counts, const std::vector<int64_t>& tiles,
                    int64_t H, int64_t W, int64_t ts, int64_t tw, int64_t th, T near, const T* out, const T* auxf,
-                   const int32_t* auxi, const T* gout, T* grads, int64_t M) {
+                   const int32_t* auxi, const T* gout, T* grads, int64_t M, bool screen_signal) {
   const int64_t nc = F + 4, G = 16 + F;
   const int nthreads = omp_get_max_threads();
   std::vector<std::vector<T>> local(nthreads);
@@ -229,8 +229,16 @@ void backward_impl(const T* adj, const T* det, const T* m2, const T* zc, const T
               g[13] += galpha * hit.G;
               gG = galpha * s.o;
             }
-            g[14] += gG * (-T(kLowpass) * hit.G) * hit.dx;
-            g[15] += gG * (-T(kLowpass) * hit.G) * hit.dy;
+            if (screen_signal && hit.use3) {
+              // densification signal: the surfel moved rigidly on screen, dG/dc = -grad_x G = G (u grad u + v grad v)
+              const T dua = (s.h[0] - hit.u * s.h[6]) * hit.inv, dva = (s.h[3] - hit.v * s.h[6]) * hit.inv;
+              const T dub = (s.h[1] - hit.u * s.h[7]) * hit.inv, dvb = (s.h[4] - hit.v * s.h[7]) * hit.inv;
+              g[14] += gG * hit.G * (hit.u * dua + hit.v * dva);
+              g[15] += gG * hit.G * (hit.u * dub + hit.v * dvb);
+            } else {  // the low-pass Gaussian about the centre (where it wins, both signals agree)
+              g[14] += gG * (-T(kLowpass) * hit.G) * hit.dx;
+              g[15] += gG * (-T(kLowpass) * hit.G) * hit.dy;
+            }
             const T grho = gG * T(-0.5) * hit.G;
             if (hit.use3) {
               const T gu = grho * T(2) * hit.u, gv = grho * T(2) * hit.v;
@@ -296,7 +304,7 @@ torch::Tensor surfels_backward(torch::Tensor adj, torch::Tensor det, torch::Tens
                                torch::Tensor op, torch::Tensor box, torch::Tensor feats, torch::Tensor ids, torch::Tensor starts,
                                torch::Tensor counts, int64_t C, int64_t H, int64_t W, int64_t ts, int64_t tw,
                                int64_t th, double near, torch::Tensor out, torch::Tensor auxf, torch::Tensor auxi,
-                               torch::Tensor gout) {
+                               torch::Tensor gout, bool screen_signal) {
   const int64_t F = feats.size(1), M = feats.size(0);
   auto grads = torch::zeros({M, 16 + F}, feats.options());
   const auto tiles = nonempty_tiles(counts);
@@ -305,7 +313,8 @@ torch::Tensor surfels_backward(torch::Tensor adj, torch::Tensor det, torch::Tens
                             zc.data_ptr<scalar_t>(), op.data_ptr<scalar_t>(), box.data_ptr<scalar_t>(), feats.data_ptr<scalar_t>(), F,
                             ids.data_ptr<int64_t>(), starts.data_ptr<int64_t>(), counts.data_ptr<int64_t>(), tiles,
                             H, W, ts, tw, th, (scalar_t)near, out.data_ptr<scalar_t>(), auxf.data_ptr<scalar_t>(),
-                            auxi.data_ptr<int32_t>(), gout.data_ptr<scalar_t>(), grads.data_ptr<scalar_t>(), M);
+                            auxi.data_ptr<int32_t>(), gout.data_ptr<scalar_t>(), grads.data_ptr<scalar_t>(), M,
+                            screen_signal);
   });
   return grads;
 }
