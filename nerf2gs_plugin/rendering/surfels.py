@@ -97,8 +97,9 @@ def rasterize_surfels(
     ``densify_signal`` defines ``gradient_2dgs`` on the cpu/torch backends: ``"lowpass"`` as if each
     surfel were the screen-space low-pass Gaussian about its centre (large for large surfels),
     ``"screen"`` the gradient of the surfel moved rigidly on screen (the projected centre's gradient
-    in 3DGS's sense; 2DGS and gsplat take ``dL/dT`` of the centre column times depth, the same
-    quantity). gsplat always uses its own.
+    in 3DGS's sense; 2DGS and gsplat take ``dL/dT`` of the centre column times depth: on an H100
+    their norms correlate 0.96 with ours, mean ratio 0.99, tests/rendering/test_gsplat_backend.py).
+    gsplat always uses its own.
     """
     if densify_signal not in ("lowpass", "screen"):
         raise ValueError(f"densify_signal must be 'lowpass' or 'screen', got {densify_signal!r}")

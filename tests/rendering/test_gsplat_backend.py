@@ -86,17 +86,20 @@ def test_gsplat_3dgs_matches_cpu() -> None:
     _close_grads(gs_grads, cpu_grads)  # means2d included: the densification signal matches too
 
 
-def _densify_norms(ours: torch.Tensor, ref: torch.Tensor) -> None:
-    """2DGS's densification signal: gsplat 1.5 writes ``dL/dM[0,2], dL/dM[1,2]`` (ray transform)
-    times depth, as 2DGS does, but reads it from the accumulator while other tiles still add to it.
-    Measured on an H100 (this scene) against our ``lowpass`` signal: norms correlate 0.63, gsplat's
-    are 0.20x ours. Check it is the same kind of signal, not the same numbers."""
+def _densify_norms(ours: torch.Tensor, ref: torch.Tensor) -> tuple[float, float]:
+    """Correlation and mean ratio of per-surfel densification norms (what the strategy thresholds).
+
+    gsplat 1.5 takes 2DGS's definition, ``dL/dM[0,2], dL/dM[1,2]`` (the ray transform's centre
+    column) times depth, from the pixels where the surfel itself wins over the low-pass. Measured on
+    an H100: on this street scene (mostly sub-pixel surfels, where the low-pass wins) correlation
+    0.63, ratio 0.20 for both our signals; with surfels 6x larger our ``screen`` signal 0.959 / 0.992,
+    ``lowpass`` 0.693 / 0.052."""
     a, b = ours.norm(dim=-1).flatten().double(), ref.norm(dim=-1).flatten().double()
     on = (a > 0) | (b > 0)
     corr = torch.corrcoef(torch.stack([a[on], b[on]]))[0, 1]
     ratio = a[on].mean() / b[on].mean()
     print(f"2DGS densification norms: correlation {float(corr):.3f}, mean ratio gsplat/cpu {float(ratio):.3f}")
-    assert float(corr) > 0.5 and 0.1 < float(ratio) < 10.0
+    return float(corr), float(ratio)
 
 
 def test_gsplat_2dgs_matches_cpu() -> None:
@@ -112,8 +115,17 @@ def test_gsplat_2dgs_matches_cpu() -> None:
     _close_images(normals_g, normals_c, "2DGS normals (camera frame)")
     assert meta["radii"].shape == (2, scene["means"].shape[0])
     _close_grads(gs_grads, cpu_grads, skip=("means2d",))
-    _densify_norms(gs_grads["means2d"], cpu_grads["means2d"])
-    # our "screen" signal is 2DGS's definition (the centre moved on screen): closer to gsplat's
-    _, screen_grads, _ = _run(rasterize_surfels, {**scene}, "cpu", "cpu", "gradient_2dgs", densify_signal="screen", **kw)
-    _densify_norms(gs_grads["means2d"], screen_grads["means2d"])
+    corr, ratio = _densify_norms(gs_grads["means2d"], cpu_grads["means2d"])
+    assert corr > 0.5 and 0.1 < ratio < 10.0
+    # most of these surfels are under a pixel, where the low-pass wins and both our signals coincide;
+    # with surfels 6x larger the "screen" signal (the centre moved on screen, 2DGS's definition) and
+    # the "lowpass" one part
+    big = {**scene, "scales": scene["scales"] * 6.0}
+    _, gs_big, _ = _run(rasterize_surfels, big, "cuda", "gsplat", "gradient_2dgs", **kw)
+    for signal in ("lowpass", "screen"):
+        _, ours, _ = _run(rasterize_surfels, big, "cpu", "cpu", "gradient_2dgs", densify_signal=signal, **kw)
+        print(f"large surfels, {signal}:", end=" ")
+        corr, ratio = _densify_norms(gs_big["means2d"], ours["means2d"])
+        if signal == "screen":  # the same signal as gsplat's, up to its read of a partial sum
+            assert corr > 0.9 and 0.8 < ratio < 1.25
 
