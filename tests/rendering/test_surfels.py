@@ -238,8 +238,8 @@ def test_cpu_kernel_matches_torch_reference_for_the_screen_signal():
     assert float(ref_g[-1].abs().max()) > 0
     assert float((ref_g[-1] - g[-1]).abs().max()) <= 1e-10 * float(ref_g[-1].abs().max())
     # only the densification signal changes, and these 0.1-0.4 m surfels at 3 m (2-8 px) get a weaker one
-    for a, b in zip(g[:-1], low[:-1]):
-        assert torch.equal(a, b)
+    for a, b in zip(g[:-1], low[:-1]):  # equal up to the threads' summation order
+        assert torch.allclose(a, b, rtol=1e-12, atol=1e-12 * float(b.abs().max()))
     assert float(g[-1].norm(dim=-1).mean()) < 0.5 * float(low[-1].norm(dim=-1).mean())
 
 
