@@ -161,13 +161,12 @@ def bench_enhancer(data: Path, runs_root: Path, scale: str) -> str:
     first, or reused: the plan then reuses it too); returns the --augment.enhancer spec. Without
     the reference's own renders the enhancer learns only synthetic degradations, which made real
     bird's-eye renders worse (measured -0.15 dB)."""
-    from nerf2gs_plugin.data import parse_dataset
-    from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
+    from nerf2gs_plugin.data import folder_fingerprint
     from nerf2gs_plugin.enhance.bench import ensure_bench_enhancer
     from nerf2gs_plugin.eval.bench_paper import _overrides
     from nerf2gs_plugin.eval.bench_runs import RunSpec, train_or_reuse
 
-    dataset = dataset_fingerprint(parse_dataset(data, "train").image_filenames)
+    dataset = folder_fingerprint(data)
     reference, _ = train_or_reuse(RunSpec("StreetNeRF", "streetnerf", _overrides(scale, "streetnerf")), data, runs_root, dataset)
     return f"onnx:{ensure_bench_enhancer(data, runs_root, scale, reference=reference)}"
 

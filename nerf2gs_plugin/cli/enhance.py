@@ -32,17 +32,8 @@ class Train(EnhancerTrainConfig):
         from nerf2gs_plugin.enhance.train import report_path, train_enhancer
 
         report = train_enhancer(self)
-        print(f"enhancer saved to {report.out} ({report.seconds:.0f} s, {report.steps} steps, {report.threads} threads, "
-              f"loss {report.losses[0]:.4f} -> {report.losses[-1]:.4f})")
-        if report.validation:
-            first, chosen = report.validation[0], next(v for v in report.validation if v["step"] == report.selected_step)
-            lp = lambda v: f", LPIPS {v['lpips']:.4f}" if v["lpips"] is not None else ""  # noqa: E731
-            print(f"held-out training views: identity PSNR {first['psnr']:.2f} dB{lp(first)}; exported step {report.selected_step}: "
-                  f"PSNR {chosen['psnr']:.2f} dB{lp(chosen)}")
-        if report.heldout:
-            h = report.heldout
-            print(f"held-out {'/'.join(h['splits'])} ({h['images']} images, synthetic degradations): "
-                  f"PSNR {h['psnr_degraded']:.2f} -> {h['psnr_enhanced']:.2f} dB")
+        for line in report.summary_lines():
+            print(line)
         print(f"report: {report_path(Path(report.out))}")
 
 

@@ -28,6 +28,7 @@ __all__ = [
     "NerfstudioDataParserConfig",
     "NormalizeOptions",
     "dataparser_config",
+    "folder_fingerprint",
     "list_splits",
     "load_dataparser_transform",
     "parse_dataset",
@@ -54,6 +55,14 @@ def dataparser_config(data: Union[str, Path], downscale: float = 1.0) -> ParserC
 def parse_dataset(data: Union[str, Path], split: str = "train", downscale: float = 1.0) -> DataparserOutputs:
     """One split of the dataset at ``data``, normalised (same transform for every split)."""
     return dataparser_config(data, downscale).parse(split)
+
+
+def folder_fingerprint(data: Union[str, Path]) -> str:
+    """The content fingerprint of the dataset at ``data`` (its training images), which keys bench
+    runs and caches: a moved copy keeps it, a regenerated scene does not."""
+    from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
+
+    return dataset_fingerprint(parse_dataset(data, "train").image_filenames)
 
 
 def list_splits(data: Union[str, Path]) -> list[str]:

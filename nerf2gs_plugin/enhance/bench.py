@@ -33,11 +33,10 @@ def bench_enhancer_config(data: Path, out: Path, scale: str) -> EnhancerTrainCon
 
 def ensure_bench_enhancer(data: Path, runs_root: Path, scale: str, reference: Optional[Path] = None) -> Path:
     """Path of the bench's ``enhancer.onnx`` for this dataset, scale (and reference run), training it when absent."""
-    from nerf2gs_plugin.data import parse_dataset
-    from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
+    from nerf2gs_plugin.data import folder_fingerprint
     from nerf2gs_plugin.engine.checkpoints import file_hash, resolve_checkpoint
 
-    fingerprint = dataset_fingerprint(parse_dataset(data, "train").image_filenames)
+    fingerprint = folder_fingerprint(data)
     probe = bench_enhancer_config(data, Path("enhancer.onnx"), scale)
     ref_hash = None
     if reference is not None:
@@ -51,7 +50,6 @@ def ensure_bench_enhancer(data: Path, runs_root: Path, scale: str, reference: Op
         return out
     print(f"[bench] train enhancer ({probe.steps} steps) -> {out}")
     report = train_enhancer(dataclasses.replace(probe, out=out))
-    if report.heldout:
-        print(f"[bench] enhancer held-out PSNR {report.heldout['psnr_degraded']:.2f} -> {report.heldout['psnr_enhanced']:.2f} dB"
-              f" ({report.seconds:.0f} s)")
+    for line in report.summary_lines():
+        print(f"[bench] {line}")
     return out

@@ -93,6 +93,23 @@ class TrainReport:
     selected_step: Optional[int] = None  # the exported state (0: the identity won)
     pairs: dict = field(default_factory=dict)  # {"pose": n, "perturbed": n} real pairs used for training
 
+    def summary_lines(self) -> list[str]:
+        """What a user reads after training: the held-out training views (real renders, what the
+        exported state was chosen on), then the eval splits under synthetic degradations."""
+        lines = [f"enhancer saved to {self.out} ({self.seconds:.0f} s, {self.steps} steps, {self.threads} threads, "
+                 f"loss {self.losses[0]:.4f} -> {self.losses[-1]:.4f})" if self.losses else f"enhancer saved to {self.out}"]
+        if self.validation:
+            first = self.validation[0]
+            chosen = next((v for v in self.validation if v["step"] == self.selected_step), self.validation[-1])
+            lp = lambda v: f", LPIPS {v['lpips']:.4f}" if v["lpips"] is not None else ""  # noqa: E731
+            lines.append(f"held-out training views: identity PSNR {first['psnr']:.2f} dB{lp(first)}; exported step "
+                         f"{self.selected_step}: PSNR {chosen['psnr']:.2f} dB{lp(chosen)}")
+        if self.heldout:
+            h = self.heldout
+            lines.append(f"held-out {'/'.join(h['splits'])} ({h['images']} images, synthetic degradations): "
+                         f"PSNR {h['psnr_degraded']:.2f} -> {h['psnr_enhanced']:.2f} dB")
+        return lines
+
 
 def psnr(a: Tensor, b: Tensor) -> float:
     mse = float(((a.float() - b.float()) ** 2).mean())

@@ -108,12 +108,11 @@ class BenchRunner:
         self._fingerprints: dict[str, str] = {}
 
     def fingerprint(self, data: Path) -> str:
-        from nerf2gs_plugin.data import parse_dataset
-        from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
+        from nerf2gs_plugin.data import folder_fingerprint
 
         key = str(Path(data).resolve())
         if key not in self._fingerprints:
-            self._fingerprints[key] = dataset_fingerprint(parse_dataset(data, "train").image_filenames)
+            self._fingerprints[key] = folder_fingerprint(data)
         return self._fingerprints[key]
 
     def lpips(self):

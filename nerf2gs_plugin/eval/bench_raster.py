@@ -59,6 +59,9 @@ def street_scene(n: int, width: int, height: int, seed: int = 0, sh_degree: int 
             "viewmats": torch.eye(4)[None], "Ks": ks, "width": width, "height": height, "sh_degree": sh_degree}
 
 
+Step = Callable[[dict[str, Any], str], Callable[[], dict[str, Any]]]  # (scene, backend) -> timed call returning meta
+
+
 def _fwd_bwd(scene: dict[str, Any], backend: str) -> Callable[[], dict[str, Any]]:
     from nerf2gs_plugin.rendering import rasterize_gaussians  # noqa: PLC0415
 
@@ -72,14 +75,17 @@ def _fwd_bwd(scene: dict[str, Any], backend: str) -> Callable[[], dict[str, Any]
     return step
 
 
-def _forward(scene: dict[str, Any], backend: str) -> Callable[[], dict[str, Any]]:
-    from nerf2gs_plugin.rendering import rasterize_gaussians  # noqa: PLC0415
+def _forward_of(render_fn: Callable[..., tuple]) -> Step:
+    """A forward-only timed call of ``rasterize_gaussians`` or ``rasterize_surfels`` (meta is last)."""
 
-    def render() -> dict[str, Any]:
-        with torch.no_grad():
-            return rasterize_gaussians(**scene, render_mode="RGB", backend=backend)[2]
+    def forward(scene: dict[str, Any], backend: str) -> Callable[[], dict[str, Any]]:
+        def render() -> dict[str, Any]:
+            with torch.no_grad():
+                return render_fn(**scene, render_mode="RGB", backend=backend)[-1]
 
-    return render
+        return render
+
+    return forward
 
 
 def _surfels_fwd_bwd(scene: dict[str, Any], backend: str) -> Callable[[], dict[str, Any]]:
@@ -94,16 +100,6 @@ def _surfels_fwd_bwd(scene: dict[str, Any], backend: str) -> Callable[[], dict[s
         return meta
 
     return step
-
-
-def _surfels_forward(scene: dict[str, Any], backend: str) -> Callable[[], dict[str, Any]]:
-    from nerf2gs_plugin.rendering import rasterize_surfels  # noqa: PLC0415
-
-    def render() -> dict[str, Any]:
-        with torch.no_grad():
-            return rasterize_surfels(**scene, render_mode="RGB", backend=backend)[-1]
-
-    return render
 
 
 def _sync() -> None:
@@ -128,13 +124,16 @@ def _time(fn: Callable[[], Any], repeats: int, cpu: Optional[list[float]] = None
     return best, out
 
 
-def _pairs(meta: dict[str, Any]) -> int:
-    """Pixel x Gaussian pairs a full (non-terminated) pass would visit: list length x tile pixels."""
-    listed = meta["n_pairs"] if "n_pairs" in meta else int(meta["flat_ids"].numel())
-    return int(listed) * int(meta["tile_size"]) ** 2
-
-
-Step = Callable[[dict[str, Any], str], Callable[[], dict[str, Any]]]  # (scene, backend) -> timed call returning meta
+def _pairs(meta: dict[str, Any]) -> Optional[int]:
+    """Pixel x Gaussian pairs a full (non-terminated) pass would visit: list length x tile pixels;
+    None for a backend that does not report its lists (gsplat)."""
+    if "n_pairs" in meta:
+        listed = int(meta["n_pairs"])
+    elif "flat_ids" in meta:
+        listed = int(meta["flat_ids"].numel())
+    else:
+        return None
+    return listed * int(meta["tile_size"]) ** 2
 
 
 def _on(scene: dict[str, Any], device: str) -> dict[str, Any]:
@@ -152,9 +151,9 @@ def _fwd_bwd_row(step: Step, n: int, w: int, h: int, fast: Optional[str], repeat
         row[f"{fast}_s"], meta = _time(step(scene, fast), repeats, cpu)
         row[f"{fast}_cpu_s"] = cpu[0]
         row["visible"] = int((meta["radii"] > 0).sum())
-        row["pairs"] = _pairs(meta) if fast == "cpu" else None  # gsplat does not report its list length
+        row["pairs"] = _pairs(meta)
         if row["pairs"]:
-            row["cpu_pairs_per_s"] = row["pairs"] / row["cpu_s"]
+            row[f"{fast}_pairs_per_s"] = row["pairs"] / row[f"{fast}_s"]
     if with_torch:
         cpu = []
         row["torch_s"], meta = _time(step(scene, "torch"), 1, cpu)
@@ -177,15 +176,17 @@ def _forward_fps(forward: Step, size: tuple[int, int, int], fast: Optional[str],
         sec, meta = _time(forward(scene, backend), repeats if backend == fast or device != "cpu" else 1, cpu_t)
         fps[f"{backend}_fps"] = 1.0 / sec
         fps[f"{backend}_cpu_s_per_frame"] = cpu_t[0]
-        if backend != "gsplat":
-            fps.setdefault("pairs", _pairs(meta))
-            fps[f"{backend}_pairs_per_s"] = fps["pairs"] / sec
+        listed = _pairs(meta)
+        if listed:
+            fps.setdefault("pairs", listed)
+            fps[f"{backend}_pairs_per_s"] = listed / sec
     return fps
 
 
 def run(out: Path, scale: str = "quick", device: str = "cpu") -> dict[str, Any]:
     """Run the benchmark at ``scale`` (``quick`` or ``full``) and write the results under ``out``:
     ``raster.*`` on the CPU (cpu kernel vs torch), ``raster_cuda.*`` on a GPU (gsplat vs torch)."""
+    from nerf2gs_plugin.rendering import rasterize_gaussians, rasterize_surfels  # noqa: PLC0415
     from nerf2gs_plugin.rendering.backend import gsplat_available  # noqa: PLC0415
     from nerf2gs_plugin.rendering.rasterization import load_kernel  # noqa: PLC0415
     from nerf2gs_plugin.rendering.surfels_cpu import available  # noqa: PLC0415
@@ -207,11 +208,11 @@ def run(out: Path, scale: str = "quick", device: str = "cpu") -> dict[str, Any]:
     rows = [_fwd_bwd_row(_fwd_bwd, n, w, h, fast, cfg["repeats"],
                          n <= torch_max_gaussians and w * h <= torch_max_pixels, device)
             for n, w, h in cfg["fwdbwd"]]
-    fps = _forward_fps(_forward, cfg["fps"], fast, cfg["repeats"] * 3, device)
+    fps = _forward_fps(_forward_of(rasterize_gaussians), cfg["fps"], fast, cfg["repeats"] * 3, device)
     surfel_rows = [_fwd_bwd_row(_surfels_fwd_bwd, n, w, h, surfel_fast, max(2, cfg["repeats"] // 2),
                                 w * h <= surfels_torch_max_pixels, device)
                    for n, w, h in cfg["surfels_fwdbwd"]]
-    surfel_fps = _forward_fps(_surfels_forward, cfg["fps"], surfel_fast, cfg["repeats"] * 2, device)
+    surfel_fps = _forward_fps(_forward_of(rasterize_surfels), cfg["fps"], surfel_fast, cfg["repeats"] * 2, device)
     result = {"scale": scale, "device": device, "fast_backend": fast or "none", "machine": machine_info(),
               "threads": torch.get_num_threads(), "load_average": os.getloadavg(),
               "compile_or_load_s": compile_s, "fwd_bwd": rows, "forward_fps": fps,

@@ -232,8 +232,9 @@ def composite_surfels_torch(proj: SurfelProjection, lists: TileLists, opacities:
     """Per-pixel compositing of the tile lists (autograd through everything).
 
     ``opacities [N]``; ``colors [C,N,D]``; ``densify [C,N,2]`` zeros (or None) whose gradient becomes
-    2DGS's densification signal, as defined by ``densify_signal`` (see :func:`_composite_batch`). Returns per-camera maps: ``colors [C,H,W,D]``, ``depth [C,H,W,1]``
-    (accumulated, not normalised), ``alpha``, ``normals [C,H,W,3]``, ``distort``, ``median``.
+    2DGS's densification signal, as defined by ``densify_signal`` (see :func:`_composite_batch`).
+    Returns per-camera maps: ``colors [C,H,W,D]``, ``depth [C,H,W,1]`` (accumulated, not
+    normalised), ``alpha``, ``normals [C,H,W,3]``, ``distort``, ``median``.
     """
     C, N = proj.radii.shape
     D = colors.shape[-1]

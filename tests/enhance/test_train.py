@@ -104,3 +104,17 @@ def test_bench_enhancer_trains_once(tiny_scene, tmp_path, monkeypatch):
     assert p1 == p2 and p1.is_file() and p1.suffix == ".onnx" and len(calls) == 1
     with pytest.raises(ConfigError, match="scale"):
         bench.ensure_bench_enhancer(tiny_scene, tmp_path, "huge")
+
+
+def test_report_summary_names_what_each_number_is_measured_on():
+    from nerf2gs_plugin.enhance.train import TrainReport
+
+    report = TrainReport("m.onnx", 40, 3.0, losses=[0.2, 0.1], threads=2, selected_step=20,
+                         validation=[{"step": 0, "psnr": 25.0, "lpips": None}, {"step": 20, "psnr": 25.4, "lpips": 0.1},
+                                     {"step": 40, "psnr": 25.2, "lpips": 0.12}],
+                         heldout={"psnr_degraded": 20.0, "psnr_enhanced": 22.0, "images": 4, "splits": ["bev_1"]})
+    lines = report.summary_lines()
+    assert "loss 0.2000 -> 0.1000" in lines[0]
+    assert "identity PSNR 25.00 dB; exported step 20: PSNR 25.40 dB, LPIPS 0.1000" in lines[1]
+    assert "synthetic degradations" in lines[2] and "20.00 -> 22.00" in lines[2]
+    assert len(TrainReport("m.onnx", 0, 0.0).summary_lines()) == 1
