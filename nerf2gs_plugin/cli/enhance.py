@@ -89,7 +89,7 @@ class Eval:
             lp = f"  LPIPS {r['lpips_before']:.4f} -> {r['lpips_after']:.4f}" if r.get("lpips_before") is not None else ""
             print(f"{split:>8}: {r['images']:3d} images  PSNR {r['psnr_before']:.2f} -> {r['psnr_after']:.2f} dB{lp}")
         if self.out is not None:
-            from nerf2gs_plugin.engine.config import atomic_write_text
+            from nerf2gs_plugin.utils.io import atomic_write_text
 
             atomic_write_text(self.out, json.dumps(result, indent=1))
 

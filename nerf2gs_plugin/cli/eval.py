@@ -10,7 +10,7 @@ from typing import Optional
 import tyro
 
 from nerf2gs_plugin.cli.common import run_cli
-from nerf2gs_plugin.engine.config import atomic_write_text
+from nerf2gs_plugin.utils.io import atomic_write_text
 
 
 @dataclass

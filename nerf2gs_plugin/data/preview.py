@@ -17,7 +17,7 @@ import torch
 from nerf2gs_plugin.data import list_splits, parse_dataset
 from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.data.images import load_image, load_mask
-from nerf2gs_plugin.engine.config import atomic_write_bytes
+from nerf2gs_plugin.utils.io import atomic_write_bytes
 
 _TINT = {"sky": (0.2, 0.45, 1.0), "ground": (0.1, 0.85, 0.2), "transient": (1.0, 0.1, 0.1)}
 _SPLIT_COLOURS = ["black", "tab:orange", "tab:blue", "tab:purple", "tab:green", "tab:red", "tab:brown"]

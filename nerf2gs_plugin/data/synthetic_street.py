@@ -36,7 +36,7 @@ from nerf2gs_plugin.data.synthetic.coverage import ground_coverage
 from nerf2gs_plugin.data.synthetic.layout import SKY, TRANSIENT_MATERIALS, build_layout, empty_boxes
 from nerf2gs_plugin.data.synthetic.poses import bev_poses, street_poses, train_poses
 from nerf2gs_plugin.data.synthetic.raycast import Pinhole, ShadowMap, render_view
-from nerf2gs_plugin.engine.config import atomic_write_text
+from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.errors import ConfigError
 
 GENERATOR_VERSION = 1

@@ -7,7 +7,7 @@ its per-image weight. The AugmentedDataManager fills both; methods never know wh
 
 from __future__ import annotations
 
-from abc import abstractmethod
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterator, Optional
@@ -15,10 +15,11 @@ from typing import Any, Iterator, Optional
 import torch
 
 from nerf2gs_plugin.cameras import Cameras
+from nerf2gs_plugin.data import list_splits, parse_dataset
 from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.datamanagers.image_set import ImageSet, load_image_set
-from nerf2gs_plugin.engine.config import InstantiateConfig
 from nerf2gs_plugin.errors import DataError
+from nerf2gs_plugin.utils.config import InstantiateConfig
 
 # eval splits in the order they are reported; a dataset may hold any subset (or others)
 PREFERRED_EVAL_SPLITS = ("street", "bev_1", "bev_2", "val", "test")
@@ -31,12 +32,13 @@ class DataManagerConfig(InstantiateConfig):
     """Shrink images on load by this factor (2 = half size)."""
 
 
-class DataManager:
+class DataManager(ABC):
+    """The DataManager contract (abstract): ``next_train``, ``next_eval`` and eval splits by name.
+    Ray managers hand out ray batches, full-image managers one camera and its image."""
+
     config: DataManagerConfig
 
     def __init__(self, config: DataManagerConfig, data: Path, device: torch.device | str = "cpu", seed: int = 0) -> None:
-        from nerf2gs_plugin.data import parse_dataset, list_splits
-
         self.config = config
         self.data = Path(data)
         self.device = torch.device(device)
@@ -73,8 +75,6 @@ class DataManager:
         return ordered + [s for s in self._split_names if s not in ordered]
 
     def eval_split(self, name: str) -> tuple[DataparserOutputs, ImageSet]:
-        from nerf2gs_plugin.data import parse_dataset
-
         if name not in self._eval_cache:
             if name not in self._split_names:
                 raise DataError(f"no eval split '{name}' (the dataset has: {', '.join(self.eval_split_names()) or 'none'})", self.data)

@@ -10,7 +10,7 @@ from typing import Any, Optional
 import torch
 
 from nerf2gs_plugin.data.fingerprint import dataset_fingerprint, file_hash  # noqa: F401 (re-exported)
-from nerf2gs_plugin.engine.config import atomic_write_bytes
+from nerf2gs_plugin.utils.io import atomic_write_bytes
 from nerf2gs_plugin.errors import CheckpointError
 
 CHECKPOINT_FORMAT_VERSION = 1

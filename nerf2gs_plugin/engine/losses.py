@@ -1,13 +1,8 @@
-"""Small loss helpers shared by methods (image-quality metrics live in eval/metrics.py)."""
+"""Small loss helpers shared by methods (PSNR and SSIM live in :mod:`nerf2gs_plugin.utils.image_metrics`)."""
 
 from __future__ import annotations
 
-import torch
 from torch import Tensor
-
-
-def psnr_from_mse(mse: Tensor) -> Tensor:
-    return -10.0 * torch.log10(mse.clamp_min(1e-10))
 
 
 def masked_mean(values: Tensor, weight: Tensor) -> Tensor:

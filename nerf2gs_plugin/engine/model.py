@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from abc import abstractmethod
+from abc import ABCMeta, abstractmethod
 from dataclasses import dataclass, field
 from typing import Any, Union
 
@@ -12,7 +12,8 @@ from torch import Tensor, nn
 from nerf2gs_plugin.cameras import Cameras, RayBundle
 from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.engine.callbacks import TrainingCallback, TrainingCallbackAttributes
-from nerf2gs_plugin.engine.config import InstantiateConfig
+from nerf2gs_plugin.utils.config import InstantiateConfig
+from nerf2gs_plugin.utils.image_metrics import psnr_from_mse
 
 
 @dataclass
@@ -20,8 +21,9 @@ class ModelConfig(InstantiateConfig):
     _target: type = field(default_factory=lambda: Model)
 
 
-class Model(nn.Module):
-    """A trainable scene representation.
+class Model(nn.Module, metaclass=ABCMeta):
+    """A trainable scene representation (an abstract base class: a method that leaves a contract
+    method out fails when built, naming it).
 
     Ray methods (NeRFs) get a :class:`RayBundle` in :meth:`get_outputs`; image methods (splatting)
     get a one-camera :class:`Cameras`. Either way, :meth:`render_camera` renders one whole image and
@@ -65,8 +67,6 @@ class Model(nn.Module):
         """Scalar losses; the trainer minimises their sum."""
 
     def get_metrics_dict(self, outputs: dict[str, Tensor], batch: dict[str, Any]) -> dict[str, Tensor]:
-        from nerf2gs_plugin.engine.losses import psnr_from_mse
-
         pred = outputs["rgb"]
         gt = batch["rgb"] if "rgb" in batch else batch["image"]
         return {"psnr": psnr_from_mse(((pred.detach() - gt) ** 2).mean())}

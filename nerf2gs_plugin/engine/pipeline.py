@@ -11,7 +11,7 @@ import torch
 from torch import Tensor, nn
 
 from nerf2gs_plugin.datamanagers.base import DataManager, DataManagerConfig
-from nerf2gs_plugin.engine.config import InstantiateConfig
+from nerf2gs_plugin.utils.config import InstantiateConfig
 from nerf2gs_plugin.engine.model import Model, ModelConfig
 
 

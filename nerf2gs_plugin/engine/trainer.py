@@ -26,7 +26,8 @@ from nerf2gs_plugin.engine.checkpoints import (
     resolve_checkpoint,
     save_checkpoint,
 )
-from nerf2gs_plugin.engine.config import atomic_write_text, save_config
+from nerf2gs_plugin.engine.config import save_config
+from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.engine.optimizers import OptimizerConfig, Optimizers
 from nerf2gs_plugin.engine.pipeline import Pipeline, PipelineConfig
 from nerf2gs_plugin.errors import ConfigError, TrainingDiverged

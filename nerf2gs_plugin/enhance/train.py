@@ -254,7 +254,7 @@ def _lpips_loss(lpips, weight: float) -> Optional[Callable[[Tensor, Tensor], Ten
 
 def _train(config: EnhancerTrainConfig, gen: torch.Generator) -> TrainReport:
     from nerf2gs_plugin.data import list_splits
-    from nerf2gs_plugin.engine.config import atomic_write_bytes, atomic_write_text
+    from nerf2gs_plugin.utils.io import atomic_write_bytes, atomic_write_text
     from nerf2gs_plugin.enhance import OnnxModelEnhancer
     from nerf2gs_plugin.enhance.pairs import reference_pairs as render_pairs
     from nerf2gs_plugin.eval.metrics import LPIPS

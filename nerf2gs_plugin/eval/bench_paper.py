@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Optional
 
-from nerf2gs_plugin.engine.config import atomic_write_text
+from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.eval.bench_io import EVAL_VERSION, BenchFailed, fmt  # noqa: F401 (EVAL_VERSION: re-exported)
 from nerf2gs_plugin.eval.bench_runs import RunSpec, train_or_reuse
 from nerf2gs_plugin.eval.machine import machine_info, machine_line
@@ -47,7 +47,7 @@ def step_overrides(method: str, steps: int) -> dict:
     method without one (a third-party plugin) just gets ``max_num_iterations``."""
     import importlib
 
-    from nerf2gs_plugin.engine.config import to_plain
+    from nerf2gs_plugin.utils.config import to_plain
     from nerf2gs_plugin.registry import get_method
 
     cfg = get_method(method).config

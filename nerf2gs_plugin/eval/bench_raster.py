@@ -20,7 +20,7 @@ from typing import Any, Callable, Optional
 import torch
 from torch import Tensor
 
-from nerf2gs_plugin.engine.config import atomic_write_text
+from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.eval.machine import machine_info, machine_line
 
 SCALES = {
@@ -187,21 +187,17 @@ def run(out: Path, scale: str = "quick", device: str = "cpu") -> dict[str, Any]:
     """Run the benchmark at ``scale`` (``quick`` or ``full``) and write the results under ``out``:
     ``raster.*`` on the CPU (cpu kernel vs torch), ``raster_cuda.*`` on a GPU (gsplat vs torch)."""
     from nerf2gs_plugin.rendering import rasterize_gaussians, rasterize_surfels  # noqa: PLC0415
-    from nerf2gs_plugin.rendering.backend import gsplat_available  # noqa: PLC0415
-    from nerf2gs_plugin.rendering.rasterization import load_kernel  # noqa: PLC0415
-    from nerf2gs_plugin.rendering.surfels_cpu import available  # noqa: PLC0415
+    from nerf2gs_plugin.rendering.backend import fastest_backend  # noqa: PLC0415
 
     cfg = SCALES[scale]
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
+    fast, surfel_fast = fastest_backend(device, "gaussians"), fastest_backend(device, "surfels")
     if device == "cuda":
-        fast = surfel_fast = "gsplat" if gsplat_available() else None
         # the torch reference is fast enough on a GPU for every size
         torch_max_pixels = torch_max_gaussians = surfels_torch_max_pixels = math.inf
     else:
-        fast = "cpu" if load_kernel() is not None else None
-        surfel_fast = "cpu" if available() else None
         torch_max_pixels, torch_max_gaussians = cfg["torch_max_pixels"], cfg["torch_max_gaussians"]
         surfels_torch_max_pixels = cfg["surfels_torch_max_pixels"]
     compile_s = time.perf_counter() - t0

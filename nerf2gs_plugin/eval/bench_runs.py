@@ -15,7 +15,8 @@ from pathlib import Path
 from typing import Any, Optional
 
 from nerf2gs_plugin.engine.checkpoints import list_checkpoints, load_checkpoint
-from nerf2gs_plugin.engine.config import apply_plain, atomic_write_text, to_plain
+from nerf2gs_plugin.utils.config import apply_plain, to_plain
+from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.engine.trainer import Trainer
 
 

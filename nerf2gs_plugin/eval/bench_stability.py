@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Optional
 
-from nerf2gs_plugin.engine.config import atomic_write_text
+from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.eval.bench_io import (BenchLog, BenchProgress, BenchRunner, fmt, mean_psnr, nonfinite_metrics, planned_steps,
                                          progress_log, write_bench_files)
 from nerf2gs_plugin.eval.bench_runs import RunSpec
@@ -100,7 +100,7 @@ def images_psnr(model, datamanager, split: str, count: int = 2) -> Optional[floa
     """Mean PSNR of the first ``count`` images of ``split`` (the collapse check's fixed images)."""
     import torch
 
-    from nerf2gs_plugin.eval.metrics import psnr
+    from nerf2gs_plugin.utils.image_metrics import psnr
 
     vals = []
     with torch.no_grad():
@@ -113,7 +113,7 @@ def images_psnr(model, datamanager, split: str, count: int = 2) -> Optional[floa
 
 def initial_psnr(spec: RunSpec, data: Path, split: str, device) -> Optional[float]:
     """PSNR of the model as set up for training (step 0), on the collapse check's images."""
-    from nerf2gs_plugin.engine.config import apply_plain
+    from nerf2gs_plugin.utils.config import apply_plain
     from nerf2gs_plugin.engine.trainer import Trainer
     from nerf2gs_plugin.registry import get_method
 

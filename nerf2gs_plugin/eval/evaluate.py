@@ -49,7 +49,8 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
     median FPS of repeated renders of one camera, model size (primitives, parameters, MB of state
     and of the checkpoint file) and the training time recorded in the checkpoint."""
     from nerf2gs_plugin.eval.figures import save_eval_grid
-    from nerf2gs_plugin.eval.metrics import LPIPS, psnr, ssim
+    from nerf2gs_plugin.eval.metrics import LPIPS
+    from nerf2gs_plugin.utils.image_metrics import psnr, ssim
 
     dm = run.pipeline.datamanager
     model = run.model

@@ -22,7 +22,7 @@ import numpy as np
 
 from nerf2gs_plugin.data.base import find_folder_mask
 from nerf2gs_plugin.data.dataparser_outputs import MASK_KINDS
-from nerf2gs_plugin.engine.config import atomic_write_text
+from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.errors import DataError
 
 

@@ -17,9 +17,6 @@ finer than the sample's footprint are faded out instead of aliasing.
 from __future__ import annotations
 
 import math
-import os
-import threading
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
@@ -27,38 +24,16 @@ from typing import Optional
 import torch
 from torch import Tensor, nn
 
+from nerf2gs_plugin.utils.extensions import load_extension
+
 _PRIMES = (1, 2654435761, 805459861)
-_EXT = None
-_EXT_LOCK = threading.Lock()
-_EXT_FAILED: Optional[str] = None
+KERNEL_SOURCE = Path(__file__).with_name("hashgrid.cpp")
 
 
 def load_kernel():
-    """Compile (first use) or load (cached) the C++ kernel; None when it cannot be built."""
-    global _EXT, _EXT_FAILED
-    if _EXT is not None or _EXT_FAILED is not None:
-        return _EXT
-    with _EXT_LOCK:
-        if _EXT is not None or _EXT_FAILED is not None:
-            return _EXT
-        try:
-            from torch.utils.cpp_extension import load
-
-            src = Path(__file__).with_name("hashgrid.cpp")
-            build = os.environ.get("TORCH_EXTENSIONS_DIR")
-            if build:
-                Path(build).mkdir(parents=True, exist_ok=True)
-            _EXT = load(
-                name="nerf2gs_hashgrid",
-                sources=[str(src)],
-                extra_cflags=["-O3", "-fopenmp", "-march=native"],
-                extra_ldflags=["-fopenmp"],
-                verbose=False,
-            )
-        except Exception as e:  # noqa: BLE001 - fall back to the torch reference, loudly
-            _EXT_FAILED = f"{type(e).__name__}: {str(e).splitlines()[0][:200] if str(e) else ''}"
-            warnings.warn(f"hash-grid C++ kernel unavailable, using the torch reference ({_EXT_FAILED})", stacklevel=2)
-    return _EXT
+    """Compile (first use) or load (cached) the C++ kernel (see :mod:`nerf2gs_plugin.utils.extensions`);
+    None only where ``NERF2GS_ALLOW_NO_KERNELS`` allows the torch fallback."""
+    return load_extension("nerf2gs_hashgrid", [KERNEL_SOURCE])
 
 
 def grid_resolutions(num_levels: int, base_res: int, max_res: int) -> list[int]:

@@ -10,15 +10,17 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from nerf2gs_plugin.fields.mlp import MLP, sh_dim, sh_encode
+from nerf2gs_plugin.fields.mlp import MLP
+
+from nerf2gs_plugin.utils.sh import num_sh_bases, sh_basis
 
 
 class SkyModel(nn.Module):
     def __init__(self, sh_degree: int = 4, hidden: int = 64, num_layers: int = 2) -> None:
         super().__init__()
         self.sh_degree = sh_degree
-        self.mlp = MLP(sh_dim(sh_degree), hidden, num_layers, 3)
+        self.mlp = MLP(num_sh_bases(sh_degree), hidden, num_layers, 3)
 
     def forward(self, directions: Tensor) -> Tensor:
         """Unit ``directions [R,3]`` -> sky colour ``[R,3]`` in [0,1]."""
-        return torch.sigmoid(self.mlp(sh_encode(directions, self.sh_degree)))
+        return torch.sigmoid(self.mlp(sh_basis(self.sh_degree, directions)))

@@ -14,7 +14,8 @@ from torch import Tensor, nn
 
 from nerf2gs_plugin.fields.contraction import contract, contraction_scale, to_box_frame, to_grid_unit
 from nerf2gs_plugin.fields.hash_encoding import HashEncoding, HashGridSpec
-from nerf2gs_plugin.fields.mlp import MLP, sh_dim, sh_encode, trunc_exp
+from nerf2gs_plugin.fields.mlp import MLP, trunc_exp
+from nerf2gs_plugin.utils.sh import num_sh_bases, sh_basis
 
 
 class _GridPositions(nn.Module):
@@ -45,7 +46,7 @@ class StreetField(_GridPositions):
         self.geo_feat_dim = geo_feat_dim
         self.sh_degree = sh_degree
         self.density_mlp = MLP(self.encoding.out_dim, hidden, 1, 1 + geo_feat_dim)
-        self.color_mlp = MLP(geo_feat_dim + sh_dim(sh_degree), color_hidden, 2, 3)
+        self.color_mlp = MLP(geo_feat_dim + num_sh_bases(sh_degree), color_hidden, 2, 3)
 
     def density(self, x: Tensor, radius: Optional[Tensor] = None) -> tuple[Tensor, Tensor]:
         """``x [N,3]`` world -> density ``[N]`` and geometry features ``[N, geo_feat_dim]``."""
@@ -56,7 +57,7 @@ class StreetField(_GridPositions):
     def forward(self, x: Tensor, directions: Tensor, radius: Optional[Tensor] = None) -> tuple[Tensor, Tensor]:
         """``x [N,3]``, unit ``directions [N,3]``, ``radius [N]`` -> density ``[N]``, rgb ``[N,3]``."""
         sigma, geo = self.density(x, radius)
-        rgb = torch.sigmoid(self.color_mlp(torch.cat([geo, sh_encode(directions, self.sh_degree)], dim=-1)))
+        rgb = torch.sigmoid(self.color_mlp(torch.cat([geo, sh_basis(self.sh_degree, directions)], dim=-1)))
         return sigma, rgb
 
 

@@ -1,5 +1,6 @@
-"""Helpers shared by the Gaussian-splatting methods: SH <-> RGB, SH basis, quaternions,
-nearest-neighbour scale initialisation, and the standard 3DGS PLY layout (write and read).
+"""Helpers shared by the Gaussian-splatting methods: covariances, nearest-neighbour scale
+initialisation, and the standard 3DGS PLY layout (write and read). SH and quaternion maths are in
+:mod:`nerf2gs_plugin.utils.sh` and :mod:`nerf2gs_plugin.utils.quaternions`.
 
 Conventions: quaternions are ``wxyz``; scales are stored as logs and opacities as logits by the
 methods; SH coefficients are ``[N, K, 3]`` with ``K = (degree + 1) ** 2`` and the DC term first.
@@ -7,7 +8,6 @@ methods; SH coefficients are ``[N, K, 3]`` with ``K = (degree + 1) ** 2`` and th
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Optional, Union
 
@@ -16,95 +16,12 @@ import torch
 from torch import Tensor
 
 from nerf2gs_plugin.errors import DataError
-
-SH_C0 = 0.28209479177387814
-_SH_C1 = 0.4886025119029199
-_SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
-_SH_C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
-          -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
-
-
-def num_sh_bases(degree: int) -> int:
-    return (degree + 1) ** 2
-
-
-def rgb_to_sh(rgb: Tensor) -> Tensor:
-    """Colour in [0, 1] -> DC coefficient (the rasterizer adds 0.5 back after evaluating SH)."""
-    return (rgb - 0.5) / SH_C0
-
-
-def sh_to_rgb(sh: Tensor) -> Tensor:
-    return sh * SH_C0 + 0.5
-
-
-def sh_basis(degree: int, dirs: Tensor) -> Tensor:
-    """Real SH basis (the 3DGS sign convention) of unit directions ``[..., 3]`` -> ``[..., K]``."""
-    x, y, z = dirs.unbind(-1)
-    out = [torch.full_like(x, SH_C0)]
-    if degree >= 1:
-        out += [-_SH_C1 * y, _SH_C1 * z, -_SH_C1 * x]
-    if degree >= 2:
-        xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
-        out += [_SH_C2[0] * xy, _SH_C2[1] * yz, _SH_C2[2] * (2 * zz - xx - yy), _SH_C2[3] * xz, _SH_C2[4] * (xx - yy)]
-    if degree >= 3:
-        out += [
-            _SH_C3[0] * y * (3 * xx - yy),
-            _SH_C3[1] * xy * z,
-            _SH_C3[2] * y * (4 * zz - xx - yy),
-            _SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy),
-            _SH_C3[4] * x * (4 * zz - xx - yy),
-            _SH_C3[5] * z * (xx - yy),
-            _SH_C3[6] * x * (xx - 3 * yy),
-        ]
-    if degree > 3:
-        raise ValueError("SH degree > 3 is not supported")
-    return torch.stack(out, dim=-1)
-
-
-# ---------------------------------------------------------------------------------------- quaternions
-def normalize_quats(q: Tensor) -> Tensor:
-    return torch.nn.functional.normalize(q, dim=-1)
-
-
-def random_quats(n: int, generator: Optional[torch.Generator] = None) -> Tensor:
-    """Uniformly distributed unit quaternions ``[n, 4]`` (wxyz), Shoemake's method."""
-    u, v, w = torch.rand(3, n, generator=generator)
-    a, b = torch.sqrt(1 - u), torch.sqrt(u)
-    return torch.stack([a * torch.sin(2 * math.pi * v), a * torch.cos(2 * math.pi * v),
-                        b * torch.sin(2 * math.pi * w), b * torch.cos(2 * math.pi * w)], dim=-1)
-
-
-def quat_to_rotmat(q: Tensor) -> Tensor:
-    """``[..., 4]`` wxyz (any norm) -> rotation matrices ``[..., 3, 3]``."""
-    w, x, y, z = normalize_quats(q).unbind(-1)
-    R = torch.stack([
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    ], dim=-1)
-    return R.reshape(*q.shape[:-1], 3, 3)
-
-
-def rotmat_to_quat(R: Tensor) -> Tensor:
-    """Rotation matrices ``[..., 3, 3]`` -> unit quaternions ``[..., 4]`` wxyz (w >= 0)."""
-    m = R
-    t = m[..., 0, 0] + m[..., 1, 1] + m[..., 2, 2]
-    cands = torch.stack([
-        torch.stack([1 + t, m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]], -1),
-        torch.stack([m[..., 2, 1] - m[..., 1, 2], 1 + 2 * m[..., 0, 0] - t, m[..., 0, 1] + m[..., 1, 0], m[..., 0, 2] + m[..., 2, 0]], -1),
-        torch.stack([m[..., 0, 2] - m[..., 2, 0], m[..., 0, 1] + m[..., 1, 0], 1 + 2 * m[..., 1, 1] - t, m[..., 1, 2] + m[..., 2, 1]], -1),
-        torch.stack([m[..., 1, 0] - m[..., 0, 1], m[..., 0, 2] + m[..., 2, 0], m[..., 1, 2] + m[..., 2, 1], 1 + 2 * m[..., 2, 2] - t], -1),
-    ], dim=-2)  # [..., 4, 4]; row i is 4*q*q_i, best conditioned where q_i is largest
-    diag = torch.stack([1 + t, 1 + 2 * m[..., 0, 0] - t, 1 + 2 * m[..., 1, 1] - t, 1 + 2 * m[..., 2, 2] - t], -1)
-    best = diag.argmax(-1)
-    q = torch.gather(cands, -2, best[..., None, None].expand(*best.shape, 1, 4)).squeeze(-2)
-    q = normalize_quats(q)
-    return torch.where(q[..., :1] < 0, -q, q)
+from nerf2gs_plugin.utils.quaternions import quat_to_rotmat
 
 
 def covariances(quats: Tensor, scales: Tensor) -> Tensor:
     """``R diag(s^2) R^T`` ``[N, 3, 3]`` from quats ``[N, 4]`` and linear scales ``[N, 3]``."""
-    R = quat_to_rotmat(quats)
+    R = quat_to_rotmat(quats)  # normalises
     M = R * scales[:, None, :]
     return M @ M.transpose(1, 2)
 

@@ -14,23 +14,14 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
+from nerf2gs_plugin.utils.quaternions import quat_to_rotmat
+
 EPS2D = 0.3
-
-
-def quat_to_rotmat(quats: Tensor) -> Tensor:
-    """Unit quaternions ``[..., 4]`` (wxyz) -> rotation matrices ``[..., 3, 3]``."""
-    w, x, y, z = quats.unbind(-1)
-    r = torch.stack([
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    ], dim=-1)
-    return r.reshape(*quats.shape[:-1], 3, 3)
 
 
 def covariance_3d(quats: Tensor, scales: Tensor) -> Tensor:
     """World covariances ``R S S^T R^T`` ``[N, 3, 3]`` from quats ``[N, 4]`` and scales ``[N, 3]``."""
-    m = quat_to_rotmat(quats) * scales[..., None, :]
+    m = quat_to_rotmat(quats, normalize=False) * scales[..., None, :]
     return m @ m.transpose(-1, -2)
 
 
@@ -73,7 +64,7 @@ def project_gaussians(
     pts = world_to_camera(means, viewmats)  # [C, N, 3]
     r = viewmats[:, :3, :3]
     if covars is None:  # cov_cam = M M^T with M = R_v R_q S  [C, N, 3, 3]
-        m = torch.einsum("cij,njk->cnik", r, quat_to_rotmat(quats) * scales[..., None, :])
+        m = torch.einsum("cij,njk->cnik", r, quat_to_rotmat(quats, normalize=False) * scales[..., None, :])
     else:  # given (possibly singular) world covariances [N, 3, 3]
         cov_c = torch.einsum("cij,njk,clk->cnil", r, covars, r)
 

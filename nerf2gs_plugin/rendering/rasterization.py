@@ -12,28 +12,32 @@ shapes and meta keys.
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any, Optional
 
 import torch
 from torch import Tensor
 
 from nerf2gs_plugin.errors import ConfigError
-from nerf2gs_plugin.rendering.backend import load_extension, resolve_backend
+from nerf2gs_plugin.rendering.backend import backend_function, resolve_backend
 from nerf2gs_plugin.rendering.composite_torch import composite_torch
 from nerf2gs_plugin.rendering.projection import Projected, camera_centers, project_gaussians
 from nerf2gs_plugin.rendering.sh import eval_sh
 from nerf2gs_plugin.rendering.tiles import bin_gaussians
+from nerf2gs_plugin.utils.extensions import load_extension
 
+CSRC = Path(__file__).with_name("csrc")
 EXT_NAME = "nerf2gs_rasterize_gaussians"
-EXT_SOURCES = ["rasterize_gaussians.cpp"]
-EXT_HEADERS = ["gaussians_core.h", "binning_core.h", "projection_core.h", "projection_bwd.h", "sh_core.h"]
+EXT_SOURCES = [CSRC / "rasterize_gaussians.cpp"]
+EXT_HEADERS = [CSRC / h for h in ("gaussians_core.h", "binning_core.h", "projection_core.h", "projection_bwd.h", "sh_core.h")]
+EXT_CFLAGS = ("-O3", "-fopenmp", "-march=native", "-fno-math-errno")
 RENDER_MODES = ("RGB", "D", "ED", "RGB+D", "RGB+ED")
 RASTERIZE_MODES = ("classic", "antialiased")
 
 
 def load_kernel() -> Optional[Any]:
     """The compiled compositing kernel (built on first use), or None when it cannot be built."""
-    return load_extension(EXT_NAME, EXT_SOURCES, EXT_HEADERS)
+    return load_extension(EXT_NAME, EXT_SOURCES, EXT_HEADERS, EXT_CFLAGS)
 
 
 class _ProjectCPU(torch.autograd.Function):
@@ -181,13 +185,31 @@ def rasterize_gaussians(
     if quats.shape != (n, 4) or scales.shape != (n, 3) or opacities.shape != (n,) or Ks.shape != (n_cams, 3, 3):
         raise ValueError(f"shape mismatch: means {tuple(means.shape)}, quats {tuple(quats.shape)}, scales "
                          f"{tuple(scales.shape)}, opacities {tuple(opacities.shape)}, Ks {tuple(Ks.shape)}")
-    chosen = resolve_backend(backend, means.device.type, EXT_NAME, EXT_SOURCES, EXT_HEADERS)
-    if chosen == "gsplat":
-        from nerf2gs_plugin.rendering.gsplat_backend import rasterize_gsplat  # noqa: PLC0415
+    chosen = resolve_backend(backend, means.device.type, "gaussians")
+    return backend_function(chosen, "gaussians")(
+        means, quats, scales, opacities, colors, viewmats, Ks, width, height, near_plane=near_plane, far_plane=far_plane,
+        sh_degree=sh_degree, backgrounds=backgrounds, render_mode=render_mode, rasterize_mode=rasterize_mode,
+        tile_size=tile_size, return_median=return_median)
 
-        return rasterize_gsplat(means, quats, scales, opacities, colors, viewmats, Ks, width, height, near_plane,
-                                far_plane, sh_degree, backgrounds, render_mode, rasterize_mode, tile_size, return_median)
 
+def rasterize_gaussians_cpu(*args: Any, **kwargs: Any) -> tuple[Tensor, Tensor, dict[str, Any]]:
+    """The ``cpu`` backend (C++/OpenMP kernels); :func:`rasterize_gaussians`' arguments, no ``backend``."""
+    return _rasterize_local(*args, chosen="cpu", **kwargs)
+
+
+def rasterize_gaussians_torch(*args: Any, **kwargs: Any) -> tuple[Tensor, Tensor, dict[str, Any]]:
+    """The ``torch`` reference backend; :func:`rasterize_gaussians`' arguments, no ``backend``."""
+    return _rasterize_local(*args, chosen="torch", **kwargs)
+
+
+def _rasterize_local(
+    means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, colors: Tensor, viewmats: Tensor, Ks: Tensor,
+    width: int, height: int, near_plane: float, far_plane: float, sh_degree: Optional[int],
+    backgrounds: Optional[Tensor], render_mode: str, rasterize_mode: str, tile_size: int, return_median: bool,
+    chosen: str,
+) -> tuple[Tensor, Tensor, dict[str, Any]]:
+    """The cpu and torch backends: the same three stages, in C++ or in torch."""
+    n, n_cams = means.shape[0], viewmats.shape[0]
     cams_grad = torch.is_grad_enabled() and (viewmats.requires_grad or Ks.requires_grad)
     if chosen == "cpu" and not cams_grad and (sh_degree or 0) <= 3:  # one C++ pass instead of ~100 torch ops
         proj, opac, feats = _project_fused(means, quats, scales, opacities, colors, viewmats, Ks, width, height, near_plane,

@@ -11,7 +11,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from nerf2gs_plugin.fields.mlp import sh_encode
+from nerf2gs_plugin.utils.sh import sh_basis
 
 
 def eval_sh(degree: int, coeffs: Tensor, dirs: Tensor) -> Tensor:
@@ -24,6 +24,6 @@ def eval_sh(degree: int, coeffs: Tensor, dirs: Tensor) -> Tensor:
     if coeffs.shape[-2] < nb:
         raise ValueError(f"SH degree {degree} needs {nb} coefficients, got {coeffs.shape[-2]}")
     d = torch.nn.functional.normalize(dirs, dim=-1)
-    basis = sh_encode(d.reshape(-1, 3), degree).reshape(*d.shape[:-1], nb)  # [..., nb]
+    basis = sh_basis(degree, d.reshape(-1, 3)).reshape(*d.shape[:-1], nb)  # [..., nb]
     rgb = (basis[..., :, None] * coeffs[..., :nb, :]).sum(-2)
     return torch.clamp_min(rgb + 0.5, 0.0)

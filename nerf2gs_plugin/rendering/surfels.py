@@ -20,13 +20,10 @@ import torch
 from torch import Tensor
 
 from nerf2gs_plugin.errors import ConfigError
-from nerf2gs_plugin.rendering.backend import resolve_backend
+from nerf2gs_plugin.rendering.backend import backend_function, resolve_backend
 from nerf2gs_plugin.rendering.projection import camera_centers
 from nerf2gs_plugin.rendering.sh import eval_sh
 from nerf2gs_plugin.rendering.surfels_cpu import (
-    EXT_HEADERS,
-    EXT_NAME,
-    EXT_SOURCES,
     composite_surfels_cpu,
     project_surfels_cpu,
     tile_lists_cpu,
@@ -104,10 +101,29 @@ def rasterize_surfels(
     if densify_signal not in ("lowpass", "screen"):
         raise ValueError(f"densify_signal must be 'lowpass' or 'screen', got {densify_signal!r}")
     _check(means, quats, scales, opacities, colors, viewmats, Ks, sh_degree, render_mode)
-    chosen = resolve_backend(backend, means.device.type, EXT_NAME, EXT_SOURCES, EXT_HEADERS)
-    if chosen == "gsplat":
-        return _rasterize_gsplat(means, quats, scales, opacities, colors, viewmats, Ks, width, height, near_plane,
-                                 far_plane, sh_degree, backgrounds, render_mode, tile_size)
+    chosen = resolve_backend(backend, means.device.type, "surfels")
+    return backend_function(chosen, "surfels")(
+        means, quats, scales, opacities, colors, viewmats, Ks, width, height, near_plane=near_plane, far_plane=far_plane,
+        sh_degree=sh_degree, backgrounds=backgrounds, render_mode=render_mode, tile_size=tile_size,
+        densify_signal=densify_signal)
+
+
+def rasterize_surfels_cpu(*args: Any, **kwargs: Any) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor, dict[str, Any]]:
+    """The ``cpu`` backend (C++/OpenMP kernels); :func:`rasterize_surfels`' arguments, no ``backend``."""
+    return _rasterize_local(*args, chosen="cpu", **kwargs)
+
+
+def rasterize_surfels_torch(*args: Any, **kwargs: Any) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor, dict[str, Any]]:
+    """The ``torch`` reference backend; :func:`rasterize_surfels`' arguments, no ``backend``."""
+    return _rasterize_local(*args, chosen="torch", **kwargs)
+
+
+def _rasterize_local(
+    means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, colors: Tensor, viewmats: Tensor, Ks: Tensor,
+    width: int, height: int, near_plane: float, far_plane: float, sh_degree: Optional[int],
+    backgrounds: Optional[Tensor], render_mode: str, tile_size: int, densify_signal: str, chosen: str,
+) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor, dict[str, Any]]:
+    """The cpu and torch backends: projection, tile lists and compositing in C++ or in torch."""
     C, N = viewmats.shape[0], means.shape[0]
     cams_grad = torch.is_grad_enabled() and (viewmats.requires_grad or Ks.requires_grad)
     if chosen == "cpu" and not cams_grad and (sh_degree is None or sh_degree <= 3):
@@ -151,30 +167,3 @@ def rasterize_surfels(
             "width": width, "height": height, "tile_size": tile_size, "n_cameras": C, "backend": chosen,
             "n_pairs": int(lists.flat_ids.numel())}
     return render, alpha, maps["normals"], surf_normals, maps["distort"], maps["median"], meta
-
-
-def _rasterize_gsplat(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, colors: Tensor,
-                      viewmats: Tensor, Ks: Tensor, width: int, height: int, near_plane: float, far_plane: float,
-                      sh_degree: Optional[int], backgrounds: Optional[Tensor], render_mode: str,
-                      tile_size: int) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor, Tensor, dict[str, Any]]:
-    """``gsplat.rasterization_2dgs`` with its normals mapped from world to camera frame."""
-    import gsplat  # noqa: PLC0415 - only reached with CUDA tensors
-
-    C = viewmats.shape[0]
-    if backgrounds is not None and backgrounds.dim() == 1:
-        backgrounds = backgrounds[None].expand(C, -1)
-    render, alpha, normals, surf, distort, median, meta = gsplat.rasterization_2dgs(
-        means, quats, scales, opacities, colors, viewmats, Ks, width, height, near_plane=near_plane,
-        far_plane=far_plane, sh_degree=sh_degree, backgrounds=backgrounds, render_mode=render_mode,
-        tile_size=tile_size, distloss="D" in render_mode)
-    rot = viewmats[:, :3, :3]
-    normals = torch.einsum("cij,chwj->chwi", rot, normals)
-    if surf is None:
-        surf = torch.zeros_like(normals)
-    else:
-        surf = torch.einsum("cij,chwj->chwi", rot, surf.reshape(C, height, width, 3))
-    radii = meta["radii"]
-    if radii.dim() == 3:  # newer gsplat: per-axis radii
-        radii = radii.max(-1).values
-    meta = {**meta, "radii": radii, "backend": "gsplat"}
-    return render, alpha, normals, surf, distort, median, meta

@@ -11,22 +11,25 @@ and backward, ``csrc/surfels_proj_core.h``) computes what :func:`surfels_torch.p
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Optional
 
 import torch
 from torch import Tensor
 
-from nerf2gs_plugin.rendering.backend import extension_error, load_extension
 from nerf2gs_plugin.rendering.surfels_torch import SurfelProjection, TileLists, _adjugate, _det
+from nerf2gs_plugin.utils.extensions import extension_error, load_extension
 
 EXT_NAME = "nerf2gs_surfels"
-EXT_SOURCES = ["surfels.cpp"]
-EXT_HEADERS = ["surfels_proj_core.h", "binning_core.h", "projection_bwd.h", "projection_core.h", "sh_core.h"]
+CSRC = Path(__file__).with_name("csrc")
+EXT_SOURCES = [CSRC / "surfels.cpp"]
+EXT_HEADERS = [CSRC / h for h in ("surfels_proj_core.h", "binning_core.h", "projection_bwd.h", "projection_core.h", "sh_core.h")]
+EXT_CFLAGS = ("-O3", "-fopenmp", "-march=native", "-fno-math-errno")
 
 
 def extension() -> Optional[Any]:
     """The compiled kernel (built on first use, cached under ``TORCH_EXTENSIONS_DIR``), or None."""
-    return load_extension(EXT_NAME, EXT_SOURCES, EXT_HEADERS)
+    return load_extension(EXT_NAME, EXT_SOURCES, EXT_HEADERS, EXT_CFLAGS)
 
 
 def available() -> bool:

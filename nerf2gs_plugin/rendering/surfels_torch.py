@@ -29,7 +29,7 @@ import torch
 from torch import Tensor
 from torch.utils.checkpoint import checkpoint
 
-from nerf2gs_plugin.rendering.projection import quat_to_rotmat
+from nerf2gs_plugin.utils.quaternions import quat_to_rotmat
 
 ALPHA_MIN = 1.0 / 255.0
 ALPHA_MAX = 0.99
@@ -62,7 +62,7 @@ def project_surfels(means: Tensor, quats: Tensor, scales: Tensor, opacities: Ten
     with the low-pass footprint about the centre. A disc that reaches the camera plane is given the
     whole image (conservative; the per-pixel depth test culls what is behind).
     """
-    R = quat_to_rotmat(torch.nn.functional.normalize(quats, dim=-1))  # [N,3,3]
+    R = quat_to_rotmat(quats)  # normalises  # [N,3,3]
     rv, tv = viewmats[:, :3, :3], viewmats[:, :3, 3]
     p = torch.einsum("cij,nj->cni", rv, means) + tv[:, None, :]  # [C,N,3]
     tu = torch.einsum("cij,nj->cni", rv, R[..., 0] * scales[:, None, 0])

@@ -16,7 +16,7 @@ from splat_tiny_scene import needs_rasterizer, write_dataset  # noqa: E402
 from nerf2gs_plugin.cli.export import ExportArgs, export  # noqa: E402
 from nerf2gs_plugin.engine.reference import load_run  # noqa: E402
 from nerf2gs_plugin.engine.trainer import Trainer  # noqa: E402
-from nerf2gs_plugin.methods.gaussian_utils import read_gaussian_ply  # noqa: E402
+from nerf2gs_plugin.methods.gaussian_utils import read_gaussian_ply
 from nerf2gs_plugin.methods.splatfacto.config import gaussian_optimizers, splatfacto_method  # noqa: E402
 
 

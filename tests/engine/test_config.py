@@ -3,7 +3,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from nerf2gs_plugin.engine.config import atomic_write_text, load_config, save_config
+from nerf2gs_plugin.engine.config import load_config, save_config
+
+from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.engine.optimizers import OptimizerConfig
 from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.registry import get_method

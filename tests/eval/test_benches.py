@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from nerf2gs_plugin.engine.config import apply_plain
+from nerf2gs_plugin.utils.config import apply_plain
 from nerf2gs_plugin.errors import ConfigError, DataError
 from nerf2gs_plugin.eval import bench_size, bench_speed_quality, bench_stability
 from nerf2gs_plugin.eval.bench_runs import RunSpec

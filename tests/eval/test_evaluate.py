@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from nerf2gs_plugin.engine.config import apply_plain
+from nerf2gs_plugin.utils.config import apply_plain
 from nerf2gs_plugin.engine.reference import load_run
 from nerf2gs_plugin.engine.trainer import Trainer
 from nerf2gs_plugin.eval import lpips as lpips_mod

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from nerf2gs_plugin.engine.config import apply_plain
+from nerf2gs_plugin.utils.config import apply_plain
 from nerf2gs_plugin.engine.reference import load_run
 from nerf2gs_plugin.engine.trainer import Trainer
 from nerf2gs_plugin.eval.evaluate import evaluate_run

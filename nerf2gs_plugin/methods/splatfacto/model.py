@@ -18,9 +18,11 @@ from torch import Tensor, nn
 from nerf2gs_plugin.cameras import Cameras
 from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.engine.callbacks import TrainingCallback, TrainingCallbackAttributes, TrainingCallbackLocation as Loc
-from nerf2gs_plugin.engine.losses import psnr_from_mse
+from nerf2gs_plugin.utils.image_metrics import psnr_from_mse
 from nerf2gs_plugin.engine.model import Model, ModelConfig
-from nerf2gs_plugin.methods.gaussian_utils import knn_mean_distance, logit, normalize_quats, num_sh_bases, random_quats, rgb_to_sh
+from nerf2gs_plugin.methods.gaussian_utils import knn_mean_distance, logit
+from nerf2gs_plugin.utils.quaternions import normalize_quats, random_quats
+from nerf2gs_plugin.utils.sh import num_sh_bases, rgb_to_sh
 from nerf2gs_plugin.methods.splatfacto.shared import Background, BackgroundMode, composite, image_loss
 from nerf2gs_plugin.methods.splatfacto.strategy import (
     DefaultStrategy,

@@ -4,53 +4,16 @@ loss) and camera helpers."""
 
 from __future__ import annotations
 
-from typing import Any, Callable, Literal
+from typing import Any, Literal
 
 import torch
 from torch import Tensor, nn
 
 from nerf2gs_plugin.cameras import Cameras
-from nerf2gs_plugin.methods.gaussian_utils import num_sh_bases, sh_basis
+from nerf2gs_plugin.utils.image_metrics import ssim
+from nerf2gs_plugin.utils.sh import num_sh_bases, sh_basis
 
 BackgroundMode = Literal["sky", "random", "learned", "black", "white"]
-
-
-def _kornia_ssim(pred: Tensor, gt: Tensor) -> Tensor:
-    import kornia.metrics
-
-    return kornia.metrics.ssim(pred.permute(2, 0, 1)[None], gt.permute(2, 0, 1)[None], 11).mean()
-
-
-_SSIM_IMPL: list = []  # resolved once: the project's SSIM (with its layout) or kornia's
-
-
-def _resolve_ssim() -> Callable[[Tensor, Tensor], Tensor]:
-    """Use ``nerf2gs_plugin.eval.metrics.ssim`` when it exists and agrees with the 11x11 Gaussian
-    SSIM on a probe pair, in whichever layout it takes ([H,W,3] or [1,3,H,W]); else kornia's."""
-    try:
-        from nerf2gs_plugin.eval.metrics import ssim as project_ssim
-    except ImportError:
-        return _kornia_ssim
-    g = torch.Generator().manual_seed(0)
-    a = torch.rand(24, 32, 3, generator=g)
-    b = (a + 0.1 * torch.rand(24, 32, 3, generator=g)).clamp(0, 1)
-    ref = float(_kornia_ssim(a, b))
-    layouts = (lambda x: x, lambda x: x.permute(2, 0, 1)[None])
-    for to in layouts:
-        try:
-            val = float(torch.as_tensor(project_ssim(to(a), to(b))).mean())
-        except Exception:  # noqa: BLE001 - a layout it does not take
-            continue
-        if abs(val - ref) < 2e-2:
-            return lambda p, q, f=project_ssim, t=to: torch.as_tensor(f(t(p), t(q))).mean()
-    return _kornia_ssim
-
-
-def ssim(pred: Tensor, gt: Tensor) -> Tensor:
-    """Mean 11x11 Gaussian SSIM of two ``[H,W,3]`` images (differentiable)."""
-    if not _SSIM_IMPL:
-        _SSIM_IMPL.append(_resolve_ssim())
-    return _SSIM_IMPL[0](pred, gt)
 
 
 def camera_directions(camera: Cameras) -> Tensor:

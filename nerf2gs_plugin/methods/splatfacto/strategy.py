@@ -24,7 +24,9 @@ from typing import Any, Optional
 import torch
 from torch import Tensor, nn
 
-from nerf2gs_plugin.methods.gaussian_utils import logit, quat_to_rotmat
+from nerf2gs_plugin.methods.gaussian_utils import logit
+
+from nerf2gs_plugin.utils.quaternions import quat_to_rotmat
 
 
 # ---------------------------------------------------------------------------------------- edits

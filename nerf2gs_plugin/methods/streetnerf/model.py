@@ -55,7 +55,8 @@ from torch import Tensor, nn
 from nerf2gs_plugin.cameras import Cameras, RayBundle
 from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.engine.callbacks import TrainingCallback, TrainingCallbackAttributes, TrainingCallbackLocation
-from nerf2gs_plugin.engine.losses import masked_mean, psnr_from_mse
+from nerf2gs_plugin.engine.losses import masked_mean
+from nerf2gs_plugin.utils.image_metrics import psnr_from_mse
 from nerf2gs_plugin.engine.model import Model, ModelConfig
 from nerf2gs_plugin.fields.appearance import AppearanceTransforms
 from nerf2gs_plugin.fields.hash_encoding import HashGridSpec

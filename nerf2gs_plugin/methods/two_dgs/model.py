@@ -19,7 +19,7 @@ from torch import Tensor, nn
 
 from nerf2gs_plugin.cameras import Cameras
 from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
-from nerf2gs_plugin.methods.gaussian_utils import normalize_quats
+from nerf2gs_plugin.utils.quaternions import normalize_quats
 from nerf2gs_plugin.methods.splatfacto.model import SplatfactoModel, SplatfactoModelConfig
 from nerf2gs_plugin.methods.splatfacto.shared import composite
 

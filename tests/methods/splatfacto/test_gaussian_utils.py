@@ -7,17 +7,9 @@ import pytest
 import torch
 
 from nerf2gs_plugin.errors import DataError
-from nerf2gs_plugin.methods.gaussian_utils import (
-    knn_mean_distance,
-    quat_to_rotmat,
-    random_quats,
-    read_gaussian_ply,
-    rgb_to_sh,
-    rotmat_to_quat,
-    sh_basis,
-    sh_to_rgb,
-    write_gaussian_ply,
-)
+from nerf2gs_plugin.methods.gaussian_utils import knn_mean_distance, read_gaussian_ply, write_gaussian_ply
+from nerf2gs_plugin.utils.quaternions import quat_to_rotmat, random_quats, rotmat_to_quat
+from nerf2gs_plugin.utils.sh import rgb_to_sh, sh_basis, sh_to_rgb
 
 
 def test_sh_rgb_round_trip_and_basis():

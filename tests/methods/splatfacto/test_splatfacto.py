@@ -224,7 +224,7 @@ def test_strategy_settings_are_one_nested_config_with_cli_flags():
     ``--pipeline.model.strategy.<field>`` and ``--pipeline.model.mcmc.<field>``."""
     import tyro
 
-    from nerf2gs_plugin.engine.config import apply_plain, to_plain
+    from nerf2gs_plugin.utils.config import apply_plain, to_plain
 
     model = splatfacto_config.pipeline.model
     assert isinstance(model.strategy, DefaultStrategyConfig) and isinstance(model.mcmc, MCMCStrategyConfig)

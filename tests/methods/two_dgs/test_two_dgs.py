@@ -10,7 +10,7 @@ from torch import nn
 
 from splat_tiny_scene import needs_rasterizer, batch_for, make_cameras, make_train_data, psnr, render_truth, train
 
-from nerf2gs_plugin.methods.gaussian_utils import quat_to_rotmat
+from nerf2gs_plugin.utils.quaternions import quat_to_rotmat
 from nerf2gs_plugin.methods.splatfacto.config import gaussian_optimizers
 from nerf2gs_plugin.methods.splatfacto.strategy import DefaultStrategy, DefaultStrategyConfig
 from nerf2gs_plugin.methods.two_dgs.config import paper_scale, two_dgs_method
@@ -131,7 +131,7 @@ def test_rendered_and_depth_normals_agree_on_a_tilted_surfel(scene):
     centre = c2w[:, 3] - 0.6 * c2w[:, 2]  # 0.6 in front of the camera (OpenGL looks down -z)
     tilt = torch.tensor(0.5)
     # surfel normal = camera's backward axis tilted about the camera's x axis
-    from nerf2gs_plugin.methods.gaussian_utils import rotmat_to_quat
+    from nerf2gs_plugin.utils.quaternions import rotmat_to_quat
 
     Rx = torch.tensor([[1.0, 0, 0], [0, torch.cos(tilt), -torch.sin(tilt)], [0, torch.sin(tilt), torch.cos(tilt)]])
     R = c2w[:, :3] @ Rx

@@ -1,0 +1,95 @@
+"""Config base helpers: dataclass configs that build their class, and the plain-value round trip
+(dataclass tree <-> YAML-safe dict) that run configs and benches use.
+
+Loading starts from a registered default config and applies stored values with type checks, so a
+renamed or removed field is a clear error instead of arbitrary code.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any, TypeVar, get_type_hints
+
+from nerf2gs_plugin.errors import ConfigError
+
+T = TypeVar("T")
+
+
+@dataclasses.dataclass
+class InstantiateConfig:
+    """A config that knows the class it builds (``_target``), like nerfstudio's."""
+
+    def setup(self, **kwargs: Any) -> Any:
+        target = getattr(self, "_target")
+        return target(self, **kwargs)
+
+
+def to_plain(obj: Any) -> Any:
+    """Dataclass tree -> dict of plain YAML-safe values (paths become strings)."""
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return {
+            f.name: to_plain(getattr(obj, f.name))
+            for f in dataclasses.fields(obj)
+            if not f.name.startswith("_")
+        }
+    if isinstance(obj, Path):
+        return str(obj)
+    if isinstance(obj, (list, tuple)):
+        return [to_plain(v) for v in obj]
+    if isinstance(obj, dict):
+        return {str(k): to_plain(v) for k, v in obj.items()}
+    if isinstance(obj, (str, int, float, bool)) or obj is None:
+        return obj
+    if isinstance(obj, type):
+        return f"{obj.__module__}.{obj.__qualname__}"
+    return str(obj)
+
+
+def apply_plain(default: T, values: dict, where: str = "config") -> T:
+    """Return ``default`` with the fields in ``values`` replaced, recursively, with type checks."""
+    if not isinstance(values, dict):
+        raise ConfigError(f"{where}: expected a mapping, got {type(values).__name__}")
+    hints = get_type_hints(type(default))
+    names = {f.name for f in dataclasses.fields(default) if not f.name.startswith("_")}
+    changes = {}
+    for key, value in values.items():
+        if key not in names:
+            raise ConfigError(f"{where}: unknown field '{key}'")
+        current = getattr(default, key)
+        if dataclasses.is_dataclass(current) and isinstance(value, dict):
+            changes[key] = apply_plain(current, value, f"{where}.{key}")
+        elif isinstance(current, dict) and isinstance(value, dict) and current and all(
+            dataclasses.is_dataclass(v) for v in current.values()
+        ):
+            merged = dict(current)
+            for k, v in value.items():
+                if k not in current:
+                    raise ConfigError(f"{where}.{key}: unknown entry '{k}'")
+                merged[k] = apply_plain(current[k], v, f"{where}.{key}.{k}")
+            changes[key] = merged
+        else:
+            changes[key] = _coerce(value, current, hints.get(key), f"{where}.{key}")
+    return dataclasses.replace(default, **changes)
+
+
+def _coerce(value: Any, current: Any, hint: Any, where: str) -> Any:
+    if value is None:
+        return None
+    if isinstance(current, Path) or hint in (Path, "Path"):
+        return Path(value)
+    if isinstance(current, bool):
+        if not isinstance(value, bool):
+            raise ConfigError(f"{where}: expected true/false, got {value!r}")
+        return value
+    if isinstance(current, (int, float)) and not isinstance(current, bool):
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            raise ConfigError(f"{where}: expected a number, got {value!r}")
+        return type(current)(value) if isinstance(current, float) else value
+    if isinstance(current, tuple):
+        return tuple(value)
+    if isinstance(current, Path) and isinstance(value, str):
+        return Path(value)
+    if isinstance(current, str) and not isinstance(value, str):
+        raise ConfigError(f"{where}: expected a string, got {value!r}")
+    return value

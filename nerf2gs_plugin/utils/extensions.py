@@ -1,0 +1,113 @@
+"""The one loader of the C++/OpenMP kernels (rasterizers, hash grid): compiled on first use with
+``torch.utils.cpp_extension.load``, cached under ``TORCH_EXTENSIONS_DIR`` and reloaded afterwards.
+
+A kernel that fails to build on a machine that has a C++ compiler is an error
+(:class:`KernelBuildError`), not a silent ten-times-slower torch fallback: a broken kernel must
+fail the test suite. Machines without a compiler set ``NERF2GS_ALLOW_NO_KERNELS=1``; the kernels
+then fall back to the torch reference (the reason printed once, and reported in pytest's summary).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import sys
+import threading
+from pathlib import Path
+from typing import Any, Optional, Sequence
+
+from nerf2gs_plugin.errors import UserError
+
+OPT_OUT_ENV = "NERF2GS_ALLOW_NO_KERNELS"
+CFLAGS = ("-O3", "-fopenmp", "-march=native")
+
+_EXTS: dict[str, Any] = {}
+_FAILED: dict[str, str] = {}
+_LOCK = threading.Lock()
+
+
+class KernelBuildError(UserError):
+    """A C++ kernel did not build although a compiler is present."""
+
+
+def kernels_opted_out() -> bool:
+    """True when ``NERF2GS_ALLOW_NO_KERNELS`` asks for the torch fallback instead of an error."""
+    return os.environ.get(OPT_OUT_ENV, "").strip().lower() not in ("", "0", "false", "no")
+
+
+def compiler_available() -> bool:
+    """True when the C++ compiler torch would call (``$CXX`` or ``c++``) is on the PATH."""
+    return shutil.which(os.environ.get("CXX", "c++")) is not None
+
+
+def extension_cache_dir() -> Path:
+    """Where compiled extensions are cached: ``$TORCH_EXTENSIONS_DIR`` or torch's default."""
+    env = os.environ.get("TORCH_EXTENSIONS_DIR")
+    if env:
+        return Path(env)
+    from torch.utils.cpp_extension import _get_build_directory  # noqa: PLC0415 - torch is heavy; only on first build
+
+    return Path(_get_build_directory("", verbose=False)).parent
+
+
+def _build_name(name: str, sources: Sequence[Path], headers: Sequence[Path]) -> str:
+    """``name`` plus a hash of every source and header: an edited kernel is rebuilt, never stale."""
+    digest = hashlib.sha1()
+    for f in [*sources, *headers]:
+        digest.update(Path(f).read_bytes())
+    return f"{name}_{digest.hexdigest()[:10]}"
+
+
+def load_extension(name: str, sources: Sequence[Path], headers: Sequence[Path] = (),
+                   extra_cflags: Sequence[str] = CFLAGS) -> Optional[Any]:
+    """Compile (first use) or load (cached) the C++ extension ``name`` from ``sources``.
+
+    Returns the module; None when it cannot be built and the opt-out is set (the reason is kept
+    for :func:`extension_error` and printed once). Raises :class:`KernelBuildError` when it cannot
+    be built without the opt-out. Thread-safe; tries once per process.
+    """
+    if name in _EXTS:
+        return _EXTS[name]
+    with _LOCK:
+        if name not in _EXTS and name not in _FAILED:
+            _build(name, [Path(s) for s in sources], [Path(h) for h in headers], list(extra_cflags))
+    if name in _FAILED:
+        _raise_unless_opted_out(name)
+    return _EXTS.get(name)
+
+
+def _build(name: str, sources: list[Path], headers: list[Path], cflags: list[str]) -> None:
+    try:
+        from torch.utils.cpp_extension import load  # noqa: PLC0415 - torch is heavy; only on first build
+
+        build_name = _build_name(name, sources, headers)
+        cache = extension_cache_dir()
+        cache.mkdir(parents=True, exist_ok=True)
+        if not (cache / build_name / f"{build_name}.so").is_file():
+            print(f"compiling the {name} kernel (first use, about 1 min)...", file=sys.stderr, flush=True)
+        include = sorted({str(h.parent) for h in headers})
+        _EXTS[name] = load(name=build_name, sources=[str(s) for s in sources], extra_cflags=cflags,
+                           extra_include_paths=include, extra_ldflags=["-fopenmp"], verbose=False)
+    except Exception as e:  # noqa: BLE001 - reported below: an error, or the torch fallback when opted out
+        msg = str(e).strip().splitlines()[0][:200] if str(e).strip() else ""
+        _FAILED[name] = f"{type(e).__name__}: {msg}"
+        print(f"the {name} kernel did not build: {_FAILED[name]}", file=sys.stderr, flush=True)
+
+
+def _raise_unless_opted_out(name: str) -> None:
+    if kernels_opted_out():
+        return
+    where = "a C++ compiler is on the PATH" if compiler_available() else "no C++ compiler was found"
+    raise KernelBuildError(f"the {name} C++ kernel did not build ({_FAILED[name]}); {where}: fix the build, "
+                           f"or set {OPT_OUT_ENV}=1 to run the slow torch reference instead")
+
+
+def extension_error(name: str) -> Optional[str]:
+    """Why extension ``name`` failed to build (None if it built or was never tried)."""
+    return _FAILED.get(name)
+
+
+def failed_extensions() -> dict[str, str]:
+    """Every kernel that failed to build in this process, with the reason (for pytest's summary)."""
+    return dict(_FAILED)
