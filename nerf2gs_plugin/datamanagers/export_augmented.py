@@ -71,7 +71,7 @@ def export_augmented_dataset(datamanager, out: Path, overwrite: bool = False) ->
 
 def preview_augmented(datamanager, views: AugmentedViews, path: Path, n: int = 3) -> Path:
     """Rows of real image | composite | bird's-eye render | enhanced bird's-eye view."""
-    from nerf2gs_plugin.eval.figures import _mpl, save_figure
+    from nerf2gs_plugin.utils.plotting import pyplot as _mpl, save_figure
 
     plt = _mpl()
     real_set = datamanager.original_train_images

@@ -13,6 +13,7 @@ from torch import Tensor, nn
 from nerf2gs_plugin.datamanagers.base import DataManager, DataManagerConfig
 from nerf2gs_plugin.utils.config import InstantiateConfig
 from nerf2gs_plugin.engine.model import Model, ModelConfig
+from nerf2gs_plugin.utils.image_metrics import psnr_from_mse
 
 
 @dataclass
@@ -46,7 +47,7 @@ class Pipeline(nn.Module):
         out = self.model.render_camera(camera)
         self.model.train(was_training)
         mse = ((out["rgb"] - batch["image"]) ** 2).mean()
-        return {"eval_psnr": float(-10 * torch.log10(mse.clamp_min(1e-10)))}
+        return {"eval_psnr": float(psnr_from_mse(mse))}
 
     @torch.no_grad()
     def render_split(self, name: str, max_images: Optional[int] = None) -> list[tuple[dict[str, Tensor], dict[str, Any], float]]:

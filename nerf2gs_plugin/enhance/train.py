@@ -30,6 +30,7 @@ from nerf2gs_plugin.enhance.degrade import KINDS, degrade
 from nerf2gs_plugin.enhance.pairs import Pair, split_indices
 from nerf2gs_plugin.enhance.unet import MULTIPLE, ResidualUNet, export_onnx
 from nerf2gs_plugin.errors import ConfigError, DataError
+from nerf2gs_plugin.utils.image_metrics import psnr, psnr_from_mse
 
 # Checkpoint selection score: PSNR - LPIPS_DB * LPIPS (0.01 LPIPS weighs like 0.2 dB).
 LPIPS_DB = 20.0
@@ -111,11 +112,6 @@ class TrainReport:
         return lines
 
 
-def psnr(a: Tensor, b: Tensor) -> float:
-    mse = float(((a.float() - b.float()) ** 2).mean())
-    return 10 * torch.log10(torch.tensor(1.0 / max(mse, 1e-12))).item()
-
-
 def _chw(img: Tensor) -> Tensor:
     return img.permute(2, 0, 1).contiguous().float().cpu()
 
@@ -177,8 +173,8 @@ def heldout_psnr(enhance, images: list[Tensor], kinds: Sequence[str], strength: 
         deg = degrade(gt[None], gen, kinds, strength)[0]
         ref = references[k].permute(1, 2, 0) if references is not None else None
         out = enhance(deg.permute(1, 2, 0), ref).permute(2, 0, 1)
-        before.append(psnr(deg, gt))
-        after.append(psnr(out, gt))
+        before.append(float(psnr(deg, gt)))
+        after.append(float(psnr(out, gt)))
     n = max(len(images), 1)
     return {"psnr_degraded": sum(before) / n, "psnr_enhanced": sum(after) / n, "images": len(images)}
 
@@ -232,7 +228,7 @@ class _Validator:
             r = F.pad(ref[None], pad, mode="replicate") if ref is not None else None
             out = net(x, r)[0, :, :h, :w]
             mse = (((out - tgt) ** 2) * mask).sum() / (mask.sum() * 3).clamp_min(1)
-            p.append(float(-10 * torch.log10(mse.clamp_min(1e-12))))
+            p.append(float(psnr_from_mse(mse)))
             if self.lpips is not None:
                 l.append(float(self.lpips(out * mask + tgt * (1 - mask), tgt)))
         net.train()

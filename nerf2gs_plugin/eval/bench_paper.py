@@ -232,11 +232,11 @@ def speed_quality_chart(results: dict[str, dict], path: Path, title: str) -> Non
 
 
 def psnr_bar_chart(results: dict[str, dict], path: Path, title: str) -> None:
-    from nerf2gs_plugin.eval.figures import _mpl, save_figure
+    from nerf2gs_plugin.utils.plotting import pyplot, save_figure
 
     if not results:  # every run failed: nothing to draw
         return
-    plt = _mpl()
+    plt = pyplot()
     labels = list(results)
     fig, ax = plt.subplots(figsize=(max(6, 1.1 * len(labels)), 4.2))
     width = 0.27

@@ -123,9 +123,9 @@ def markdown(rows: list[dict], best: dict[str, dict], tol: float = TOLERANCE_DB)
 
 def chart(rows: list[dict], best: dict[str, dict], path: Path, title: str) -> None:
     """Mean PSNR against primitives (log x), one curve per method and swept field; picks marked."""
-    from nerf2gs_plugin.eval.figures import _mpl, save_figure
+    from nerf2gs_plugin.utils.plotting import pyplot, save_figure
 
-    plt = _mpl()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7.5, 4.6))
     methods = list(dict.fromkeys(r["method"] for r in rows))
     for k, m in enumerate(methods):

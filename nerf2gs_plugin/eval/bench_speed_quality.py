@@ -92,9 +92,9 @@ def fronts(points: list[dict]) -> tuple[list[int], list[int]]:
 
 def chart(points: list[dict], path: Path, title: str) -> None:
     """Two panels, log x: FPS vs BEV PSNR and training time vs BEV PSNR; front points ringed and joined."""
-    from nerf2gs_plugin.eval.figures import _mpl, save_figure
+    from nerf2gs_plugin.utils.plotting import pyplot, save_figure
 
-    plt = _mpl()
+    plt = pyplot()
     f_fps, f_time = fronts(points)
     methods = sorted({str(p["method"]) for p in points})
     colours = {m: plt.get_cmap("tab10")(i % 10) for i, m in enumerate(methods)}

@@ -260,9 +260,9 @@ def run(plan: list[StressCase], data: Path, runs_root: Path, out_dir: Path, scal
 
 def chart(rows: list[dict], path: Path, title: str) -> None:
     """BEV PSNR per case and method (failed cases drawn as red crosses at the axis floor)."""
-    from nerf2gs_plugin.eval.figures import _mpl, save_figure
+    from nerf2gs_plugin.utils.plotting import pyplot, save_figure
 
-    plt = _mpl()
+    plt = pyplot()
     variants = list(dict.fromkeys(r["variant"] for r in rows))
     methods = list(dict.fromkeys(r["method"] for r in rows))
     fig, ax = plt.subplots(figsize=(max(7, 0.9 * len(variants) * max(1, len(methods)) / 2), 4.4))

@@ -8,19 +8,12 @@ from typing import Sequence
 import torch
 from torch import Tensor
 
-
-def _mpl():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+from nerf2gs_plugin.utils.plotting import pyplot, save_figure
 
 
 def save_eval_grid(path: Path, pairs: Sequence[tuple[Tensor, Tensor]], title: str = "") -> None:
     """Rows of GT | render | error (|GT-render| x4, clipped), written atomically."""
-    plt = _mpl()
+    plt = pyplot()
     n = len(pairs)
     fig, axes = plt.subplots(n, 3, figsize=(9, 1.9 * n + 0.4), squeeze=False)
     for r, (gt, pred) in enumerate(pairs):
@@ -38,20 +31,9 @@ def save_eval_grid(path: Path, pairs: Sequence[tuple[Tensor, Tensor]], title: st
     save_figure(fig, path)
 
 
-def save_figure(fig, path: Path) -> None:
-    import os
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
-    fig.savefig(tmp, dpi=110)
-    _mpl().close(fig)
-    os.replace(tmp, path)
-
-
 def image_row(images: Sequence[Tensor], labels: Sequence[str], path: Path, title: str = "") -> None:
     """One labelled row of images (e.g. real | composite | BEV | enhanced BEV)."""
-    plt = _mpl()
+    plt = pyplot()
     fig, axes = plt.subplots(1, len(images), figsize=(3.2 * len(images), 2.2), squeeze=False)
     for ax, img, label in zip(axes[0], images, labels):
         ax.imshow(torch.as_tensor(img).clamp(0, 1).numpy())

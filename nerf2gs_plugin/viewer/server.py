@@ -21,6 +21,7 @@ import torch
 
 from nerf2gs_plugin.cameras import Cameras
 from nerf2gs_plugin.errors import ConfigError
+from nerf2gs_plugin.utils.image_metrics import psnr_from_mse
 from nerf2gs_plugin.viewer.camera import cameras_to_viser
 from nerf2gs_plugin.viewer.render_loop import ClientRenderer, FrameInfo
 from nerf2gs_plugin.viewer.resolution import AdaptiveResolution
@@ -258,7 +259,7 @@ class Viewer:
         out = self._render_outputs(camera)
         render = out["rgb"][..., :3].detach().float().cpu().clamp(0, 1)
         gt = gt.detach().float().cpu()
-        psnr = float(-10 * torch.log10(((render - gt) ** 2).mean().clamp_min(1e-10)))
+        psnr = float(psnr_from_mse(((render - gt) ** 2).mean()))
         sep = torch.ones(render.shape[0], max(2, render.shape[1] // 100), 3)
         pair = (torch.cat([render, sep, gt], dim=1).numpy() * 255 + 0.5).astype(np.uint8)
         text = f"**{label}**: render | ground truth, PSNR {psnr:.2f} dB"
