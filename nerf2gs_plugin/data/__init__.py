@@ -21,6 +21,7 @@ from nerf2gs_plugin.data.normalize import (
 )
 from nerf2gs_plugin.data.registry import discover_dataparsers
 from nerf2gs_plugin.errors import DataError
+from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
 
 __all__ = [
     "MASK_KINDS",
@@ -57,8 +58,6 @@ def parse_dataset(data: Union[str, Path], split: str = "train", downscale: float
 def folder_fingerprint(data: Union[str, Path]) -> str:
     """The content fingerprint of the dataset at ``data`` (its training images), which keys bench
     runs and caches: a moved copy keeps it, a regenerated scene does not."""
-    from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
-
     return dataset_fingerprint(parse_dataset(data, "train").image_filenames)
 
 

@@ -36,8 +36,9 @@ from nerf2gs_plugin.data.synthetic.coverage import ground_coverage
 from nerf2gs_plugin.data.synthetic.layout import SKY, TRANSIENT_MATERIALS, build_layout, empty_boxes
 from nerf2gs_plugin.data.synthetic.poses import bev_poses, street_poses, train_poses
 from nerf2gs_plugin.data.synthetic.raycast import Pinhole, ShadowMap, render_view
-from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.errors import ConfigError
+from nerf2gs_plugin.progress import make_progress
+from nerf2gs_plugin.utils.io import atomic_write_text
 
 GENERATOR_VERSION = 1
 
@@ -138,8 +139,6 @@ def generate_street(cfg: SynthStreetConfig) -> dict[str, Any]:
 
 
 def _generate(cfg: SynthStreetConfig) -> dict[str, Any]:
-    from nerf2gs_plugin.progress import make_progress
-
     t_start, cpu_start = time.perf_counter(), time.process_time()
     out = _prepare_out(cfg)
     layout = build_layout(cfg.seed, cfg.num_cars)

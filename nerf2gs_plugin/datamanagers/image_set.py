@@ -11,6 +11,8 @@ from torch import Tensor
 
 from nerf2gs_plugin.cameras import Cameras
 from nerf2gs_plugin.data.dataparser_outputs import MASK_KINDS, DataparserOutputs
+from nerf2gs_plugin.data.images import load_image, load_mask
+from nerf2gs_plugin.errors import DataError
 
 
 @dataclass
@@ -90,15 +92,11 @@ class ImageSet:
 
 def load_image_set(outputs: DataparserOutputs) -> ImageSet:
     """Read every image (and mask) of a split into an ImageSet."""
-    from nerf2gs_plugin.data.images import load_image, load_mask
-
     images, masks = [], {k: [] for k in MASK_KINDS if k in outputs.mask_filenames}
     for i, path in enumerate(outputs.image_filenames):
         img = load_image(path, outputs.downscale)
         h, w = int(outputs.cameras.height[i]), int(outputs.cameras.width[i])
         if tuple(img.shape[:2]) != (h, w):
-            from nerf2gs_plugin.errors import DataError
-
             raise DataError(f"image is {img.shape[1]}x{img.shape[0]} but its camera says {w}x{h}", path)
         images.append(img)
         for kind in masks:

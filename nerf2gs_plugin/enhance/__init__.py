@@ -16,7 +16,7 @@ from __future__ import annotations
 import os
 from abc import ABC, abstractmethod
 from pathlib import Path
-from typing import Optional
+from typing import Callable, Optional
 
 from torch import Tensor
 
@@ -69,25 +69,39 @@ def default_builtin_path() -> Path:
     return Path(env) if env else DEFAULT_BUILTIN
 
 
+def _none(arg: str) -> Enhancer:
+    if arg:
+        raise ConfigError(f"unknown enhancer 'none:{arg}' (expected none, builtin, builtin:PATH or onnx:PATH)")
+    return IdentityEnhancer()
+
+
+def _builtin(arg: str) -> Enhancer:
+    path = Path(arg) if arg else default_builtin_path()
+    if not path.is_file():
+        raise ConfigError(
+            "no built-in enhancer model here: train one with `ns2gs-enhance train --data DATA --out "
+            f"{path}` or pass --augment.enhancer builtin:PATH / onnx:PATH", path)
+    return OnnxModelEnhancer(path)
+
+
+def _onnx(arg: str) -> Enhancer:
+    if not arg:
+        raise ConfigError("--augment.enhancer onnx:PATH needs a model path")
+    return OnnxModelEnhancer(Path(arg))
+
+
+# ``--augment.enhancer KIND[:ARG]``: a new enhancer is one class and one row here
+ENHANCERS: dict[str, Callable[[str], Enhancer]] = {"none": _none, "builtin": _builtin, "onnx": _onnx}
+
+
 def make_enhancer(spec: str) -> Enhancer:
     """``none | builtin | builtin:PATH | onnx:PATH`` -> an :class:`Enhancer`."""
     spec = (spec or "none").strip()
     kind, _, arg = spec.partition(":")
-    kind = kind.lower()
-    if kind == "none" and not arg:
-        return IdentityEnhancer()
-    if kind == "builtin":
-        path = Path(arg) if arg else default_builtin_path()
-        if not path.is_file():
-            raise ConfigError(
-                "no built-in enhancer model here: train one with `ns2gs-enhance train --data DATA --out "
-                f"{path}` or pass --augment.enhancer builtin:PATH / onnx:PATH", path)
-        return OnnxModelEnhancer(path)
-    if kind == "onnx":
-        if not arg:
-            raise ConfigError("--augment.enhancer onnx:PATH needs a model path")
-        return OnnxModelEnhancer(Path(arg))
-    raise ConfigError(f"unknown enhancer '{spec}' (expected none, builtin, builtin:PATH or onnx:PATH)")
+    make = ENHANCERS.get(kind.lower())
+    if make is None:
+        raise ConfigError(f"unknown enhancer '{spec}' (expected none, builtin, builtin:PATH or onnx:PATH)")
+    return make(arg)
 
 
-__all__ = ["DEFAULT_BUILTIN", "Enhancer", "IdentityEnhancer", "OnnxModelEnhancer", "default_builtin_path", "make_enhancer"]
+__all__ = ["DEFAULT_BUILTIN", "Enhancer", "IdentityEnhancer", "OnnxModelEnhancer", "ENHANCERS", "default_builtin_path", "make_enhancer"]

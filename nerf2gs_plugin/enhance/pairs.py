@@ -26,6 +26,8 @@ from typing import Optional, Sequence
 import torch
 import torch.nn.functional as F
 from torch import Tensor
+from nerf2gs_plugin.data.normalize import load_dataparser_transform
+from nerf2gs_plugin.progress import make_progress
 
 # Camera perturbation for ``perturbed`` pairs, in metres and degrees (uniform ranges).
 RAISE_M = (2.0, 8.0)
@@ -51,8 +53,6 @@ def _chw(img: Tensor) -> Tensor:
 
 def metres_per_unit(run_dir: Path) -> float:
     """Metres per world unit of a run (``dataparser_transforms.json``), 1 when unknown."""
-    from nerf2gs_plugin.data.normalize import load_dataparser_transform
-
     path = Path(run_dir) / "dataparser_transforms.json"
     if not path.is_file():
         return 1.0
@@ -114,7 +114,6 @@ def reference_pairs(refs: Sequence[Path], data: Path, indices: Sequence[int], ge
                     perturbed: bool = True, progress: bool = True) -> list[Pair]:
     """``pose`` pairs (and ``perturbed`` ones when asked) at the training images ``indices``, from each reference."""
     from nerf2gs_plugin.engine.reference import load_run
-    from nerf2gs_plugin.progress import make_progress
 
     pairs: list[Pair] = []
     runs = [load_run(Path(r), data=data) for r in refs]

@@ -30,7 +30,11 @@ from nerf2gs_plugin.enhance.degrade import KINDS, degrade
 from nerf2gs_plugin.enhance.pairs import Pair, split_indices
 from nerf2gs_plugin.enhance.unet import MULTIPLE, ResidualUNet, export_onnx
 from nerf2gs_plugin.errors import ConfigError, DataError
+from nerf2gs_plugin.eval.lpips import to_nchw
+from nerf2gs_plugin.eval.metrics import LPIPS
+from nerf2gs_plugin.progress import make_progress
 from nerf2gs_plugin.utils.image_metrics import psnr, psnr_from_mse
+from nerf2gs_plugin.utils.io import atomic_write_bytes, atomic_write_text
 
 # Checkpoint selection score: PSNR - LPIPS_DB * LPIPS (0.01 LPIPS weighs like 0.2 dB).
 LPIPS_DB = 20.0
@@ -241,7 +245,6 @@ def _lpips_loss(lpips, weight: float) -> Optional[Callable[[Tensor, Tensor], Ten
     """LPIPS as a differentiable loss term (frozen AlexNet), or None when not used."""
     if lpips is None or weight <= 0:
         return None
-    from nerf2gs_plugin.eval.lpips import to_nchw
 
     for prm in lpips.net.parameters():
         prm.requires_grad_(False)
@@ -250,11 +253,8 @@ def _lpips_loss(lpips, weight: float) -> Optional[Callable[[Tensor, Tensor], Ten
 
 def _train(config: EnhancerTrainConfig, gen: torch.Generator) -> TrainReport:
     from nerf2gs_plugin.data import list_splits
-    from nerf2gs_plugin.utils.io import atomic_write_bytes, atomic_write_text
     from nerf2gs_plugin.enhance import OnnxModelEnhancer
     from nerf2gs_plugin.enhance.pairs import reference_pairs as render_pairs
-    from nerf2gs_plugin.eval.metrics import LPIPS
-    from nerf2gs_plugin.progress import make_progress
 
     if not 0 <= config.pair_fraction <= 1:
         raise ConfigError(f"--pair-fraction must be in [0, 1] (got {config.pair_fraction})")

@@ -11,10 +11,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Optional
 
-from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.errors import UserError
 from nerf2gs_plugin.eval.bench_runs import RunSpec, run_key, train_or_reuse
 from nerf2gs_plugin.eval.machine import machine_info, machine_line
+from nerf2gs_plugin.eval.metrics import LPIPS
+from nerf2gs_plugin.utils.config import apply_plain
+from nerf2gs_plugin.utils.io import atomic_write_text
 
 EVAL_SPLITS = ("street", "bev_1", "bev_2")
 EVAL_VERSION = 2  # bump when evaluate_run gains a metric: cached bench evaluations are then redone
@@ -117,8 +119,6 @@ class BenchRunner:
 
     def lpips(self):
         if self._lpips is None:
-            from nerf2gs_plugin.eval.metrics import LPIPS
-
             self._lpips = LPIPS.load_default(device=self.device) or False
         return self._lpips or None
 
@@ -167,7 +167,6 @@ def progress_log(progress, log_file: BenchLog) -> Callable[[str], None]:
 
 def planned_steps(method: str, overrides: dict) -> int:
     """Training steps of a run: its method's config with the overrides applied."""
-    from nerf2gs_plugin.utils.config import apply_plain
     from nerf2gs_plugin.registry import get_method
 
     return int(apply_plain(get_method(method).config, overrides, where=f"bench run of {method}").max_num_iterations)

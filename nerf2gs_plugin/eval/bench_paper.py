@@ -8,10 +8,15 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Optional
 
-from nerf2gs_plugin.utils.io import atomic_write_text
+from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.eval.bench_io import EVAL_VERSION, BenchFailed, fmt  # noqa: F401 (EVAL_VERSION: re-exported)
 from nerf2gs_plugin.eval.bench_runs import RunSpec, train_or_reuse
+from nerf2gs_plugin.eval.figures import image_row
 from nerf2gs_plugin.eval.machine import machine_info, machine_line
+from nerf2gs_plugin.progress import make_progress
+from nerf2gs_plugin.utils.config import to_plain
+from nerf2gs_plugin.utils.io import atomic_write_text
+from nerf2gs_plugin.utils.plotting import pyplot, save_figure
 
 SPLITS = ("street", "bev_1", "bev_2")
 METRICS = (("psnr", "PSNR", True), ("ssim", "SSIM", True), ("lpips", "LPIPS", False), ("psnr_ground", "PSNR road", True))
@@ -47,7 +52,6 @@ def step_overrides(method: str, steps: int) -> dict:
     method without one (a third-party plugin) just gets ``max_num_iterations``."""
     import importlib
 
-    from nerf2gs_plugin.utils.config import to_plain
     from nerf2gs_plugin.registry import get_method
 
     cfg = get_method(method).config
@@ -100,9 +104,7 @@ def run_plan(plan: list[RunSpec], data: Path, runs_root: Path, log: Optional[Cal
     is a row with ``failed: True`` and its ``error``, as in the stability bench, and the plan goes
     on; runs that augment from a failed run fail too. One progress bar over the whole plan (in
     training steps); log lines also go to ``<runs_root>/logs/<name>.log``."""
-    from nerf2gs_plugin.errors import ConfigError
     from nerf2gs_plugin.eval.bench_io import BenchLog, BenchProgress, BenchRunner, failure_reason, planned_steps, progress_log
-    from nerf2gs_plugin.progress import make_progress
 
     done: dict[str, tuple[Path, str]] = {}
     results: dict[str, dict] = {}
@@ -232,8 +234,6 @@ def speed_quality_chart(results: dict[str, dict], path: Path, title: str) -> Non
 
 
 def psnr_bar_chart(results: dict[str, dict], path: Path, title: str) -> None:
-    from nerf2gs_plugin.utils.plotting import pyplot, save_figure
-
     if not results:  # every run failed: nothing to draw
         return
     plt = pyplot()
@@ -258,7 +258,6 @@ def psnr_bar_chart(results: dict[str, dict], path: Path, title: str) -> None:
 def renders_figure(results: dict[str, dict], labels: list[str], split: str, path: Path, image_index: int = 0) -> None:
     """Paper Fig. 4 analogue: GT and each run's render of one eval view."""
     from nerf2gs_plugin.engine.reference import load_run
-    from nerf2gs_plugin.eval.figures import image_row
 
     images, names = [], []
     for label in labels:

@@ -16,6 +16,9 @@ from typing import Any, Optional
 from nerf2gs_plugin.eval.bench_io import (EVAL_SPLITS, BenchLog, BenchProgress, BenchRunner, fmt, mean_psnr, planned_steps,
                                          progress_log, write_bench_files)
 from nerf2gs_plugin.eval.bench_runs import RunSpec
+from nerf2gs_plugin.utils.plotting import pyplot, save_figure
+from nerf2gs_plugin.progress import make_progress
+from nerf2gs_plugin.errors import ConfigError
 
 TOLERANCE_DB = 0.5
 # method -> [(model config field (dotted into a nested config), values at quick scale, values at
@@ -55,8 +58,6 @@ def size_plan(scale: str, methods=tuple(SWEEPS), augment: bool = False) -> list[
         plan.append(RunSpec("StreetNeRF", "streetnerf", _overrides(scale, "streetnerf")))
     for m in methods:
         if m not in SWEEPS:
-            from nerf2gs_plugin.errors import ConfigError
-
             raise ConfigError(f"model-size has no sweep for method '{m}' (has: {', '.join(SWEEPS)})")
         seen: set[tuple] = set()
         model_defaults = get_method(m).config.pipeline.model
@@ -123,8 +124,6 @@ def markdown(rows: list[dict], best: dict[str, dict], tol: float = TOLERANCE_DB)
 
 def chart(rows: list[dict], best: dict[str, dict], path: Path, title: str) -> None:
     """Mean PSNR against primitives (log x), one curve per method and swept field; picks marked."""
-    from nerf2gs_plugin.utils.plotting import pyplot, save_figure
-
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7.5, 4.6))
     methods = list(dict.fromkeys(r["method"] for r in rows))
@@ -149,8 +148,6 @@ def chart(rows: list[dict], best: dict[str, dict], path: Path, title: str) -> No
 
 def run(plan: list[RunSpec], data: Path, runs_root: Path, out_dir: Path, scale: str) -> dict:
     """Train/evaluate the sweep (failures recorded, not fatal), write model_size.{json,md,png}."""
-    from nerf2gs_plugin.progress import make_progress
-
     rows, done = [], {}
     with make_progress() as progress:
         bar = BenchProgress(progress, "model-size", [planned_steps(s.method, s.overrides) for s in plan])

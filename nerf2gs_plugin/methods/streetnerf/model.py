@@ -71,6 +71,7 @@ from nerf2gs_plugin.methods.streetnerf.sampling import (
     s_to_t,
     uniform_edges,
 )
+from nerf2gs_plugin.errors import ConfigError
 
 
 @dataclass
@@ -140,8 +141,6 @@ class StreetNeRFModel(Model):
     def populate_modules(self, train_data: DataparserOutputs) -> None:
         c = self.config
         if len(c.proposal_max_res) != len(c.num_proposal_samples):
-            from nerf2gs_plugin.errors import ConfigError
-
             raise ConfigError("proposal_max_res and num_proposal_samples must have the same length (one per proposal round)")
         box = train_data.scene_box.float()
         spec = HashGridSpec(c.num_levels, c.features_per_level, c.log2_hashmap_size, c.base_res, c.max_res)
