@@ -3,14 +3,13 @@ entry-point group. A plugin that fails to load is reported by name and skipped."
 
 from __future__ import annotations
 
-import importlib
 import sys
 from dataclasses import dataclass
 from functools import lru_cache
-from importlib.metadata import entry_points
 
 from nerf2gs_plugin.engine.trainer import TrainerConfig
 from nerf2gs_plugin.errors import ConfigError
+from nerf2gs_plugin.utils.plugins import load_entry_points, load_ref
 
 ENTRY_POINT_GROUP = "nerf2gs.methods"
 
@@ -43,18 +42,13 @@ class Discovery:
     failures: dict[str, str]  # name -> one-line reason
 
 
-def _load_ref(ref: str) -> object:
-    module, attr = ref.split(":")
-    return getattr(importlib.import_module(module), attr)
-
-
 @lru_cache(maxsize=1)
 def discover_methods() -> Discovery:
     methods: dict[str, MethodSpecification] = {}
     failures: dict[str, str] = {}
     for name, ref in BUILTIN_METHODS.items():
         try:
-            spec = _load_ref(ref)
+            spec = load_ref(ref)
         except ModuleNotFoundError as e:
             if e.name and e.name.startswith("nerf2gs_plugin.methods"):
                 continue  # not built yet in this tree: not a failure
@@ -64,19 +58,8 @@ def discover_methods() -> Discovery:
             failures[name] = f"{type(e).__name__}: {e}"
             continue
         methods[name] = spec
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            spec = ep.load()
-            if not isinstance(spec, MethodSpecification):
-                raise TypeError(f"entry point {ep.value} is a {type(spec).__name__}, not a MethodSpecification")
-        except Exception as e:  # noqa: BLE001 - a broken plugin must never break the others
-            failures[ep.name] = f"{type(e).__name__}: {e}"
-            continue
-        if ep.name in methods:
-            failures[ep.name] = f"name clashes with an already registered method; plugin {ep.value} ignored"
-            continue
-        methods[ep.name] = spec
-    return Discovery(methods, failures)
+    plugins, plugin_failures = load_entry_points(ENTRY_POINT_GROUP, MethodSpecification, methods)
+    return Discovery({**methods, **plugins}, {**failures, **plugin_failures})
 
 
 def report_failures(discovery: Discovery, file=None) -> None:

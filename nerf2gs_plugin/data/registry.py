@@ -10,13 +10,13 @@ undistortion and packaging from raw frames).
 
 from __future__ import annotations
 
-import importlib
 import sys
 from dataclasses import dataclass
 from functools import lru_cache
-from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any, Callable
+
+from nerf2gs_plugin.utils.plugins import load_entry_points, load_ref
 
 ENTRY_POINT_GROUP = "nerf2gs.dataparsers"
 
@@ -43,27 +43,11 @@ class DataParserDiscovery:
     failures: dict[str, str]  # name -> one-line reason
 
 
-def _load(ref: str) -> object:
-    module, attr = ref.split(":")
-    return getattr(importlib.import_module(module), attr)
-
-
 @lru_cache(maxsize=1)
 def discover_dataparsers() -> DataParserDiscovery:
     """Built-ins, then every entry point of ``nerf2gs.dataparsers``; failures reported once."""
-    parsers: dict[str, DataParserSpecification] = {name: _load(ref) for name, ref in BUILTIN_DATAPARSERS.items()}
-    failures: dict[str, str] = {}
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            spec = ep.load()
-            if not isinstance(spec, DataParserSpecification):
-                raise TypeError(f"entry point {ep.value} is a {type(spec).__name__}, not a DataParserSpecification")
-            if ep.name in parsers:
-                raise ValueError(f"name clashes with an already registered dataparser; plugin {ep.value} ignored")
-        except Exception as e:  # noqa: BLE001 - a broken plugin must never break the other formats
-            failures[ep.name] = f"{type(e).__name__}: {e}"
-            print(f"warning: dataparser plugin '{ep.name}' failed to load and is skipped ({failures[ep.name]})",
-                  file=sys.stderr)
-            continue
-        parsers[ep.name] = spec
-    return DataParserDiscovery(parsers, failures)
+    parsers: dict[str, DataParserSpecification] = {name: load_ref(ref) for name, ref in BUILTIN_DATAPARSERS.items()}
+    plugins, failures = load_entry_points(ENTRY_POINT_GROUP, DataParserSpecification, parsers)
+    for name, reason in failures.items():
+        print(f"warning: dataparser plugin '{name}' failed to load and is skipped ({reason})", file=sys.stderr)
+    return DataParserDiscovery({**parsers, **plugins}, failures)

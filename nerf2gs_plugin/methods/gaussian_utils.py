@@ -16,6 +16,7 @@ import torch
 from torch import Tensor
 
 from nerf2gs_plugin.errors import DataError
+from nerf2gs_plugin.utils.io import atomic_write_bytes
 from nerf2gs_plugin.utils.quaternions import quat_to_rotmat
 
 
@@ -78,13 +79,7 @@ def write_gaussian_ply(
         data[name] = col.detach().float().cpu().numpy()
     header = "ply\nformat binary_little_endian 1.0\n"
     header += f"element vertex {n}\n" + "".join(f"property float {name}\n" for name, _ in cols) + "end_header\n"
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    with open(tmp, "wb") as f:
-        f.write(header.encode("ascii"))
-        f.write(data.tobytes())
-    tmp.replace(path)
+    atomic_write_bytes(Path(path), header.encode("ascii") + data.tobytes())
 
 
 def read_gaussian_ply(path: Union[str, Path]) -> dict[str, Tensor]:

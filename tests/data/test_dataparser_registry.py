@@ -11,6 +11,7 @@ from importlib.metadata import EntryPoint
 import torch
 
 from nerf2gs_plugin.data import list_splits, parse_dataset, registry
+from nerf2gs_plugin.utils import plugins
 
 
 def test_builtins_and_the_example_plugin_are_registered():
@@ -53,7 +54,7 @@ def test_the_example_plugin_parses_a_dataset(tiny_scene, tmp_path):
 
 def test_a_broken_plugin_is_reported_by_name_and_skipped(monkeypatch, tiny_scene, capsys):
     broken = EntryPoint(name="broken-format", value="no_such_module_anywhere:spec", group=registry.ENTRY_POINT_GROUP)
-    monkeypatch.setattr(registry, "entry_points", lambda group: [broken])
+    monkeypatch.setattr(plugins, "entry_points", lambda group: [broken])
     registry.discover_dataparsers.cache_clear()
     try:
         disc = registry.discover_dataparsers()
