@@ -8,9 +8,12 @@ import sys
 from dataclasses import dataclass
 from functools import lru_cache
 from importlib.metadata import entry_points
+from typing import TYPE_CHECKING
 
-from nerf2gs_plugin.engine.trainer import TrainerConfig
 from nerf2gs_plugin.errors import ConfigError
+
+if TYPE_CHECKING:  # the registry imports no layer at import time: methods' configs import it
+    from nerf2gs_plugin.engine.trainer import TrainerConfig
 
 ENTRY_POINT_GROUP = "nerf2gs.methods"
 

@@ -93,16 +93,23 @@ class Trainer:
         torch.manual_seed(self.config.seed)
         np.random.seed(self.config.seed)
         random.seed(self.config.seed)
-        self.pipeline = Pipeline(self.config.pipeline, self.config.data, self.device, seed=self.config.seed)
-        if self.config.augment_from is not None:
-            from nerf2gs_plugin.engine.reference import attach_augmentation
-
-            attach_augmentation(self.pipeline.datamanager, self.config.augment_from, self.config.augment, self.device)
+        self.pipeline = Pipeline(self.config.pipeline, self.config.data, self.device, seed=self.config.seed,
+                                 wrap_datamanager=self._augmentation())
         self.optimizers = Optimizers(self.config.optimizers, self.pipeline.model.get_param_groups())
         attrs = TrainingCallbackAttributes(optimizers=self.optimizers, pipeline=self.pipeline)
         self.callbacks = self.pipeline.model.get_training_callbacks(attrs)
         if self.config.load_checkpoint is not None:
             self._resume(self.config.load_checkpoint)
+
+    def _augmentation(self):
+        """With ``--augment-from``: the factory that wraps the method's DataManager in an
+        AugmentedDataManager (the Pipeline applies it after building the model)."""
+        if self.config.augment_from is None:
+            return None
+        from nerf2gs_plugin.engine.reference import augmented_datamanager
+
+        ref, augment, device = self.config.augment_from, self.config.augment, self.device
+        return lambda inner: augmented_datamanager(inner, ref, augment, device)
 
     def _resume(self, path: Path) -> None:
         _, ckpt_file = resolve_checkpoint(path)
