@@ -39,6 +39,14 @@ class MethodSpecification:
     config: TrainerConfig
     description: str
 
+    def with_steps(self, steps: int) -> TrainerConfig:
+        """The config with ``steps`` iterations and every schedule marked in its dataclasses
+        (``nerf2gs_plugin.utils.schedule``) rescaled to them: densification, SH degree, loss
+        start steps, learning-rate decay. A third-party method's marked fields are rescaled too."""
+        from nerf2gs_plugin.utils.schedule import with_steps
+
+        return with_steps(self.config, steps)
+
 
 @dataclass
 class Discovery:

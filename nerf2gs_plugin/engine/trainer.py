@@ -30,6 +30,7 @@ from nerf2gs_plugin.engine.config import atomic_write_text, save_config
 from nerf2gs_plugin.engine.optimizers import OptimizerConfig, Optimizers
 from nerf2gs_plugin.engine.pipeline import Pipeline, PipelineConfig
 from nerf2gs_plugin.errors import ConfigError, TrainingDiverged
+from nerf2gs_plugin.utils.schedule import scheduled
 
 
 def pick_device(name: str = "auto") -> torch.device:
@@ -52,9 +53,9 @@ class TrainerConfig:
     experiment_name: Optional[str] = None
     """Defaults to the dataset folder's name: runs go to output_dir/experiment/method/timestamp."""
     timestamp: str = "{timestamp}"
-    max_num_iterations: int = 2000
+    max_num_iterations: int = scheduled(2000, "total")
     steps_per_eval_image: int = 250
-    steps_per_save: int = 1000
+    steps_per_save: int = scheduled(1000, "cap")
     keep_all_checkpoints: bool = False
     seed: int = 42
     device: str = "auto"
