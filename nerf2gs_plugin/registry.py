@@ -6,10 +6,13 @@ from __future__ import annotations
 import sys
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
-from nerf2gs_plugin.engine.trainer import TrainerConfig
 from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.utils.plugins import load_entry_points, load_ref
+
+if TYPE_CHECKING:  # the registry imports no layer at import time: methods' configs import it
+    from nerf2gs_plugin.engine.trainer import TrainerConfig
 
 ENTRY_POINT_GROUP = "nerf2gs.methods"
 
@@ -34,6 +37,14 @@ class MethodSpecification:
 
     config: TrainerConfig
     description: str
+
+    def with_steps(self, steps: int) -> TrainerConfig:
+        """The config with ``steps`` iterations and every schedule marked in its dataclasses
+        (``nerf2gs_plugin.utils.schedule``) rescaled to them: densification, SH degree, loss
+        start steps, learning-rate decay. A third-party method's marked fields are rescaled too."""
+        from nerf2gs_plugin.utils.schedule import with_steps
+
+        return with_steps(self.config, steps)
 
 
 @dataclass

@@ -49,3 +49,19 @@ def test_builtin_methods_have_cpu_and_paper_scale(name):
     # the paper variant trains the same method (its checkpoints load as `name`), far longer
     assert paper.method_name == cpu.method_name == name
     assert paper.max_num_iterations >= 25000 > cpu.max_num_iterations
+
+
+def test_registry_imports_no_layer_at_import_time():
+    """registry -> engine/trainer -> engine/reference -> registry was a cycle: the registry now
+    needs TrainerConfig only for type checking, and the trainer no longer imports reference."""
+    import subprocess
+    import sys
+
+    code = ("import sys, nerf2gs_plugin.registry as r, nerf2gs_plugin.engine.trainer as t; "
+            "print(sorted(m for m in sys.modules if m.startswith('nerf2gs_plugin.engine')))")
+    out = subprocess.run([sys.executable, "-c", "import sys; import nerf2gs_plugin.registry; "
+                          "print(sorted(m for m in sys.modules if m.startswith('nerf2gs_plugin.') and m != 'nerf2gs_plugin.registry'))"],
+                         capture_output=True, text=True, timeout=120, check=True).stdout
+    assert "engine" not in out and "methods" not in out, out
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True).stdout
+    assert "nerf2gs_plugin.engine.reference" not in out, out

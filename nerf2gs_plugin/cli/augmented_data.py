@@ -12,13 +12,11 @@ from nerf2gs_plugin.datamanagers.augmented import AugmentConfig
 
 def _augmented_datamanager(data: Path, reference: Path, augment: AugmentConfig, device: str):
     from nerf2gs_plugin.datamanagers.full_image import FullImageDataManagerConfig
-    from nerf2gs_plugin.engine.reference import attach_augmentation
+    from nerf2gs_plugin.engine.reference import augmented_datamanager
     from nerf2gs_plugin.engine.trainer import pick_device
 
     dev = pick_device(device)
-    dm = FullImageDataManagerConfig().setup(data=data, device=dev)
-    attach_augmentation(dm, reference, augment, dev)
-    return dm
+    return augmented_datamanager(FullImageDataManagerConfig().setup(data=data, device=dev), reference, augment, dev)
 
 
 @dataclass
@@ -54,10 +52,10 @@ class PreviewAugmented:
     device: str = "auto"
 
     def main(self) -> None:
-        from nerf2gs_plugin.datamanagers.export_augmented import preview_augmented
+        from nerf2gs_plugin.eval.augment_preview import preview_augmented
 
         dm = _augmented_datamanager(self.data, self.reference, self.augment, self.device)
-        print(f"wrote {preview_augmented(dm, dm.augmented_views, self.out, self.rows)}")
+        print(f"wrote {preview_augmented(dm, self.out, self.rows)}")
 
 
 AUGMENTED_SUBCOMMANDS = {

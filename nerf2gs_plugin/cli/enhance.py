@@ -52,7 +52,7 @@ class Apply:
 
     def main(self) -> None:
         from nerf2gs_plugin.data.images import load_image, write_image_atomic
-        from nerf2gs_plugin.enhance import OnnxModelEnhancer, make_enhancer
+        from nerf2gs_plugin.enhancers import OnnxModelEnhancer, make_enhancer
         from nerf2gs_plugin.errors import DataError
 
         spec = _spec(self.model)
@@ -100,7 +100,7 @@ def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: 
     import torch
 
     from nerf2gs_plugin.data import list_splits
-    from nerf2gs_plugin.enhance import make_enhancer
+    from nerf2gs_plugin.enhancers import make_enhancer
     from nerf2gs_plugin.enhance.degrade import KINDS
     from nerf2gs_plugin.enhance.train import heldout_psnr, load_split_images
     from nerf2gs_plugin.utils.image_metrics import psnr

@@ -1,23 +1,25 @@
 """The augmentation of the paper (Sec. 2.3-2.4): a reference model's renders become training data.
 
-Any DataManager is augmented in place, so every target method (built-in or plugin) gains it:
+:class:`AugmentedDataManager` wraps any method's DataManager, so every target method (built-in or
+plugin) gains it and never knows the views are not real:
   (a) input-view composites: the real image with only its (dilated) transient-mask pixels
       replaced by the reference render at that pose;
   (b) bird's-eye additional views: every ``every_n``-th input pose raised by ``delta_h`` metres
       along the scene's up vector and pitched down by ``theta_pitch`` degrees (paper Fig. 3),
       rendered by the reference and optionally passed through an enhancer.
-Renders are cached under the reference run, keyed by everything that changes them.
+Renders are cached under the reference run, keyed by everything that changes them (the cache
+format: :mod:`nerf2gs_plugin.datamanagers.augment_cache`). This module knows no reference method,
+no enhancer implementation and no engine: the engine loads the reference and builds the enhancer.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 import os
 import shutil
+import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Any, Callable, Iterator, Optional, Protocol
 
 import numpy as np
 import torch
@@ -25,10 +27,39 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from nerf2gs_plugin.cameras import Cameras, birds_eye_poses
+from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
+from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
+from nerf2gs_plugin.datamanagers.augment_cache import (
+    CACHE_DIR_NAME,
+    CacheManifest,
+    cache_key,
+    cache_manifests,
+    load_png,
+    read_manifest,
+    save_png,
+)
+from nerf2gs_plugin.datamanagers.base import DataManager
 from nerf2gs_plugin.datamanagers.image_set import ImageSet
 
-CACHE_FORMAT_VERSION = 1
 RenderFn = Callable[[Cameras], dict[str, Tensor]]
+
+
+class ViewEnhancer(Protocol):
+    """What the augmentation needs of an enhancer (``nerf2gs_plugin.enhancers.Enhancer`` is one)."""
+
+    def enhance(self, rgb: Tensor, reference: Optional[Tensor] = None) -> Tensor: ...
+
+    def cache_key(self) -> str: ...
+
+
+@dataclass
+class Reference:
+    """A trained reference as the augmentation sees it: a renderer, a key that changes whenever
+    its renders would (method and checkpoint hash), and the folder its cache lives under."""
+
+    render: RenderFn
+    key: str
+    cache_root: Path
 
 
 @dataclass
@@ -77,35 +108,6 @@ def composite(real: Tensor, render: Tensor, mask: Tensor, dilate_px: int = 0, fe
     return torch.where(m > 0, real * (1 - m) + render * m, real)
 
 
-def _save_png(path: Path, img: Tensor) -> None:
-    import cv2
-
-    arr = (img.clamp(0, 1).cpu().numpy() * 255 + 0.5).astype(np.uint8)
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    cv2.imwrite(str(tmp), arr[..., ::-1])
-    os.replace(tmp, path)
-
-
-def _load_png(path: Path) -> Tensor:
-    import cv2
-
-    arr = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if arr is None:
-        raise FileNotFoundError(path)
-    return torch.from_numpy(arr[..., ::-1].copy()).float() / 255.0
-
-
-def cache_key(ref_key: str, dataset: str, config: AugmentConfig, bev: Optional[Cameras], train: Cameras, enhancer_key: str) -> str:
-    relevant = {k: v for k, v in asdict(config).items() if k not in ("extra_prob", "extra_weight", "use_cache", "enhancer")}
-    h = hashlib.sha1()
-    h.update(json.dumps({"v": CACHE_FORMAT_VERSION, "ref": ref_key, "data": dataset, "cfg": relevant, "enh": enhancer_key}, sort_keys=True).encode())
-    for cams in (train, bev):
-        if cams is not None:
-            h.update(np.round(cams.camera_to_worlds.cpu().numpy(), 5).tobytes())
-            h.update(cams.Ks().cpu().numpy().round(3).tobytes())
-    return h.hexdigest()[:16]
-
-
 @dataclass
 class AugmentedViews:
     """What the augmentation produced; also what the preview and the export write out."""
@@ -115,100 +117,183 @@ class AugmentedViews:
     extra_raw: Optional[list[Tensor]]  # bird's-eye renders before enhancement
     cache_dir: Path
     reused: bool
+    manifest: Optional[CacheManifest] = None
+
+
+def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn: RenderFn, config: AugmentConfig,
+                  enhancer: Optional[ViewEnhancer], comp_idx: list[int]) -> None:
+    """Render every image of a cache entry into ``work`` (not yet the entry: it is renamed after)."""
+    from nerf2gs_plugin.progress import make_progress
+
+    for sub in ("composites", "extra", "extra_raw"):
+        (work / sub).mkdir(parents=True, exist_ok=True)
+    n_jobs = len(comp_idx) + (len(bev) if bev is not None else 0)
+    with make_progress() as progress:
+        task = progress.add_task("render reference views", total=n_jobs, stats="")
+        for i in comp_idx:
+            out = render_fn(train.cameras[i])["rgb"].cpu()
+            comp = composite(train.image(i).cpu(), out, train.mask("transient", i).cpu(), config.dilate_px, config.feather_px)
+            save_png(work / "composites" / f"{i:05d}.png", comp)
+            progress.update(task, advance=1, stats=f"composite {i}")
+        for j in range(len(bev) if bev is not None else 0):
+            out = render_fn(bev[j])
+            rgb = out["rgb"].cpu()
+            save_png(work / "extra_raw" / f"{j:05d}.png", rgb)
+            if "depth" in out:
+                np.save(work / "extra_raw" / f"{j:05d}_depth.npy", out["depth"].cpu().numpy().astype(np.float16))
+            if enhancer is not None:
+                src = train.image(j * max(config.every_n, 1)).cpu()
+                rgb = enhancer.enhance(rgb, reference=src)
+            save_png(work / "extra" / f"{j:05d}.png", rgb)
+            progress.update(task, advance=1, stats=f"bird's-eye {j}")
 
 
 def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, render_fn: RenderFn, ref_key: str,
-                           dataset: str, cache_root: Path, config: AugmentConfig) -> AugmentedViews:
+                           dataset: str, cache_root: Path, config: AugmentConfig,
+                           enhancer: Optional[ViewEnhancer] = None) -> AugmentedViews:
     """Render (or reuse from the cache) the composites and the additional views."""
-    from nerf2gs_plugin.progress import make_progress
-
-    enhancer = None
-    if config.enhancer not in ("", "none"):
-        from nerf2gs_plugin.enhance import make_enhancer
-
-        enhancer = make_enhancer(config.enhancer)
     bev = bev_cameras(train.cameras, up, delta_h_world, config.theta_pitch, config.every_n) if config.extra_views else None
     has_transient = "transient" in train.masks and config.composites
-    key = cache_key(ref_key, dataset, config, bev, train.cameras, enhancer.cache_key() if enhancer else "none")
-    cache_dir = Path(cache_root) / "augment_cache" / key
-    manifest_path = cache_dir / "manifest.json"
-    reused = config.use_cache and manifest_path.is_file()
-    work = cache_dir if reused else cache_dir.with_name(f".tmp-{key}-{os.getpid()}")
+    enhancer_key = enhancer.cache_key() if enhancer is not None else "none"
+    key = cache_key(ref_key, dataset, asdict(config), bev, train.cameras, enhancer_key)
+    cache_dir = Path(cache_root) / CACHE_DIR_NAME / key
+    reused = config.use_cache and (cache_dir / "manifest.json").is_file()
     if not reused:
+        work = cache_dir.with_name(f".tmp-{key}-{os.getpid()}")
         shutil.rmtree(work, ignore_errors=True)
-        for sub in ("composites", "extra", "extra_raw"):
-            (work / sub).mkdir(parents=True, exist_ok=True)
         comp_idx = [i for i in range(len(train)) if has_transient and bool(train.mask("transient", i).any())]
-        n_jobs = len(comp_idx) + (len(bev) if bev is not None else 0)
-        with make_progress() as progress:
-            task = progress.add_task("render reference views", total=n_jobs, stats="")
-            for i in comp_idx:
-                out = render_fn(train.cameras[i])["rgb"].cpu()
-                comp = composite(train.image(i).cpu(), out, train.mask("transient", i).cpu(), config.dilate_px, config.feather_px)
-                _save_png(work / "composites" / f"{i:05d}.png", comp)
-                progress.update(task, advance=1, stats=f"composite {i}")
-            for j in range(len(bev) if bev is not None else 0):
-                out = render_fn(bev[j])
-                rgb = out["rgb"].cpu()
-                _save_png(work / "extra_raw" / f"{j:05d}.png", rgb)
-                if "depth" in out:
-                    np.save(work / "extra_raw" / f"{j:05d}_depth.npy", out["depth"].cpu().numpy().astype(np.float16))
-                if enhancer is not None:
-                    src = train.image(j * max(config.every_n, 1)).cpu()
-                    rgb = enhancer.enhance(rgb, reference=src)
-                _save_png(work / "extra" / f"{j:05d}.png", rgb)
-                progress.update(task, advance=1, stats=f"bird's-eye {j}")
-        manifest = {
-            "format_version": CACHE_FORMAT_VERSION,
-            "reference": ref_key,
-            "dataset": dataset,
-            "config": asdict(config),
-            "enhancer": enhancer.cache_key() if enhancer else "none",
-            "composited_images": comp_idx,
-            "num_extra": len(bev) if bev is not None else 0,
-            "extra_camera_to_worlds": bev.camera_to_worlds.cpu().tolist() if bev is not None else [],
-        }
-        (work / "manifest.json").write_text(json.dumps(manifest, indent=1))
+        _render_entry(work, train, bev, render_fn, config, enhancer, comp_idx)
+        CacheManifest(reference=ref_key, dataset=dataset, config=asdict(config), enhancer=enhancer_key,
+                      composited_images=comp_idx, num_extra=len(bev) if bev is not None else 0,
+                      extra_camera_to_worlds=bev.camera_to_worlds.cpu().tolist() if bev is not None else []).write(work)
         if cache_dir.exists():
             shutil.rmtree(cache_dir)
         os.replace(work, cache_dir)
-    manifest = json.loads(manifest_path.read_text())
+    manifest = read_manifest(cache_dir)
     composites = None
-    if manifest["composited_images"]:
+    if manifest.composited_images:
         images = [train.image(i).cpu() for i in range(len(train))]
-        for i in manifest["composited_images"]:
-            images[i] = _load_png(cache_dir / "composites" / f"{i:05d}.png")
+        for i in manifest.composited_images:
+            images[i] = load_png(manifest.composite_png(i))
         composites = train.to("cpu").with_images(images)
     extra = extra_raw = None
-    if manifest["num_extra"]:
+    if manifest.num_extra:
         assert bev is not None
-        imgs = [_load_png(cache_dir / "extra" / f"{j:05d}.png") for j in range(manifest["num_extra"])]
-        extra_raw = [_load_png(cache_dir / "extra_raw" / f"{j:05d}.png") for j in range(manifest["num_extra"])]
+        imgs = [load_png(manifest.extra_png(j)) for j in range(manifest.num_extra)]
+        extra_raw = [load_png(manifest.extra_png(j, raw=True)) for j in range(manifest.num_extra)]
         extra = ImageSet.from_images(bev.to("cpu"), imgs, weights=torch.full((len(imgs),), float(config.extra_weight)),
                                      names=[f"bev_{j:05d}" for j in range(len(imgs))])
-    return AugmentedViews(composites, extra, extra_raw, cache_dir, reused)
+    return AugmentedViews(composites, extra, extra_raw, cache_dir, reused, manifest)
 
 
-def augment_datamanager(datamanager, render_fn: RenderFn, ref_key: str, cache_root: Path, config: AugmentConfig) -> AugmentedViews:
-    """Rewrite a DataManager's training set with the reference's composites and additional views."""
-    from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
+class AugmentedDataManager(DataManager):
+    """Any method's DataManager with the reference's composites and bird's-eye views as training data.
 
-    if config.composites and "transient" not in datamanager.train_images.masks:
-        import warnings
+    It renders (or reads from the cache) once, at construction, then hands the views to ``inner``
+    through the DataManager's own hooks (:meth:`DataManager.set_train_images` /
+    :meth:`DataManager.set_extra_images`), so ``inner`` keeps sampling exactly as it always does and
+    the model only ever sees ``next_train`` batches. Everything else delegates to ``inner``; the
+    checkpoint state is ``inner``'s, so a run resumes with or without this wrapper.
+    """
 
-        warnings.warn("the dataset has no transient masks: input-view composites are off", stacklevel=2)
-    train_data = datamanager.train_data
-    views = render_augmented_views(
-        datamanager.train_images, train_data.up, train_data.metres_to_world(config.delta_h), render_fn, ref_key,
-        dataset_fingerprint(train_data.image_filenames), cache_root, config,
-    )
-    datamanager.original_train_images = datamanager.train_images
-    datamanager.augment_every_n = max(config.every_n, 1)
-    if views.composites is not None:
-        datamanager.set_train_images(views.composites)
-    if views.extra is not None:
-        n_real, n_extra = len(datamanager.train_images), len(views.extra)
-        prob = config.extra_prob if config.extra_prob is not None else n_extra / (n_real + n_extra)
-        datamanager.set_extra_images(views.extra, prob)
-    datamanager.augmented_views = views
-    return views
+    def __init__(self, inner: DataManager, reference: Reference, augment: AugmentConfig,
+                 enhancer: Optional[ViewEnhancer] = None) -> None:
+        # no DataManager.__init__: the dataset is inner's, parsed once
+        self.inner = inner
+        self.reference = reference
+        self.augment = augment
+        self.every_n = max(augment.every_n, 1)
+        self.original_train_images: ImageSet = inner.train_images
+        if augment.composites and "transient" not in inner.train_images.masks:
+            warnings.warn("the dataset has no transient masks: input-view composites are off", stacklevel=2)
+        td = inner.train_data
+        self.views: AugmentedViews = render_augmented_views(
+            inner.train_images, td.up, td.metres_to_world(augment.delta_h), reference.render, reference.key,
+            dataset_fingerprint(td.image_filenames), reference.cache_root, augment, enhancer,
+        )
+        if self.views.composites is not None:
+            inner.set_train_images(self.views.composites)
+        if self.views.extra is not None:
+            n_real, n_extra = len(inner.train_images), len(self.views.extra)
+            prob = augment.extra_prob if augment.extra_prob is not None else n_extra / (n_real + n_extra)
+            inner.set_extra_images(self.views.extra, prob)
+
+    @property
+    def manifest(self) -> CacheManifest:
+        assert self.views.manifest is not None
+        return self.views.manifest
+
+    # ------------------------------------------------------------------ the DataManager contract, by delegation
+    @property
+    def config(self):  # type: ignore[override]
+        return self.inner.config
+
+    @property
+    def data(self) -> Path:  # type: ignore[override]
+        return self.inner.data
+
+    @property
+    def device(self) -> torch.device:  # type: ignore[override]
+        return self.inner.device
+
+    @property
+    def generator(self) -> torch.Generator:  # type: ignore[override]
+        return self.inner.generator
+
+    @property
+    def train_data(self) -> DataparserOutputs:  # type: ignore[override]
+        return self.inner.train_data
+
+    @property
+    def train_images(self) -> ImageSet:  # type: ignore[override]
+        return self.inner.train_images
+
+    @property
+    def extra_images(self) -> Optional[ImageSet]:  # type: ignore[override]
+        return self.inner.extra_images
+
+    @property
+    def extra_prob(self) -> float:  # type: ignore[override]
+        return self.inner.extra_prob
+
+    @property
+    def all_train_cameras(self) -> Cameras:
+        return self.inner.all_train_cameras
+
+    def set_train_images(self, images: ImageSet) -> None:
+        self.inner.set_train_images(images)
+
+    def set_extra_images(self, images: Optional[ImageSet], prob: float) -> None:
+        self.inner.set_extra_images(images, prob)
+
+    def next_train(self, step: int) -> tuple[Any, dict[str, Any]]:
+        return self.inner.next_train(step)
+
+    def next_eval(self, step: int) -> tuple[Cameras, dict[str, Any]]:
+        return self.inner.next_eval(step)
+
+    def eval_split_names(self) -> list[str]:
+        return self.inner.eval_split_names()
+
+    def eval_split(self, name: str) -> tuple[DataparserOutputs, ImageSet]:
+        return self.inner.eval_split(name)
+
+    def eval_images(self, name: str) -> Iterator[tuple[Cameras, dict[str, Any]]]:
+        return self.inner.eval_images(name)
+
+    def state_dict(self) -> dict:
+        return self.inner.state_dict()
+
+    def load_state_dict(self, state: dict) -> None:
+        self.inner.load_state_dict(state)
+
+
+def find_cached_extra_views(cache_root: Path, dataset: str, augment: AugmentConfig, num_views: int) -> Optional[CacheManifest]:
+    """The newest cache entry under a reference run whose ``num_views`` bird's-eye views are those
+    of ``augment`` (what the viewer shows for a finished augmented run), or None."""
+    for manifest in cache_manifests(cache_root):
+        same = manifest.same_geometry(dataset, augment.delta_h, augment.theta_pitch, max(int(augment.every_n), 1))
+        if same and manifest.num_extra == num_views:
+            return manifest
+    return None
+

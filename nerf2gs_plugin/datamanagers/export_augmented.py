@@ -1,5 +1,6 @@
 """Write an augmented training set as a plain nerfstudio dataset, so external tools (nerfstudio,
-gsplat's trainer) can train on the composites and bird's-eye views too; and a picture of them."""
+gsplat's trainer) can train on the composites and bird's-eye views too (the picture of them:
+``nerf2gs_plugin.eval.augment_preview``)."""
 
 from __future__ import annotations
 
@@ -8,10 +9,8 @@ import os
 import shutil
 from pathlib import Path
 
-import numpy as np
 import torch
 
-from nerf2gs_plugin.datamanagers.augmented import AugmentedViews
 from nerf2gs_plugin.datamanagers.image_set import ImageSet
 from nerf2gs_plugin.errors import UserError
 
@@ -67,36 +66,3 @@ def export_augmented_dataset(datamanager, out: Path, overwrite: bool = False) ->
         out.rmdir()
     os.replace(tmp, out)
     return out
-
-
-def preview_augmented(datamanager, views: AugmentedViews, path: Path, n: int = 3) -> Path:
-    """Rows of real image | composite | bird's-eye render | enhanced bird's-eye view."""
-    from nerf2gs_plugin.utils.plotting import pyplot as _mpl, save_figure
-
-    plt = _mpl()
-    real_set = datamanager.original_train_images
-    comp_set = datamanager.train_images
-    ids = [i for i in range(len(real_set)) if real_set.mask("transient", i) is not None and bool(real_set.mask("transient", i).any())]
-    ids = (ids or list(range(len(real_set))))[:n]
-    cols = ["real image", "composite (transients from reference)", "bird's-eye view (reference)"]
-    if views.extra_raw is not None and views.extra is not None:
-        cols.append("bird's-eye view, enhanced")
-    fig, axes = plt.subplots(len(ids), len(cols), figsize=(3.3 * len(cols), 2.1 * len(ids) + 0.4), squeeze=False)
-    every = max(int(getattr(datamanager, "augment_every_n", 1)), 1)
-    for r, i in enumerate(ids):
-        row = [real_set.image(i), comp_set.image(i)]
-        j = i // every
-        if views.extra_raw is not None and j < len(views.extra_raw):
-            row.append(views.extra_raw[j])
-            if len(cols) == 4:
-                row.append(views.extra.image(j))
-        for c, img in enumerate(row):
-            ax = axes[r][c]
-            ax.imshow(np.clip(img.cpu().numpy(), 0, 1))
-            ax.set_xticks([])
-            ax.set_yticks([])
-            if r == 0:
-                ax.set_title(cols[c], fontsize=8)
-    fig.tight_layout()
-    save_figure(fig, path)
-    return Path(path)

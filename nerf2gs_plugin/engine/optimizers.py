@@ -9,6 +9,8 @@ from typing import Optional
 import torch
 from torch import nn
 
+from nerf2gs_plugin.utils.schedule import scheduled
+
 
 @dataclass
 class OptimizerConfig:
@@ -20,7 +22,7 @@ class OptimizerConfig:
     weight_decay: float = 0.0
     lr_final: Optional[float] = None
     warmup_steps: int = 0
-    max_steps: int = 30000
+    max_steps: int = scheduled(30000, "horizon", only_if="lr_final")
 
     def lr_at(self, step: int) -> float:
         if step < self.warmup_steps:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 import torch
 from torch import Tensor, nn
@@ -24,13 +24,20 @@ class PipelineConfig(InstantiateConfig):
 
 
 class Pipeline(nn.Module):
+    """``wrap_datamanager`` (e.g. the AugmentedDataManager's factory) replaces the method's
+    DataManager by a wrapper of it once the model is built: the model is built from the real
+    training data, and with the same random state as without the wrapper."""
+
     def __init__(self, config: PipelineConfig, data: Path, device: torch.device | str = "cpu", seed: int = 0,
-                 datamanager: Optional[DataManager] = None) -> None:
+                 datamanager: Optional[DataManager] = None,
+                 wrap_datamanager: Optional[Callable[[DataManager], DataManager]] = None) -> None:
         super().__init__()
         self.config = config
         self.device = torch.device(device)
         self.datamanager: DataManager = datamanager or config.datamanager.setup(data=data, device=self.device, seed=seed)
         self.model: Model = config.model.setup(train_data=self.datamanager.train_data).to(self.device)
+        if wrap_datamanager is not None:
+            self.datamanager = wrap_datamanager(self.datamanager)
 
     def get_train_loss_dict(self, step: int) -> tuple[dict[str, Tensor], dict[str, Tensor], dict[str, Tensor]]:
         inputs, batch = self.datamanager.next_train(step)

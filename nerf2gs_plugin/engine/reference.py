@@ -5,15 +5,21 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import torch
 
+from nerf2gs_plugin.datamanagers.augmented import AugmentConfig, AugmentedDataManager, Reference
+from nerf2gs_plugin.datamanagers.base import DataManager
 from nerf2gs_plugin.engine.checkpoints import dataset_fingerprint, file_hash, load_checkpoint, resolve_checkpoint
 from nerf2gs_plugin.engine.config import load_config, read_config_doc
 from nerf2gs_plugin.engine.pipeline import Pipeline
-from nerf2gs_plugin.engine.trainer import TrainerConfig
+from nerf2gs_plugin.enhancers import make_enhancer
 from nerf2gs_plugin.errors import CheckpointError, ConfigError
+from nerf2gs_plugin.registry import get_method
+
+if TYPE_CHECKING:  # the trainer builds the augmentation from here: no arrow back at run time
+    from nerf2gs_plugin.engine.trainer import TrainerConfig
 
 
 @dataclass
@@ -33,8 +39,6 @@ class LoadedRun:
 
 def load_run(path: Path, device: torch.device | str = "cpu", data: Optional[Path] = None) -> LoadedRun:
     """A run directory or ``.ckpt`` -> its pipeline with the checkpoint loaded (eval mode)."""
-    from nerf2gs_plugin.registry import get_method
-
     run_dir, ckpt_file = resolve_checkpoint(path)
     doc = read_config_doc(run_dir / "config.yml")
     spec = get_method(doc["method_name"])
@@ -53,10 +57,9 @@ def load_run(path: Path, device: torch.device | str = "cpu", data: Optional[Path
     return LoadedRun(run_dir, ckpt_file, config, pipeline, int(ckpt["step"]), file_hash(ckpt_file), float(ckpt.get("train_seconds", 0.0)))
 
 
-def attach_augmentation(datamanager, reference: Path, augment, device: torch.device | str) -> None:
-    """Load the reference run and let the AugmentedDataManager logic rewrite the training set."""
-    from nerf2gs_plugin.datamanagers.augmented import augment_datamanager
-
+def load_reference(reference: Path, datamanager, device: torch.device | str) -> Reference:
+    """A reference run (directory or .ckpt) for the augmentation of ``datamanager``'s dataset: it must
+    have been trained on the same images and its method must render whole cameras."""
     run_dir, ckpt_file = resolve_checkpoint(reference)
     ckpt = load_checkpoint(ckpt_file, map_location="cpu")
     ours = dataset_fingerprint(datamanager.train_data.image_filenames)
@@ -67,4 +70,18 @@ def attach_augmentation(datamanager, reference: Path, augment, device: torch.dev
     ref = load_run(ckpt_file, device=device, data=datamanager.data)
     if not hasattr(ref.model, "render_camera") or getattr(type(ref.model).render_camera, "__isabstractmethod__", False):
         raise CheckpointError(f"method '{ref.config.method_name}' cannot render cameras (no render_camera)", ckpt_file)
-    augment_datamanager(datamanager, ref.model.render_camera, f"{ref.config.method_name}:{ref.checkpoint_hash}", run_dir, augment)
+    return Reference(ref.model.render_camera, f"{ref.config.method_name}:{ref.checkpoint_hash}", run_dir)
+
+
+def build_enhancer(spec: str):
+    """The enhancer named by ``--augment.enhancer`` (None for "none"), built here so the data
+    managers never import an enhancer implementation."""
+    if spec in ("", "none"):
+        return None
+    return make_enhancer(spec)
+
+
+def augmented_datamanager(inner: DataManager, reference: Path, augment: AugmentConfig, device: torch.device | str) -> AugmentedDataManager:
+    """The factory the Trainer and ``ns2gs-data export-augmented`` call: ``inner`` wrapped in an
+    AugmentedDataManager fed by the reference run at ``reference``."""
+    return AugmentedDataManager(inner, load_reference(reference, inner, device), augment, build_enhancer(augment.enhancer))

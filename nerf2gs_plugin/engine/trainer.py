@@ -31,6 +31,7 @@ from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.engine.optimizers import OptimizerConfig, Optimizers
 from nerf2gs_plugin.engine.pipeline import Pipeline, PipelineConfig
 from nerf2gs_plugin.errors import ConfigError, TrainingDiverged
+from nerf2gs_plugin.utils.schedule import scheduled
 
 
 def pick_device(name: str = "auto") -> torch.device:
@@ -53,9 +54,9 @@ class TrainerConfig:
     experiment_name: Optional[str] = None
     """Defaults to the dataset folder's name: runs go to output_dir/experiment/method/timestamp."""
     timestamp: str = "{timestamp}"
-    max_num_iterations: int = 2000
+    max_num_iterations: int = scheduled(2000, "total")
     steps_per_eval_image: int = 250
-    steps_per_save: int = 1000
+    steps_per_save: int = scheduled(1000, "cap")
     keep_all_checkpoints: bool = False
     seed: int = 42
     device: str = "auto"
@@ -94,16 +95,23 @@ class Trainer:
         torch.manual_seed(self.config.seed)
         np.random.seed(self.config.seed)
         random.seed(self.config.seed)
-        self.pipeline = Pipeline(self.config.pipeline, self.config.data, self.device, seed=self.config.seed)
-        if self.config.augment_from is not None:
-            from nerf2gs_plugin.engine.reference import attach_augmentation
-
-            attach_augmentation(self.pipeline.datamanager, self.config.augment_from, self.config.augment, self.device)
+        self.pipeline = Pipeline(self.config.pipeline, self.config.data, self.device, seed=self.config.seed,
+                                 wrap_datamanager=self._augmentation())
         self.optimizers = Optimizers(self.config.optimizers, self.pipeline.model.get_param_groups())
         attrs = TrainingCallbackAttributes(optimizers=self.optimizers, pipeline=self.pipeline)
         self.callbacks = self.pipeline.model.get_training_callbacks(attrs)
         if self.config.load_checkpoint is not None:
             self._resume(self.config.load_checkpoint)
+
+    def _augmentation(self):
+        """With ``--augment-from``: the factory that wraps the method's DataManager in an
+        AugmentedDataManager (the Pipeline applies it after building the model)."""
+        if self.config.augment_from is None:
+            return None
+        from nerf2gs_plugin.engine.reference import augmented_datamanager
+
+        ref, augment, device = self.config.augment_from, self.config.augment, self.device
+        return lambda inner: augmented_datamanager(inner, ref, augment, device)
 
     def _resume(self, path: Path) -> None:
         _, ckpt_file = resolve_checkpoint(path)

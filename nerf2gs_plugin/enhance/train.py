@@ -11,7 +11,7 @@ training image is held out: the network is scored on it ``checkpoints`` times du
 best state is exported, the untrained network (the identity: its last layer starts at zero) included,
 so the exported model never scores worse than no enhancement on those held-out training views.
 The trained network is exported to ONNX with its I/O convention in the metadata and is run, like
-any other model, through :mod:`nerf2gs_plugin.enhance.onnx_runtime`.
+any other model, through :mod:`nerf2gs_plugin.enhancers.onnx_runtime`.
 """
 
 from __future__ import annotations
@@ -253,7 +253,7 @@ def _lpips_loss(lpips, weight: float) -> Optional[Callable[[Tensor, Tensor], Ten
 
 def _train(config: EnhancerTrainConfig, gen: torch.Generator) -> TrainReport:
     from nerf2gs_plugin.data import list_splits
-    from nerf2gs_plugin.enhance import OnnxModelEnhancer
+    from nerf2gs_plugin.enhancers import OnnxModelEnhancer
     from nerf2gs_plugin.enhance.pairs import reference_pairs as render_pairs
 
     if not 0 <= config.pair_fraction <= 1:

@@ -64,7 +64,7 @@ class _ExportWrapper(nn.Module):
 
 def export_onnx(net: ResidualUNet, path, metadata: dict[str, str], opset: int = 17) -> bytes:
     """Export to ONNX bytes (legacy TorchScript exporter: needs no onnxscript) with the I/O
-    convention of :mod:`nerf2gs_plugin.enhance.onnx_runtime` in ``metadata_props``."""
+    convention of :mod:`nerf2gs_plugin.enhancers.onnx_runtime` in ``metadata_props``."""
     import io
     import warnings
 

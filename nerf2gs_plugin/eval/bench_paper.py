@@ -48,19 +48,12 @@ def _merge(base: dict, extra: dict) -> dict:
 
 def step_overrides(method: str, steps: int) -> dict:
     """Plain overrides for ``steps`` iterations with the method's schedules (densification,
-    SH degree, learning-rate decay, ...) rescaled by its config module's ``with_steps``; a
-    method without one (a third-party plugin) just gets ``max_num_iterations``."""
-    import importlib
-
+    SH degree, learning-rate decay, ...) rescaled by ``MethodSpecification.with_steps``."""
+    from nerf2gs_plugin.utils.config import to_plain
     from nerf2gs_plugin.registry import get_method
 
-    cfg = get_method(method).config
-    package = type(cfg.pipeline.model).__module__.rsplit(".", 1)[0]
-    try:
-        with_steps = importlib.import_module(f"{package}.config").with_steps
-    except (ImportError, AttributeError):
-        return {"max_num_iterations": steps}
-    return json.loads(json.dumps(_diff(to_plain(cfg), to_plain(with_steps(cfg, steps))), default=str))
+    spec = get_method(method)
+    return json.loads(json.dumps(_diff(to_plain(spec.config), to_plain(spec.with_steps(steps))), default=str))
 
 
 def _overrides(scale: str, method: str, extra: Optional[dict] = None) -> dict:

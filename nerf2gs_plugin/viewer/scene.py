@@ -4,7 +4,6 @@ and the bird's-eye additional views of an augmented run (read from the augment c
 from __future__ import annotations
 
 import functools
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Optional
@@ -110,11 +109,12 @@ class ExtraViews:
 def find_extra_views(config, train_data, train_cameras: Cameras, thumb_side: int = 96) -> Optional[ExtraViews]:
     """The additional views a run was trained with (``None`` for a run without ``--augment-from``).
 
-    Read from the reference run's augment cache manifest whose dataset and geometry (``delta_h``,
-    ``theta_pitch``, ``every_n``) match the run's config, with the rendered views as thumbnails;
-    when the cache is gone, recomputed from the config exactly as the augmentation does.
+    Read from the reference run's augment cache (:func:`find_cached_extra_views`, the one manifest
+    reader) whose dataset and geometry match the run's config, with the rendered views as
+    thumbnails; when the cache is gone, recomputed from the config exactly as the augmentation does.
     """
-    from nerf2gs_plugin.datamanagers.augmented import _load_png, bev_cameras
+    from nerf2gs_plugin.datamanagers.augment_cache import load_png
+    from nerf2gs_plugin.datamanagers.augmented import bev_cameras, find_cached_extra_views
     from nerf2gs_plugin.engine.checkpoints import dataset_fingerprint, resolve_checkpoint
     from nerf2gs_plugin.errors import UserError
 
@@ -127,24 +127,13 @@ def find_extra_views(config, train_data, train_cameras: Cameras, thumb_side: int
         ref_dir, _ = resolve_checkpoint(Path(config.augment_from))
     except UserError:
         ref_dir = None
-    if ref_dir is not None:
-        fingerprint = dataset_fingerprint(train_data.image_filenames)
-        manifests = sorted(Path(ref_dir).glob("augment_cache/*/manifest.json"), key=lambda p: p.stat().st_mtime, reverse=True)
-        for path in manifests:
-            try:
-                doc = json.loads(path.read_text())
-                cfg = doc["config"]
-                poses = torch.tensor(doc["extra_camera_to_worlds"], dtype=torch.float32)
-            except (OSError, ValueError, KeyError, TypeError):
-                continue
-            same = (doc.get("dataset") == fingerprint and float(cfg.get("delta_h", -1)) == float(aug.delta_h)
-                    and float(cfg.get("theta_pitch", -1)) == float(aug.theta_pitch) and int(cfg.get("every_n", 1)) == every_n)
-            if not same or poses.ndim != 3 or len(poses) != len(sub):
-                continue
-            thumbs: list[Optional[np.ndarray]] = []
-            for j in range(len(poses)):
-                png = path.parent / "extra" / f"{j:05d}.png"
-                thumbs.append(thumbnail(_load_png(png), thumb_side) if png.is_file() else None)
-            return ExtraViews(sub.with_poses(poses.to(sub.device)), thumbs, str(path))
+    manifest = (find_cached_extra_views(ref_dir, dataset_fingerprint(train_data.image_filenames), aug, len(sub))
+                if ref_dir is not None else None)
+    if manifest is not None:
+        thumbs: list[Optional[np.ndarray]] = []
+        for j in range(manifest.num_extra):
+            png = manifest.extra_png(j)
+            thumbs.append(thumbnail(load_png(png), thumb_side) if png.is_file() else None)
+        return ExtraViews(sub.with_poses(manifest.extra_poses().to(sub.device)), thumbs, str(manifest.path))
     cams = bev_cameras(train_cameras, train_data.up, train_data.metres_to_world(aug.delta_h), aug.theta_pitch, every_n)
     return ExtraViews(cams, [None] * len(cams), "recomputed from the run's --augment config (no cache manifest found)")

@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from nerf2gs_plugin.datamanagers.augmented import AugmentConfig, augment_datamanager, bev_cameras, composite
+from nerf2gs_plugin.datamanagers.augmented import AugmentConfig, AugmentedDataManager, Reference, bev_cameras, composite
 from nerf2gs_plugin.datamanagers.full_image import FullImageDataManagerConfig
 from nerf2gs_plugin.engine.trainer import Trainer
 from nerf2gs_plugin.errors import CheckpointError
@@ -25,6 +25,13 @@ class CountingRenderer:
         self.calls += 1
         h, w = int(camera.height[0]), int(camera.width[0])
         return {"rgb": torch.full((h, w, 3), 0.3), "depth": torch.ones(h, w, 1)}
+
+
+def _augment(dm, render, key, root, cfg):
+    """The AugmentedDataManager over ``dm`` (the enhancer built as the engine builds it); its views."""
+    from nerf2gs_plugin.engine.reference import build_enhancer
+
+    return AugmentedDataManager(dm, Reference(render, key, root), cfg, build_enhancer(cfg.enhancer)).views
 
 
 def _dm(data):
@@ -69,7 +76,7 @@ def test_augmentation_cache_reuse_and_invalidation(tiny_scene, tmp_path):
     dm = _dm(tiny_scene)
     real = [dm.train_images.image(i).clone() for i in range(len(dm.train_images))]
     r1 = CountingRenderer()
-    views = augment_datamanager(dm, r1, "ref:abc", tmp_path, cfg)
+    views = _augment(dm, r1, "ref:abc", tmp_path, cfg)
     n_transient = sum(bool(dm.train_images.mask("transient", i).any()) for i in range(len(dm.train_images)))
     assert r1.calls == n_transient + len(dm.train_images) and not views.reused
     # composites: only transient (dilated) pixels changed, images without transients untouched
@@ -84,13 +91,13 @@ def test_augmentation_cache_reuse_and_invalidation(tiny_scene, tmp_path):
     assert 0 < dm.extra_prob < 1
     # same parameters: nothing rendered again
     r2 = CountingRenderer()
-    views2 = augment_datamanager(_dm(tiny_scene), r2, "ref:abc", tmp_path, cfg)
+    views2 = _augment(_dm(tiny_scene), r2, "ref:abc", tmp_path, cfg)
     assert r2.calls == 0 and views2.reused and views2.cache_dir == views.cache_dir
     # a changed parameter or another reference re-renders
     r3 = CountingRenderer()
-    augment_datamanager(_dm(tiny_scene), r3, "ref:abc", tmp_path, dataclasses.replace(cfg, delta_h=5.0))
+    _augment(_dm(tiny_scene), r3, "ref:abc", tmp_path, dataclasses.replace(cfg, delta_h=5.0))
     r4 = CountingRenderer()
-    augment_datamanager(_dm(tiny_scene), r4, "ref:other", tmp_path, cfg)
+    _augment(_dm(tiny_scene), r4, "ref:other", tmp_path, cfg)
     assert r3.calls > 0 and r4.calls > 0
     assert not list((tmp_path / "augment_cache").glob(".tmp-*"))  # no half-written entries
 
@@ -103,10 +110,10 @@ def test_interrupted_render_leaves_no_cache_entry(tiny_scene, tmp_path):
             return super().__call__(camera)
 
     with pytest.raises(KeyboardInterrupt):
-        augment_datamanager(_dm(tiny_scene), Failing(), "ref:x", tmp_path, AugmentConfig())
+        _augment(_dm(tiny_scene), Failing(), "ref:x", tmp_path, AugmentConfig())
     assert not [p for p in (tmp_path / "augment_cache").iterdir() if not p.name.startswith(".tmp-")]
     r = CountingRenderer()
-    augment_datamanager(_dm(tiny_scene), r, "ref:x", tmp_path, AugmentConfig())
+    _augment(_dm(tiny_scene), r, "ref:x", tmp_path, AugmentConfig())
     assert r.calls > 0
 
 
@@ -140,3 +147,50 @@ def test_bad_references(tiny_scene, tmp_path):
     empty.mkdir()
     with pytest.raises(CheckpointError, match="holds no checkpoints"):
         _train_voxel(tiny_scene, tmp_path / "t3", steps=2, augment_from=empty)
+
+
+def test_augmented_datamanager_wraps_a_plugin_datamanager(tiny_scene, tmp_path):
+    """The third-party voxel-grid method's (ray) DataManager, wrapped: a DataManager itself, real
+    rays plus bird's-eye rays in its batches, the inner manager's checkpoint state."""
+    from nerf2gs_plugin.datamanagers.base import DataManager
+
+    inner = get_method("voxel-grid").config.pipeline.datamanager.setup(data=tiny_scene, device="cpu")
+    n_real = len(inner.train_images)
+    dm = AugmentedDataManager(inner, Reference(CountingRenderer(), "ref:plugin", tmp_path), AugmentConfig(delta_h=3.0, every_n=2))
+    assert isinstance(dm, DataManager) and type(inner).__name__ == "RayDataManager"
+    assert dm.train_data is inner.train_data and dm.eval_split_names() == inner.eval_split_names()
+    assert len(dm.extra_images) == n_real // 2 and dm.every_n == 2
+    assert dm.all_train_cameras.camera_to_worlds.shape[0] == n_real + n_real // 2
+    rays, batch = dm.next_train(0)
+    assert (batch["image_idx"] >= n_real).any() and (batch["image_idx"] < n_real).any()
+    assert set(dm.state_dict()) == set(inner.state_dict())
+    assert dm.manifest.num_extra == n_real // 2 and dm.manifest.path.parent == dm.views.cache_dir
+    assert not hasattr(inner, "augmented_views") and not hasattr(inner, "original_train_images")
+
+
+def test_read_manifest_is_the_one_reader(tiny_scene, tmp_path, monkeypatch):
+    """The viewer finds the bird's-eye views through read_manifest; a bad manifest is refused."""
+    import json
+    from types import SimpleNamespace
+
+    from nerf2gs_plugin.datamanagers import augment_cache
+    from nerf2gs_plugin.viewer.scene import find_extra_views
+
+    aug = AugmentConfig(delta_h=3.0, composites=False)
+    dm = AugmentedDataManager(_dm(tiny_scene), Reference(CountingRenderer(), "ref:m", tmp_path), aug)
+    (tmp_path / "checkpoints").mkdir()
+    (tmp_path / "checkpoints" / "step-000000001.ckpt").write_bytes(b"resolved, never loaded")
+    calls = []
+    real = augment_cache.read_manifest
+    monkeypatch.setattr(augment_cache, "read_manifest", lambda p: calls.append(p) or real(p))
+    found = find_extra_views(SimpleNamespace(augment_from=tmp_path, augment=aug), dm.train_data, dm.original_train_images.cameras)
+    assert calls and found.source == str(dm.manifest.path)
+    assert torch.allclose(found.cameras.camera_to_worlds, dm.extra_images.cameras.camera_to_worlds)
+    doc = json.loads(dm.manifest.path.read_text())
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps({**doc, "format_version": 99}))
+    with pytest.raises(ValueError, match="cache format 99"):
+        real(bad)
+    bad.write_text(json.dumps({k: v for k, v in doc.items() if k != "num_extra"}))
+    with pytest.raises(ValueError, match="malformed"):
+        real(bad)

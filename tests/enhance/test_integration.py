@@ -5,7 +5,7 @@ import dataclasses
 
 import torch
 
-from nerf2gs_plugin.datamanagers.augmented import AugmentConfig, augment_datamanager
+from nerf2gs_plugin.datamanagers.augmented import AugmentConfig, AugmentedDataManager, Reference
 from nerf2gs_plugin.datamanagers.full_image import FullImageDataManagerConfig
 from nerf2gs_plugin.enhance.train import EnhancerTrainConfig, reference_pairs, train_enhancer
 
@@ -18,6 +18,13 @@ class GreyRenderer:
         self.calls += 1
         h, w = int(camera.height[0]), int(camera.width[0])
         return {"rgb": torch.full((h, w, 3), 0.3)}
+
+
+def _augment(dm, render, key, root, cfg):
+    """The AugmentedDataManager over ``dm`` (the enhancer built as the engine builds it); its views."""
+    from nerf2gs_plugin.engine.reference import build_enhancer
+
+    return AugmentedDataManager(dm, Reference(render, key, root), cfg, build_enhancer(cfg.enhancer)).views
 
 
 def _dm(data):
@@ -39,17 +46,17 @@ def test_enhanced_views_are_cached_per_model_content(tiny_scene, tmp_path):
     onnx.save(model, str(path))
     cfg = AugmentConfig(composites=False, delta_h=3.0, enhancer=f"onnx:{path}")
     r1 = GreyRenderer()
-    views = augment_datamanager(_dm(tiny_scene), r1, "ref:x", tmp_path, cfg)
+    views = _augment(_dm(tiny_scene), r1, "ref:x", tmp_path, cfg)
     assert r1.calls > 0 and len(views.extra) == len(views.extra_raw)
     for j in range(len(views.extra)):
         assert (views.extra.image(j) - (1 - views.extra_raw[j])).abs().max() < 1.5 / 255
     r2 = GreyRenderer()
-    assert augment_datamanager(_dm(tiny_scene), r2, "ref:x", tmp_path, cfg).reused and r2.calls == 0
+    assert _augment(_dm(tiny_scene), r2, "ref:x", tmp_path, cfg).reused and r2.calls == 0
     # same path, new content: the cache key changes and the views are rendered again
     model.graph.initializer[0].float_data[:] = [0.5]
     onnx.save(model, str(path))
     r3 = GreyRenderer()
-    again = augment_datamanager(_dm(tiny_scene), r3, "ref:x", tmp_path, cfg)
+    again = _augment(_dm(tiny_scene), r3, "ref:x", tmp_path, cfg)
     assert r3.calls > 0 and not again.reused and again.cache_dir != views.cache_dir
 
 

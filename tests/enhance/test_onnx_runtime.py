@@ -9,8 +9,8 @@ import pytest
 import torch
 from torch import nn
 
-from nerf2gs_plugin.enhance import IdentityEnhancer, make_enhancer
-from nerf2gs_plugin.enhance.onnx_runtime import OnnxEnhancer
+from nerf2gs_plugin.enhancers import IdentityEnhancer, make_enhancer
+from nerf2gs_plugin.enhancers.onnx_runtime import OnnxEnhancer
 from nerf2gs_plugin.errors import ConfigError
 
 

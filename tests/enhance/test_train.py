@@ -7,7 +7,7 @@ import sys
 import pytest
 import torch
 
-from nerf2gs_plugin.enhance import make_enhancer
+from nerf2gs_plugin.enhancers import make_enhancer
 from nerf2gs_plugin.enhance.degrade import KINDS, degrade
 from nerf2gs_plugin.enhance.train import EnhancerTrainConfig, heldout_psnr, load_split_images, report_path, train_enhancer
 from nerf2gs_plugin.errors import ConfigError

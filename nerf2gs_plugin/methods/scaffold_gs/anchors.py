@@ -17,6 +17,7 @@ import torch
 from torch import Tensor
 
 from nerf2gs_plugin.methods.splatfacto.strategy import append_rows, keep_rows
+from nerf2gs_plugin.methods.strategy_base import Strategy
 
 
 def voxelize(points: Tensor, voxel: float) -> Tensor:
@@ -48,11 +49,16 @@ class AnchorStats:
         """After backward: ``last`` holds the meta of the rasterized neural Gaussians, the visible
         anchor indices ``[Mv]``, the opacity>0 mask ``[Mv*k]`` and the opacities ``[Mv*k]``."""
         meta, idx, keep, opacity = last["meta"], last["anchor_idx"], last["keep"], last["opacity"]
+        return self._update(m, k, meta, idx, keep, opacity, meta.get("means2d"))
+
+    @torch.no_grad()
+    def _update(self, m: int, k: int, meta: dict[str, Any], idx: Tensor, keep: Tensor, opacity: Tensor,
+                grad_of: Optional[Tensor]) -> None:
         if self.denom is None or self.denom.shape[0] != m * k:
             self.reset(m, k, idx.device)
         self.opacity_accum.index_add_(0, idx, opacity.clamp_min(0).reshape(-1, k).sum(1))
         self.anchor_denom[idx] += 1
-        g = meta["means2d"].grad
+        g = grad_of.grad if grad_of is not None else None
         if g is None:
             return
         g = g[0].detach().clone()
@@ -81,20 +87,18 @@ class AnchorStats:
 
 
 @torch.no_grad()
-def grow_anchors(model: Any, optimizers: Any) -> int:
+def grow_anchors(c: Any, st: AnchorStats, a: Any, voxel: float, optimizers: Any) -> int:
     """New anchors where neural Gaussians have large average gradients, level by level: level
     ``i`` uses threshold ``t * (h/2)^i`` and voxel ``v * f / h^i`` (h = hierarchy factor, f = init
     factor), keeps each candidate with probability ``1 - 0.5^(i+1)``, and adds only voxels that
-    hold no anchor yet. New anchors take the max feature of their candidates."""
-    c, st = model.config, model.stats
+    hold no anchor yet. New anchors take the max feature of their candidates. ``c``: the model
+    config (its growing settings), ``a``: the anchor ParameterDict, ``voxel``: the base voxel size."""
     k = c.n_offsets
-    a = model.anchor
     m0 = a["anchors"].shape[0]
     grads = st.grad_accum / st.denom.clamp_min(1)
     seen = st.denom > c.update_interval * c.success_threshold * 0.5
     xyz = (a["anchors"][:, None] + a["offsets"] * torch.exp(a["scaling"][:, None, :3])).reshape(-1, 3)
     feats = a["anchor_feat"].detach().repeat_interleave(k, dim=0)
-    voxel = float(model.voxel)
     added = 0
     for level in range(c.update_depth):
         room = c.max_anchors - a["anchors"].shape[0] if c.max_anchors > 0 else None
@@ -137,9 +141,8 @@ def grow_anchors(model: Any, optimizers: Any) -> int:
 
 
 @torch.no_grad()
-def prune_anchors(model: Any, optimizers: Any, n_new: int = 0) -> int:
+def prune_anchors(c: Any, st: AnchorStats, a: Any, optimizers: Any) -> int:
     """Drop anchors seen often enough whose average neural opacity is below ``min_opacity``."""
-    c, st = model.config, model.stats
     judged = st.anchor_denom > c.update_interval * c.success_threshold
     prune = (st.opacity_accum < c.min_opacity * st.anchor_denom) & judged
     if bool(prune.all()):
@@ -149,6 +152,43 @@ def prune_anchors(model: Any, optimizers: Any, n_new: int = 0) -> int:
     st.anchor_denom[judged] = 0
     if n:
         keep = ~prune
-        keep_rows(model.anchor, optimizers, keep)
+        keep_rows(a, optimizers, keep)
         st.keep(keep, c.n_offsets)
     return n
+
+
+class AnchorStrategy(Strategy):
+    """Scaffold-GS's anchor growing and pruning as a :class:`Strategy`: statistics from the neural
+    Gaussians' projected centres (``grad_key = "means2d"``) from ``start_stat``, refinement every
+    ``update_interval`` steps in ``(update_from, update_until)``. ``info`` is the model's record of
+    the step: the rasterizer's ``meta`` plus the visible anchors, the kept slots and opacities."""
+
+    grad_key = "means2d"
+
+    def __init__(self, config: Any, voxel: float) -> None:
+        self.config = config  # the model config: its anchor growing / pruning settings
+        self.voxel = voxel
+        self.initialize_state()
+
+    def initialize_state(self) -> None:
+        self.stats = AnchorStats()
+
+    def step_post_backward(self, params: Any, optimizers: Any, step: int, info: Optional[dict[str, Any]]) -> dict[str, int]:
+        c = self.config
+        m, k = params["anchors"].shape[0], c.n_offsets
+        if info is not None and c.start_stat <= step < c.update_until:
+            meta = info["meta"]
+            self.stats._update(m, k, meta, info["anchor_idx"], info["keep"], info["opacity"], self.grad_tensor(meta))
+        if c.update_from < step < c.update_until and step % c.update_interval == 0:
+            return self.refine(params, optimizers)
+        return {"grown": 0, "pruned": 0}
+
+    @torch.no_grad()
+    def refine(self, params: Any, optimizers: Any) -> dict[str, int]:
+        """Grow anchors from offset gradients, then prune transparent anchors."""
+        k = self.config.n_offsets
+        if self.stats.denom is None or self.stats.denom.shape[0] != params["anchors"].shape[0] * k:
+            return {"grown": 0, "pruned": 0}
+        grown = grow_anchors(self.config, self.stats, params, self.voxel, optimizers)
+        pruned = prune_anchors(self.config, self.stats, params, optimizers)
+        return {"grown": grown, "pruned": pruned}

@@ -23,7 +23,6 @@ from nerf2gs_plugin.engine.optimizers import OptimizerConfig
 from nerf2gs_plugin.engine.pipeline import PipelineConfig
 from nerf2gs_plugin.engine.trainer import TrainerConfig
 from nerf2gs_plugin.methods.scaffold_gs.model import ScaffoldGSModelConfig
-from nerf2gs_plugin.methods.splatfacto.config import with_steps  # noqa: F401 (rescales schedules to a step budget)
 from nerf2gs_plugin.registry import MethodSpecification
 
 DEFAULT_STEPS = 3000

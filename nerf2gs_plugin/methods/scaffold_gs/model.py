@@ -12,7 +12,7 @@ several voxel levels) and are pruned when their accumulated opacity is low (:mod
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Literal, Optional
+from typing import Any, Optional
 
 import torch
 from torch import Tensor, nn
@@ -21,16 +21,20 @@ from nerf2gs_plugin.cameras import Cameras
 from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.engine.callbacks import TrainingCallback, TrainingCallbackAttributes, TrainingCallbackLocation as Loc
 from nerf2gs_plugin.utils.image_metrics import psnr_from_mse
-from nerf2gs_plugin.engine.model import Model, ModelConfig
+from nerf2gs_plugin.engine.model import Model
 from nerf2gs_plugin.methods.gaussian_utils import knn_mean_distance
 from nerf2gs_plugin.utils.quaternions import normalize_quats
 from nerf2gs_plugin.utils.sh import rgb_to_sh
-from nerf2gs_plugin.methods.scaffold_gs.anchors import AnchorStats, grow_anchors, prune_anchors, voxelize
-from nerf2gs_plugin.methods.splatfacto.shared import Background, BackgroundMode, composite, image_loss
+from nerf2gs_plugin.methods.scaffold_gs.anchors import AnchorStats, AnchorStrategy, voxelize
+from nerf2gs_plugin.methods.splatfacto.shared import Background, SplatModelConfig, composite, image_loss
+from nerf2gs_plugin.utils.schedule import scheduled
 
 
 @dataclass
-class ScaffoldGSModelConfig(ModelConfig):
+class ScaffoldGSModelConfig(SplatModelConfig):
+    """The shared splatting settings (initial points, loss, background, rasterizer) come from
+    :class:`SplatModelConfig`; the rest are Scaffold-GS's own."""
+
     _target: type = field(default_factory=lambda: ScaffoldGSModel)
     feat_dim: int = 32
     n_offsets: int = 10
@@ -39,24 +43,14 @@ class ScaffoldGSModelConfig(ModelConfig):
     appearance_dim: int = 0
     """Per-training-image appearance code fed to the colour MLP (0 = off)."""
     hidden_dim: int = 32
-    num_random: int = 5000
-    ssim_lambda: float = 0.2
     volume_reg: float = 0.01
-    background: BackgroundMode = "sky"
-    sky_sh_degree: int = 3
-    sky_alpha_weight: float = 0.05
-    mask_transients: bool = False
     frustum_margin: float = 0.15
     """Anchors projecting this fraction of the image outside the frame still spawn Gaussians."""
-    near_plane: float = 0.01
-    far_plane: float = 1e10
-    rasterize_mode: Literal["classic", "antialiased"] = "classic"
-    backend: str = "auto"
     # ---- anchor growing / pruning (Scaffold-GS names; CPU-scale values, paper values in config.py)
-    start_stat: int = 50
-    update_from: int = 150
-    update_interval: int = 100
-    update_until: int = 1500
+    start_stat: int = scheduled(50)
+    update_from: int = scheduled(150)
+    update_interval: int = scheduled(100, "interval")
+    update_until: int = scheduled(1500)
     grow_threshold: float = 0.0002
     update_depth: int = 3
     update_init_factor: int = 16
@@ -98,7 +92,7 @@ class ScaffoldGSModel(Model):
         self.register_buffer("train_c2w", train_data.cameras.camera_to_worlds.clone(), persistent=False)
         self.background = Background(c.background, c.sky_sh_degree)
         self.register_buffer("step", torch.zeros((), dtype=torch.long))
-        self.stats = AnchorStats()
+        self.strategy = AnchorStrategy(c, float(self.voxel))  # the buffer's (float32) value, as after a reload
         self._last: Optional[dict[str, Any]] = None
 
     def get_param_groups(self) -> dict[str, list[nn.Parameter]]:
@@ -179,7 +173,7 @@ class ScaffoldGSModel(Model):
             rasterize_mode=self.config.rasterize_mode, backend=self.config.backend,
         )
         if training and meta["means2d"].requires_grad:
-            meta["means2d"].retain_grad()
+            self.strategy.step_pre_backward(self.anchor, None, int(self.step), meta)
             self._last = {"meta": meta, "anchor_idx": idx, "keep": keep, "opacity": neural["opacity"].detach()}
         else:
             self._last = None
@@ -220,33 +214,21 @@ class ScaffoldGSModel(Model):
 
     # ------------------------------------------------------------------ growing / pruning
     def get_training_callbacks(self, attrs: TrainingCallbackAttributes) -> list[TrainingCallback]:
-        optimizers, pipeline = attrs.optimizers, attrs.pipeline
-        c = self.config
+        optimizers = attrs.optimizers
 
         def before(step: int) -> None:
             self.step.fill_(step)
 
-        def after_backward(step: int) -> None:
-            if self._last is not None and c.start_stat <= step < c.update_until:
-                self.stats.update(self.num_primitives(), c.n_offsets, self._last)
-
         def after_step(step: int) -> None:
-            self._last = None
-            if c.update_from < step < c.update_until and step % c.update_interval == 0:
-                self.refine(optimizers)
+            info, self._last = self._last, None
+            self.strategy.step_post_backward(self.anchor, optimizers, step, info)
 
-        return [TrainingCallback([Loc.BEFORE_STEP], before), TrainingCallback([Loc.AFTER_BACKWARD], after_backward),
-                TrainingCallback([Loc.AFTER_STEP], after_step)]
+        return [TrainingCallback([Loc.BEFORE_STEP], before), TrainingCallback([Loc.AFTER_STEP], after_step)]
 
-    @torch.no_grad()
-    def refine(self, optimizers: Any) -> dict[str, int]:
-        """Grow anchors from offset gradients, then prune transparent anchors."""
-        c = self.config
-        if self.stats.denom is None or self.stats.denom.shape[0] != self.num_primitives() * c.n_offsets:
-            return {"grown": 0, "pruned": 0}
-        grown = grow_anchors(self, optimizers)
-        pruned = prune_anchors(self, optimizers, grown)
-        return {"grown": grown, "pruned": pruned}
+    @property
+    def stats(self) -> AnchorStats:
+        """The anchor statistics (held by the strategy)."""
+        return self.strategy.stats
 
     # ------------------------------------------------------------------ bookkeeping
     def num_primitives(self) -> int:
@@ -259,7 +241,7 @@ class ScaffoldGSModel(Model):
                 old = self.anchor[name]
                 self.anchor[name] = nn.Parameter(torch.zeros(saved.shape, dtype=saved.dtype, device=old.device), requires_grad=old.requires_grad)
         self.load_state_dict(state)
-        self.stats = AnchorStats()
+        self.strategy = AnchorStrategy(self.config, float(self.voxel))
 
     export_needs_cameras = True
 

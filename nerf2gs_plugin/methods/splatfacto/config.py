@@ -14,9 +14,9 @@ Paper scale (nerfstudio's splatfacto defaults, for a GPU)::
       --optimizers.means.max-steps 30000 --optimizers.means.lr-final 1.6e-6 --steps-per-save 2000
 
 (:func:`paper_scale` applies the same changes in code; ``splatfacto_paper_method`` is that config.)
-:func:`with_steps` rescales every step-valued schedule (and the learning-rate decay) to another
-step budget, e.g. a quick 800-step run; overriding ``--max-num-iterations`` alone keeps the
-3000-step schedules.
+``MethodSpecification.with_steps`` rescales every step-valued schedule (the fields marked
+``scheduled`` in their config, and the learning-rate decay) to another step budget, e.g. a quick
+800-step run; overriding ``--max-num-iterations`` alone keeps the 3000-step schedules.
 MCMC with a hard budget: ``--pipeline.model.strategy-type mcmc --pipeline.model.mcmc.cap-max N``
 (at paper scale also ``--pipeline.model.mcmc.refine-start-iter 500 --pipeline.model.mcmc.refine-stop-iter 25000``).
 """
@@ -30,6 +30,7 @@ from nerf2gs_plugin.engine.optimizers import OptimizerConfig
 from nerf2gs_plugin.engine.pipeline import PipelineConfig
 from nerf2gs_plugin.engine.trainer import TrainerConfig
 from nerf2gs_plugin.methods.splatfacto.model import SplatfactoModelConfig
+from nerf2gs_plugin.methods.splatfacto.strategy import DefaultStrategyConfig, MCMCStrategyConfig
 from nerf2gs_plugin.registry import MethodSpecification
 
 DEFAULT_STEPS = 3000
@@ -49,46 +50,12 @@ def gaussian_optimizers(max_steps: int) -> dict[str, OptimizerConfig]:
     }
 
 
-# step-valued settings of a model config or of its nested strategy configs, scaled by with_steps
-SCHEDULE_FIELDS = ("sh_degree_interval", "warmup_length", "reset_alpha_every", "stop_split_at", "stop_screen_size_at",
-                   "max_pause_after_reset", "refine_start_iter", "refine_stop_iter", "dist_start", "normal_start",
-                   "start_stat", "update_from", "update_until")
-INTERVAL_FIELDS = ("refine_every", "update_interval")  # shrink with the budget, but stay >= 20 steps
-
-
-def _rescaled(cfg, ratio: float):
-    """``cfg`` with its schedule fields scaled by ``ratio``, nested config dataclasses included."""
-    changes = {f: max(1, int(round(getattr(cfg, f) * ratio))) for f in SCHEDULE_FIELDS if hasattr(cfg, f)}
-    for f in INTERVAL_FIELDS:
-        if hasattr(cfg, f):
-            changes[f] = max(20, min(getattr(cfg, f), int(round(getattr(cfg, f) * ratio))))
-    for f in dataclasses.fields(cfg):
-        value = getattr(cfg, f.name)
-        if dataclasses.is_dataclass(value) and not isinstance(value, type):
-            changes[f.name] = _rescaled(value, ratio)
-    return dataclasses.replace(cfg, **changes)
-
-
-def with_steps(config: TrainerConfig, steps: int, optimizers=None) -> TrainerConfig:
-    """``config`` (at its own ``max_num_iterations``) with every schedule scaled to ``steps``;
-    refinement intervals shrink with it (at least 20 steps apart)."""
-    ratio = steps / max(config.max_num_iterations, 1)
-    opts = {name: dataclasses.replace(o, max_steps=steps) if o.lr_final is not None else o for name, o in config.optimizers.items()}
-    return dataclasses.replace(
-        config, max_num_iterations=steps, steps_per_save=min(config.steps_per_save, steps),
-        pipeline=dataclasses.replace(config.pipeline, model=_rescaled(config.pipeline.model, ratio)),
-        optimizers=optimizers or opts,
-    )
-
-
 def paper_scale(config: TrainerConfig) -> TrainerConfig:
-    """The original step counts and schedules (30k steps) for a GPU."""
-    model = config.pipeline.model
+    """The original step counts and schedules (30k steps) for a GPU: the strategies' own defaults
+    (nerfstudio's and gsplat's values, stated once in ``strategy.py``; MCMC's budget raised)."""
     model = dataclasses.replace(
-        model, sh_degree_interval=1000, num_random=50000,
-        strategy=dataclasses.replace(model.strategy, warmup_length=500, reset_alpha_every=3000, stop_split_at=15000,
-                                     stop_screen_size_at=4000, max_gaussians=0, max_pause_after_reset=1000),
-        mcmc=dataclasses.replace(model.mcmc, cap_max=1_000_000, refine_start_iter=500, refine_stop_iter=25000),
+        config.pipeline.model, sh_degree_interval=1000, num_random=50000,
+        strategy=DefaultStrategyConfig(), mcmc=MCMCStrategyConfig(cap_max=1_000_000),
     )
     return dataclasses.replace(
         config, max_num_iterations=PAPER_STEPS, steps_per_save=2000, steps_per_eval_image=1000,

@@ -19,42 +19,30 @@ from nerf2gs_plugin.cameras import Cameras
 from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.engine.callbacks import TrainingCallback, TrainingCallbackAttributes, TrainingCallbackLocation as Loc
 from nerf2gs_plugin.utils.image_metrics import psnr_from_mse
-from nerf2gs_plugin.engine.model import Model, ModelConfig
+from nerf2gs_plugin.engine.model import Model
 from nerf2gs_plugin.methods.gaussian_utils import knn_mean_distance, logit
 from nerf2gs_plugin.utils.quaternions import normalize_quats, random_quats
 from nerf2gs_plugin.utils.sh import num_sh_bases, rgb_to_sh
-from nerf2gs_plugin.methods.splatfacto.shared import Background, BackgroundMode, composite, image_loss
+from nerf2gs_plugin.methods.splatfacto.shared import Background, SplatModelConfig, composite, image_loss
 from nerf2gs_plugin.methods.splatfacto.strategy import (
     DefaultStrategy,
     DefaultStrategyConfig,
     MCMCStrategy,
     MCMCStrategyConfig,
 )
+from nerf2gs_plugin.methods.strategy_base import Strategy
+from nerf2gs_plugin.utils.schedule import scheduled
 
 
 @dataclass
-class SplatfactoModelConfig(ModelConfig):
+class SplatfactoModelConfig(SplatModelConfig):
     """Defaults are the CPU scale (see ``config.py`` for the step counts and the paper-scale flags)."""
 
     _target: type = field(default_factory=lambda: SplatfactoModel)
     sh_degree: int = 3
-    sh_degree_interval: int = 300
+    sh_degree_interval: int = scheduled(300)
     """Raise the SH degree every this many steps (nerfstudio: 1000 of 30000)."""
-    ssim_lambda: float = 0.2
-    num_random: int = 5000
-    """Random Gaussians in the scene box when the dataset has no sparse points (nerfstudio: 50000)."""
     init_opacity: float = 0.1
-    background: BackgroundMode = "sky"
-    """sky: learned view-direction background; random: random colour per step; learned; black; white."""
-    sky_sh_degree: int = 3
-    sky_alpha_weight: float = 0.05
-    """Push accumulation to 0 on sky-mask pixels (when the dataset has sky masks)."""
-    mask_transients: bool = False
-    """Ignore transient-mask pixels in the loss (the baseline-with-masks variant)."""
-    rasterize_mode: Literal["classic", "antialiased"] = "classic"
-    backend: str = "auto"
-    near_plane: float = 0.01
-    far_plane: float = 1e10
     strategy_type: Literal["default", "mcmc"] = "default"
     """Densification: ``default`` (clone / split / prune, settings in ``strategy``) or ``mcmc`` (in ``mcmc``)."""
     strategy: DefaultStrategyConfig = field(default_factory=lambda: DefaultStrategyConfig(
@@ -107,7 +95,7 @@ class SplatfactoModel(Model):
         xyz = lo + (hi - lo) * torch.rand(self.config.num_random, 3, generator=gen)
         return xyz, torch.rand(self.config.num_random, 3, generator=gen)
 
-    def _make_strategy(self) -> Any:
+    def _make_strategy(self) -> Strategy:
         c = self.config
         if c.strategy_type == "mcmc":
             return MCMCStrategy(c.mcmc)
@@ -141,8 +129,8 @@ class SplatfactoModel(Model):
             sh_degree=self.current_sh_degree, render_mode="RGB+ED", rasterize_mode=self.config.rasterize_mode,
             backend=self.config.backend,
         )
-        if training and meta["means2d"].requires_grad:
-            meta["means2d"].retain_grad()
+        if training:
+            self.strategy.step_pre_backward(self.gauss, None, int(self.step), meta)
         self._meta = meta if training else None
         alpha = alpha[0]
         rgb = composite(render[0, ..., :3], alpha, bg).clamp(0.0, 1.0)
@@ -179,23 +167,11 @@ class SplatfactoModel(Model):
         def set_step(step: int) -> None:
             self.step.fill_(step)
 
-        def after_backward(step: int) -> None:
-            if isinstance(self.strategy, DefaultStrategy) and self._meta is not None:
-                self.strategy.update_stats(self.num_primitives(), self._meta)
-
         def after_step(step: int) -> None:
-            self._meta = None
-            if isinstance(self.strategy, MCMCStrategy):
-                lr = optimizers.configs["means"].lr_at(step) if "means" in optimizers.configs else 1.6e-4
-                self.strategy.refine(step, self.gauss, optimizers, lr)
-            else:
-                self.strategy.refine(step, self.gauss, optimizers)
+            info, self._meta = self._meta, None
+            self.strategy.step_post_backward(self.gauss, optimizers, step, info)
 
-        return [
-            TrainingCallback([Loc.BEFORE_STEP], set_step),
-            TrainingCallback([Loc.AFTER_BACKWARD], after_backward),
-            TrainingCallback([Loc.AFTER_STEP], after_step),
-        ]
+        return [TrainingCallback([Loc.BEFORE_STEP], set_step), TrainingCallback([Loc.AFTER_STEP], after_step)]
 
     # ------------------------------------------------------------------ bookkeeping
     def num_primitives(self) -> int:

@@ -1,19 +1,42 @@
-"""Pieces every splatting method here shares: the background (sky) model, the image loss
-(``(1-l) L1 + l (1-SSIM)`` weighted by the batch weight, optional transient masking, sky alpha
-loss) and camera helpers."""
+"""Pieces every splatting method here shares: the settings of :class:`SplatModelConfig`, the
+background (sky) model, the image loss (``(1-l) L1 + l (1-SSIM)`` weighted by the batch weight,
+optional transient masking, sky alpha loss) and camera helpers."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import torch
 from torch import Tensor, nn
 
 from nerf2gs_plugin.cameras import Cameras
+from nerf2gs_plugin.engine.model import ModelConfig
 from nerf2gs_plugin.utils.image_metrics import ssim
 from nerf2gs_plugin.utils.sh import num_sh_bases, sh_basis
 
 BackgroundMode = Literal["sky", "random", "learned", "black", "white"]
+
+
+@dataclass
+class SplatModelConfig(ModelConfig):
+    """The settings every splatting model here has (Splatfacto, 2DGS, Scaffold-GS): initial points,
+    image loss, background, rasterizer. Same flags for each (``--pipeline.model.<name>``)."""
+
+    num_random: int = 5000
+    """Random primitives in the scene box when the dataset has no sparse points (nerfstudio: 50000)."""
+    ssim_lambda: float = 0.2
+    background: BackgroundMode = "sky"
+    """sky: learned view-direction background; random: random colour per step; learned; black; white."""
+    sky_sh_degree: int = 3
+    sky_alpha_weight: float = 0.05
+    """Push accumulation to 0 on sky-mask pixels (when the dataset has sky masks)."""
+    mask_transients: bool = False
+    """Ignore transient-mask pixels in the loss (the baseline-with-masks variant)."""
+    rasterize_mode: Literal["classic", "antialiased"] = "classic"
+    backend: str = "auto"
+    near_plane: float = 0.01
+    far_plane: float = 1e10
 
 
 def camera_directions(camera: Cameras) -> Tensor:

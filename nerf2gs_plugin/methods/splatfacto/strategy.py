@@ -1,4 +1,5 @@
-"""Densification strategies shared by Splatfacto and 2DGS.
+"""Densification strategies shared by Splatfacto and 2DGS (the :class:`Strategy` contract of
+:mod:`nerf2gs_plugin.methods.strategy_base`).
 
 Both operate on an ``nn.ParameterDict`` whose tensors all have the primitive count ``N`` as their
 first dimension, with keys ``means [N,3]``, ``scales [N,S]`` (log; S = 3 for 3D Gaussians, 2 for
@@ -25,8 +26,9 @@ import torch
 from torch import Tensor, nn
 
 from nerf2gs_plugin.methods.gaussian_utils import logit
-
+from nerf2gs_plugin.methods.strategy_base import Strategy
 from nerf2gs_plugin.utils.quaternions import quat_to_rotmat
+from nerf2gs_plugin.utils.schedule import scheduled
 
 
 # ---------------------------------------------------------------------------------------- edits
@@ -76,12 +78,13 @@ def _scales3(log_scales: Tensor) -> Tensor:
 # ---------------------------------------------------------------------------------------- default
 @dataclass
 class DefaultStrategyConfig:
-    """nerfstudio's names and (30k-step) values; the model config sets the CPU-scale ones."""
+    """nerfstudio's names and (30k-step) values, stated here only: the paper-scale configs use these
+    defaults as they are; the model config sets the CPU-scale ones."""
 
-    warmup_length: int = 500
-    refine_every: int = 100
-    reset_alpha_every: int = 3000
-    stop_split_at: int = 15000
+    warmup_length: int = scheduled(500)
+    refine_every: int = scheduled(100, "interval")
+    reset_alpha_every: int = scheduled(3000)
+    stop_split_at: int = scheduled(15000)
     densify_grad_thresh: float = 0.0008
     densify_size_thresh: float = 0.01
     n_split_samples: int = 2
@@ -89,24 +92,35 @@ class DefaultStrategyConfig:
     cull_scale_thresh: float = 0.5
     cull_screen_size: float = 0.15
     split_screen_size: float = 0.05
-    stop_screen_size_at: int = 4000
+    stop_screen_size_at: int = scheduled(4000)
     continue_cull_post_densification: bool = True
-    max_pause_after_reset: int = 1000
+    max_pause_after_reset: int = scheduled(1000)
     """Cap on nerfstudio's pause after an opacity reset (num_images + refine_every steps)."""
     max_gaussians: int = 0
     """Soft budget of Gaussians (0 = unlimited, as nerfstudio)."""
 
 
-class DefaultStrategy:
-    """Clone / split / prune / opacity-reset; statistics come from ``meta["means2d"].grad``."""
+class DefaultStrategy(Strategy):
+    """Clone / split / prune / opacity-reset; statistics come from ``info[grad_key].grad``."""
+
+    grad_key = "means2d"
 
     def __init__(self, cfg: DefaultStrategyConfig, num_train_images: int = 1, scene_scale: float = 1.0) -> None:
         self.cfg = cfg
         self.num_train_images = num_train_images  # of the dataset, not a setting: not in the config
         self.scene_scale = scene_scale
+        self.initialize_state()
+
+    def initialize_state(self) -> None:
         self.grad_accum: Optional[Tensor] = None  # [N] sum of NDC-space gradient norms
         self.count: Optional[Tensor] = None  # [N] times visible
         self.max_radii: Optional[Tensor] = None  # [N] max radius / max(W, H)
+
+    def step_post_backward(self, params: nn.ParameterDict, optimizers: Any, step: int,
+                           info: Optional[dict[str, Any]]) -> dict[str, int]:
+        if info is not None:
+            self.update_stats(params["means"].shape[0], info)
+        return self.refine(step, params, optimizers)
 
     @property
     def pause_after_reset(self) -> int:
@@ -124,7 +138,7 @@ class DefaultStrategy:
     @torch.no_grad()
     def update_stats(self, n: int, meta: dict[str, Any]) -> None:
         """After backward: accumulate the projected-mean gradient of the visible primitives."""
-        means2d = meta.get("means2d")
+        means2d = self.grad_tensor(meta)
         if means2d is None or means2d.grad is None:
             return
         if self.grad_accum is None or self.grad_accum.shape[0] != n:
@@ -239,9 +253,9 @@ class MCMCStrategyConfig:
     cap_max: int = 100_000
     """Hard budget of Gaussians."""
     noise_lr: float = 5e5
-    refine_start_iter: int = 500
-    refine_stop_iter: int = 25_000
-    refine_every: int = 100
+    refine_start_iter: int = scheduled(500)
+    refine_stop_iter: int = scheduled(25_000)
+    refine_every: int = scheduled(100, "interval")
     min_opacity: float = 0.005
     grow_factor: float = 0.05
     init_opacity: float = 0.5
@@ -282,9 +296,26 @@ def relocation_values(opacities: Tensor, scales: Tensor, ratios: Tensor) -> tupl
     return new_o, new_s
 
 
-class MCMCStrategy:
+class MCMCStrategy(Strategy):
+    """Relocate / add / noise; reads no gradient statistics (its ``step_pre_backward`` keeps the
+    projected centres' gradient only because every strategy does: it costs nothing)."""
+
     def __init__(self, cfg: MCMCStrategyConfig) -> None:
         self.cfg = cfg
+
+    def initialize_state(self) -> None:
+        """Nothing accumulates between steps."""
+
+    def step_post_backward(self, params: nn.ParameterDict, optimizers: Any, step: int,
+                           info: Optional[dict[str, Any]]) -> dict[str, int]:
+        return self.refine(step, params, optimizers)
+
+    @staticmethod
+    def means_lr(optimizers: Any, step: int) -> float:
+        """The means' learning rate at ``step`` (scales the exploration noise); nerfstudio's initial
+        one when no ``means`` optimizer config is known."""
+        configs = getattr(optimizers, "configs", {})
+        return configs["means"].lr_at(step) if "means" in configs else 1.6e-4
 
     def _sample(self, probs: Tensor, n: int) -> Tensor:
         return torch.multinomial(probs / probs.sum(), n, replacement=True)
@@ -339,11 +370,11 @@ class MCMCStrategy:
         noise = torch.einsum("nij,nj->ni", R, (s3 * s3) * torch.einsum("nji,nj->ni", R, z))
         params["means"].data += noise
 
-    def refine(self, step: int, params: nn.ParameterDict, optimizers: Any, lr_means: float) -> dict[str, int]:
+    def refine(self, step: int, params: nn.ParameterDict, optimizers: Any) -> dict[str, int]:
         c = self.cfg
         out = {"relocated": 0, "added": 0}
         if c.refine_start_iter < step < c.refine_stop_iter and step % c.refine_every == 0:
             out["relocated"] = self.relocate(params, optimizers)
             out["added"] = self.add(params, optimizers)
-        self.inject_noise(params, lr_means)
+        self.inject_noise(params, self.means_lr(optimizers, step))
         return out

@@ -39,12 +39,6 @@ def streetnerf_optimizers(max_steps: int) -> dict[str, OptimizerConfig]:
     }
 
 
-def with_steps(config: TrainerConfig, steps: int) -> TrainerConfig:
-    """``config`` with ``steps`` iterations and its learning-rate decay rescaled to them."""
-    opts = {k: dataclasses.replace(o, max_steps=steps) for k, o in config.optimizers.items()}
-    return dataclasses.replace(config, max_num_iterations=steps, steps_per_save=min(config.steps_per_save, steps), optimizers=opts)
-
-
 def paper_scale(config: TrainerConfig) -> TrainerConfig:
     """Zip-NeRF/nerfacto-like capacity and step count, for a GPU."""
     model = dataclasses.replace(

@@ -17,7 +17,6 @@ from nerf2gs_plugin.engine.pipeline import PipelineConfig
 from nerf2gs_plugin.engine.trainer import TrainerConfig
 from nerf2gs_plugin.methods.splatfacto.config import gaussian_optimizers
 from nerf2gs_plugin.methods.splatfacto.config import paper_scale as splatfacto_paper_scale
-from nerf2gs_plugin.methods.splatfacto.config import with_steps  # noqa: F401 (rescales schedules to a step budget)
 from nerf2gs_plugin.methods.two_dgs.model import TwoDGSModelConfig
 from nerf2gs_plugin.registry import MethodSpecification
 

@@ -5,7 +5,8 @@ its normal, two scales (``scales [N,2]`` log) and an opacity; it is rendered by 
 intersection with the screen-space low-pass fallback (the rasterizer's ``rasterize_surfels``).
 On top of the photometric loss: depth distortion (from ``dist_start``) and normal consistency
 between the rendered normals and the normals of the rendered depth (from ``normal_start``).
-Densification reuses the 3DGS strategy (clone / split in the tangent plane / prune / reset).
+Densification reuses the 3DGS strategy (clone / split in the tangent plane / prune / reset) on
+2DGS's own gradient (:class:`SurfelStrategy`, ``grad_key = "gradient_2dgs"``).
 """
 
 from __future__ import annotations
@@ -22,6 +23,9 @@ from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.utils.quaternions import normalize_quats
 from nerf2gs_plugin.methods.splatfacto.model import SplatfactoModel, SplatfactoModelConfig
 from nerf2gs_plugin.methods.splatfacto.shared import composite
+from nerf2gs_plugin.methods.splatfacto.strategy import DefaultStrategy
+from nerf2gs_plugin.methods.strategy_base import Strategy
+from nerf2gs_plugin.utils.schedule import scheduled
 
 ZERO_LOG_SCALE = math.log(1e-7)  # the "zero" third axis of a surfel when exported as a 3D Gaussian
 
@@ -37,17 +41,33 @@ class TwoDGSModelConfig(SplatfactoModelConfig):
     surfel's size and kept 2.8x more surfels at the quick scale (43.6k vs 15.4k) for 0.7 dB less
     from above and 0.2 dB more on the street."""
     normal_lambda: float = 0.05
-    normal_start: int = 700
+    normal_start: int = scheduled(700)
     """Step from which the normal consistency loss is on (2DGS: 7000 of 30000)."""
     dist_lambda: float = 0.01
-    dist_start: int = 300
+    dist_start: int = scheduled(300)
     """Step from which the depth distortion loss is on (2DGS: 3000 of 30000)."""
     normals_frame: Literal["camera", "world"] = "camera"
     """Frame of the rasterizer's rendered normals (converted to world for the viewer)."""
 
 
+class SurfelStrategy(DefaultStrategy):
+    """The 3DGS densify/prune recipe driven by the surfel rasterizer's ``gradient_2dgs`` (see
+    ``densify_signal``); a backend that reports none (gsplat's) drives it by ``means2d``."""
+
+    grad_key = "gradient_2dgs"
+
+    def grad_tensor(self, info):
+        g = super().grad_tensor(info)
+        return info.get("means2d") if g is None and info is not None else g
+
+
 class TwoDGSModel(SplatfactoModel):
     config: TwoDGSModelConfig
+
+    def _make_strategy(self) -> Strategy:
+        if self.config.strategy_type == "mcmc":
+            return super()._make_strategy()
+        return SurfelStrategy(self.config.strategy, num_train_images=self.num_train_images)
 
     def populate_modules(self, train_data: DataparserOutputs) -> None:
         super().populate_modules(train_data)
@@ -76,12 +96,9 @@ class TwoDGSModel(SplatfactoModel):
             sh_degree=self.current_sh_degree, render_mode="RGB+ED", backend=self.config.backend,
             densify_signal=self.config.densify_signal,
         )
-        grad_key = "gradient_2dgs" if meta.get("gradient_2dgs") is not None else "means2d"
-        if training and meta[grad_key].requires_grad:
-            meta[grad_key].retain_grad()
-            self._meta = {**meta, "means2d": meta[grad_key]}
-        else:
-            self._meta = None
+        if training:
+            self.strategy.step_pre_backward(self.gauss, None, int(self.step), meta)
+        self._meta = meta if training else None
         alpha = alpha[0]
         rgb = composite(render[0, ..., :3], alpha, bg).clamp(0.0, 1.0)
         depth = median[0] if self.config.depth_mode == "median" else render[0, ..., 3:4]

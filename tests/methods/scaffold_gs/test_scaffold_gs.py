@@ -93,14 +93,14 @@ def test_grow_adds_anchors_only_in_empty_voxels(scene):
     slots = torch.arange(40 * k)
     model.stats.grad_accum[slots] = 1.0
     model.stats.denom[:] = 100.0
-    added = grow_anchors(model, opts)
+    added = grow_anchors(model.config, model.stats, model.anchor, float(model.voxel), opts)
     assert added > 0 and model.num_primitives() == m0 + added
     a = model.anchor["anchors"]
     assert torch.unique(torch.round(a / float(model.voxel)).long(), dim=0).shape[0] == a.shape[0]  # no duplicates
     assert model.anchor["offsets"][m0:].abs().sum() == 0
     assert model.stats.denom.shape[0] == model.num_primitives() * k and model.stats.denom[slots].sum() == 0
     # with no gradient nothing grows
-    assert grow_anchors(model, opts) == 0
+    assert grow_anchors(model.config, model.stats, model.anchor, float(model.voxel), opts) == 0
 
 
 def test_prune_drops_transparent_anchors(scene):
@@ -110,7 +110,7 @@ def test_prune_drops_transparent_anchors(scene):
     model.stats.opacity_accum[:] = 10.0
     model.stats.opacity_accum[:7] = 0.0  # never opaque
     kept_feat = model.anchor["anchors"][7:].clone()
-    assert prune_anchors(model, opts) == 7
+    assert prune_anchors(model.config, model.stats, model.anchor, opts) == 7
     assert model.num_primitives() == m0 - 7
     assert torch.equal(model.anchor["anchors"], kept_feat)
     assert model.stats.grad_accum.shape[0] == (m0 - 7) * model.config.n_offsets
@@ -137,7 +137,7 @@ def test_checkpoint_reload_and_export(scene, trained, tmp_path):
 
 
 def test_with_steps_rescales_anchor_schedule():
-    from nerf2gs_plugin.methods.scaffold_gs.config import with_steps
+    from nerf2gs_plugin.utils.schedule import with_steps
 
     quick = with_steps(scaffold_gs_method.config, 1500)
     m = quick.pipeline.model

@@ -140,11 +140,11 @@ def test_mcmc_respects_hard_budget_and_relocates():
     params["opacities"].data[:10] = -10.0  # dead
     opts = _with_adam_state(params)
     strat = MCMCStrategy(MCMCStrategyConfig(cap_max=60, refine_start_iter=0, refine_every=1, refine_stop_iter=100))
-    out = strat.refine(1, params, opts, lr_means=1e-4)
+    out = strat.refine(1, params, opts)
     assert out["relocated"] == 10
     assert float(torch.sigmoid(params["opacities"].detach()).min()) > 0.005 - 1e-6
     for step in range(2, 20):
-        strat.refine(step, params, opts, lr_means=1e-4)
+        strat.refine(step, params, opts)
         assert params["means"].shape[0] <= 60
     assert params["means"].shape[0] == 60
 
@@ -240,7 +240,7 @@ def test_strategy_settings_are_one_nested_config_with_cli_flags():
 
 
 def test_with_steps_rescales_schedules():
-    from nerf2gs_plugin.methods.splatfacto.config import with_steps
+    from nerf2gs_plugin.utils.schedule import with_steps
 
     quick = with_steps(splatfacto_method.config, 750)
     m = quick.pipeline.model

@@ -9,7 +9,8 @@ import torch
 
 from nerf2gs_plugin.data import parse_dataset
 from nerf2gs_plugin.engine.trainer import Trainer
-from nerf2gs_plugin.methods.streetnerf.config import streetnerf_config, streetnerf_method, with_steps
+from nerf2gs_plugin.methods.streetnerf.config import streetnerf_config, streetnerf_method
+from nerf2gs_plugin.utils.schedule import with_steps
 from nerf2gs_plugin.methods.streetnerf.model import StreetNeRFModel, StreetNeRFModelConfig, ground_height_from_points, median_depth
 
 STEPS = 300

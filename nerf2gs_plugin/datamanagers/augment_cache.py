@@ -1,0 +1,136 @@
+"""The augment cache's on-disk format, defined once: where each rendered image lives in a cache
+entry, the manifest that describes the entry, and its one reader (:func:`read_manifest`), which the
+AugmentedDataManager, the viewer and export-augmented all use.
+
+An entry ``<reference run>/augment_cache/<key>/`` holds ``composites/00007.png`` (input view 7 with
+its transient pixels from the reference), ``extra_raw/00003.png`` (+ ``_depth.npy``: bird's-eye
+view 3 as rendered), ``extra/00003.png`` (after the enhancer) and ``manifest.json``. An entry is
+written under a temporary name and renamed into place, so a present manifest means a whole entry.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Optional
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from nerf2gs_plugin.cameras import Cameras
+
+CACHE_FORMAT_VERSION = 1
+CACHE_DIR_NAME = "augment_cache"
+MANIFEST_NAME = "manifest.json"
+# AugmentConfig fields that do not change a rendered image (so not in the key)
+UNKEYED_FIELDS = ("extra_prob", "extra_weight", "use_cache", "enhancer")
+
+
+@dataclass
+class CacheManifest:
+    """What one cache entry holds; ``config`` is the AugmentConfig as a plain dict."""
+
+    reference: str
+    dataset: str
+    config: dict[str, Any]
+    enhancer: str
+    composited_images: list[int]
+    num_extra: int
+    extra_camera_to_worlds: list = field(default_factory=list)  # [num_extra][3][4]
+    format_version: int = CACHE_FORMAT_VERSION
+    path: Optional[Path] = None  # where it was read from (not written)
+
+    @property
+    def entry(self) -> Path:
+        assert self.path is not None, "manifest was not read from disk"
+        return self.path.parent
+
+    def composite_png(self, i: int) -> Path:
+        return self.entry / "composites" / f"{i:05d}.png"
+
+    def extra_png(self, j: int, raw: bool = False) -> Path:
+        return self.entry / ("extra_raw" if raw else "extra") / f"{j:05d}.png"
+
+    def extra_poses(self) -> Tensor:
+        """``[num_extra, 3, 4]`` camera-to-world poses of the bird's-eye views."""
+        return torch.tensor(self.extra_camera_to_worlds, dtype=torch.float32).reshape(-1, 3, 4)
+
+    def same_geometry(self, dataset: str, delta_h: float, theta_pitch: float, every_n: int) -> bool:
+        """True when this entry's bird's-eye views are those of a run with these settings."""
+        cfg = self.config
+        return (self.dataset == dataset and float(cfg.get("delta_h", -1)) == float(delta_h)
+                and float(cfg.get("theta_pitch", -1)) == float(theta_pitch) and int(cfg.get("every_n", 1)) == int(every_n))
+
+    def write(self, entry: Path) -> None:
+        doc = {k: v for k, v in asdict(self).items() if k != "path"}
+        (Path(entry) / MANIFEST_NAME).write_text(json.dumps(doc, indent=1))
+
+
+def read_manifest(path: Path) -> CacheManifest:
+    """The manifest of a cache entry (its folder or its ``manifest.json``). Raises ``ValueError``
+    on a malformed or other-version manifest, ``OSError`` when it cannot be read."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / MANIFEST_NAME
+    try:
+        doc = json.loads(path.read_text())
+        version = int(doc.get("format_version", -1))
+        if version != CACHE_FORMAT_VERSION:
+            raise ValueError(f"cache format {version}, expected {CACHE_FORMAT_VERSION}")
+        manifest = CacheManifest(
+            reference=str(doc["reference"]), dataset=str(doc["dataset"]), config=dict(doc["config"]),
+            enhancer=str(doc["enhancer"]), composited_images=[int(i) for i in doc["composited_images"]],
+            num_extra=int(doc["num_extra"]), extra_camera_to_worlds=list(doc["extra_camera_to_worlds"]), path=path,
+        )
+        if manifest.num_extra and manifest.extra_poses().shape[0] != manifest.num_extra:
+            raise ValueError("extra_camera_to_worlds does not match num_extra")
+    except (KeyError, TypeError, RuntimeError, json.JSONDecodeError) as e:
+        raise ValueError(f"{path}: malformed augment cache manifest ({e})") from None
+    return manifest
+
+
+def cache_manifests(cache_root: Path) -> list[CacheManifest]:
+    """Every readable manifest under ``<cache_root>/augment_cache``, newest first."""
+    paths = sorted(Path(cache_root).glob(f"{CACHE_DIR_NAME}/*/{MANIFEST_NAME}"), key=lambda p: p.stat().st_mtime, reverse=True)
+    found = []
+    for p in paths:
+        try:
+            found.append(read_manifest(p))
+        except (OSError, ValueError):
+            continue
+    return found
+
+
+def cache_key(ref_key: str, dataset: str, config: dict[str, Any], bev: Optional[Cameras], train: Cameras, enhancer_key: str) -> str:
+    """The entry name: everything that changes a rendered image (``config`` is the plain AugmentConfig)."""
+    relevant = {k: v for k, v in config.items() if k not in UNKEYED_FIELDS}
+    h = hashlib.sha1()
+    h.update(json.dumps({"v": CACHE_FORMAT_VERSION, "ref": ref_key, "data": dataset, "cfg": relevant, "enh": enhancer_key}, sort_keys=True).encode())
+    for cams in (train, bev):
+        if cams is not None:
+            h.update(np.round(cams.camera_to_worlds.cpu().numpy(), 5).tobytes())
+            h.update(cams.Ks().cpu().numpy().round(3).tobytes())
+    return h.hexdigest()[:16]
+
+
+def save_png(path: Path, img: Tensor) -> None:
+    """``[H, W, 3]`` float image in [0, 1] -> 8-bit PNG, atomically."""
+    import cv2
+
+    arr = (img.clamp(0, 1).cpu().numpy() * 255 + 0.5).astype(np.uint8)
+    tmp = path.with_name(f".{path.name}.tmp.png")
+    cv2.imwrite(str(tmp), arr[..., ::-1])
+    os.replace(tmp, path)
+
+
+def load_png(path: Path) -> Tensor:
+    import cv2
+
+    arr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if arr is None:
+        raise FileNotFoundError(path)
+    return torch.from_numpy(arr[..., ::-1].copy()).float() / 255.0
