@@ -60,7 +60,9 @@ def discover_methods() -> Discovery:
                 continue  # not built yet in this tree: not a failure
             failures[name] = f"{type(e).__name__}: {e}"
             continue
-        except Exception as e:  # noqa: BLE001
+        except KeyboardInterrupt:
+            raise
+        except BaseException as e:  # noqa: BLE001
             failures[name] = f"{type(e).__name__}: {e}"
             continue
         methods[name] = spec
@@ -69,7 +71,9 @@ def discover_methods() -> Discovery:
             spec = ep.load()
             if not isinstance(spec, MethodSpecification):
                 raise TypeError(f"entry point {ep.value} is a {type(spec).__name__}, not a MethodSpecification")
-        except Exception as e:  # noqa: BLE001 - a broken plugin must never break the others
+        except KeyboardInterrupt:
+            raise
+        except BaseException as e:  # noqa: BLE001 - a broken plugin (even one calling sys.exit) never breaks the others
             failures[ep.name] = f"{type(e).__name__}: {e}"
             continue
         if ep.name in methods:

@@ -49,3 +49,21 @@ def test_builtin_methods_have_cpu_and_paper_scale(name):
     # the paper variant trains the same method (its checkpoints load as `name`), far longer
     assert paper.method_name == cpu.method_name == name
     assert paper.max_num_iterations >= 25000 > cpu.max_num_iterations
+
+
+def test_plugin_calling_sys_exit_at_import_is_isolated(tmp_path, monkeypatch):
+    """issue 17 #5: a plugin that calls sys.exit() at import used to end every ns2gs-train with exit 1."""
+    dist = tmp_path / "exiting_plugin-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: exiting-plugin\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text("[nerf2gs.methods]\nexiting-method = exiting_plugin_mod:spec\n")
+    (tmp_path / "exiting_plugin_mod.py").write_text("import sys\nsys.exit(3)\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    registry.discover_methods.cache_clear()
+    try:
+        disc = registry.discover_methods()
+        assert "exiting-method" in disc.failures and "SystemExit" in disc.failures["exiting-method"]
+        assert "voxel-grid" in disc.methods and "splatfacto" in disc.methods
+    finally:
+        registry.discover_methods.cache_clear()
+        sys.modules.pop("exiting_plugin_mod", None)
