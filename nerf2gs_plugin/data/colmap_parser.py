@@ -23,6 +23,7 @@ import numpy as np
 import torch
 
 from nerf2gs_plugin.cameras import opencv_w2c_to_opengl_c2w
+from nerf2gs_plugin.data.colmap_binary import check_intrinsics_inside, check_model_dir
 from nerf2gs_plugin.data.base import RawFrame, build_outputs, check_split, find_folder_mask
 from nerf2gs_plugin.data.dataparser_outputs import MASK_KINDS, DataparserOutputs
 from nerf2gs_plugin.data.normalize import NormalizeOptions
@@ -92,6 +93,7 @@ class ColmapDataParserConfig:
         model_dir = find_model_dir(root)
         if model_dir is None:
             raise DataError(f"no COLMAP model (cameras.bin/.txt in one of {', '.join(MODEL_DIRS)})", root)
+        check_model_dir(model_dir)  # counts vs file sizes before pycolmap allocates anything
         try:
             rec = pycolmap.Reconstruction(str(model_dir))
         except Exception as e:  # pycolmap raises ValueError/RuntimeError with a C++ message
@@ -110,6 +112,7 @@ class ColmapDataParserConfig:
                 continue
             cam = rec.cameras[image.camera_id]
             intr = _intrinsics(cam, model_dir, image.name)
+            check_intrinsics_inside(intr, f"camera {cam.camera_id} of image '{image.name}'", model_dir)
             w2c = torch.eye(4, dtype=torch.float64)
             w2c[:3] = torch.from_numpy(np.asarray(image.cam_from_world().matrix(), dtype=np.float64))
             c2w = opencv_w2c_to_opengl_c2w(w2c[None])[0].float()
