@@ -115,15 +115,49 @@ def check_points3d_bin(path: Path) -> int:
     return n
 
 
+def check_rigs_bin(path: Path) -> int:
+    """COLMAP >= 3.12 ``rigs.bin``: per rig an id, a sensor count, the reference sensor, then the
+    other sensors (type, id, has-pose flag, optional 7-double pose)."""
+    r = _Reader(path)
+    n = r.count("rig count", 8)
+    for _ in range(n):
+        rig_id, n_sensors = r.take("<II", "rig header")
+        if n_sensors * 9 > len(r.buf) - r.pos + 8:
+            raise r.fail(f"rig {rig_id} declares {n_sensors} sensors")
+        if n_sensors > 0:
+            r.take("<iI", f"rig {rig_id} reference sensor")
+        for _ in range(max(n_sensors - 1, 0)):
+            _, _, has_pose = r.take("<iIB", f"rig {rig_id} sensor")
+            if has_pose:
+                r.take("<7d", f"rig {rig_id} sensor pose")
+    r.done()
+    return n
+
+
+def check_frames_bin(path: Path) -> int:
+    """COLMAP >= 3.12 ``frames.bin``: per frame ids, a 7-double pose and its (sensor, data id) list."""
+    r = _Reader(path)
+    n = r.count("frame count", 68)
+    for _ in range(n):
+        (frame_id,) = r.take("<I", "frame id")
+        r.take("<I7d", f"frame {frame_id} rig and pose")
+        (n_data,) = r.take("<I", f"frame {frame_id} data count")
+        r.need(16 * n_data, f"frame {frame_id} data ids")
+        r.pos += 16 * n_data
+    r.done()
+    return n
+
+
+CHECKS = {"cameras.bin": check_cameras_bin, "images.bin": check_images_bin, "points3D.bin": check_points3d_bin,
+          "rigs.bin": check_rigs_bin, "frames.bin": check_frames_bin}
+
+
 def check_model_dir(model_dir: Path) -> None:
     """Validate whichever binary files ``model_dir`` holds (text models are parsed safely by pycolmap)."""
     model_dir = Path(model_dir)
-    if (model_dir / "cameras.bin").is_file():
-        check_cameras_bin(model_dir / "cameras.bin")
-    if (model_dir / "images.bin").is_file():
-        check_images_bin(model_dir / "images.bin")
-    if (model_dir / "points3D.bin").is_file():
-        check_points3d_bin(model_dir / "points3D.bin")
+    for name, check in CHECKS.items():
+        if (model_dir / name).is_file():
+            check(model_dir / name)
 
 
 def check_intrinsics_inside(intr: Any, what: str, where: Path) -> None:

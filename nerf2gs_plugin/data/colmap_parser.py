@@ -65,8 +65,12 @@ class ColmapDataParserConfig:
         if not groups["train"]:
             raise DataError("split 'train' is empty", model_dir)
         pts = rec.points3D
-        xyz = np.array([p.xyz for p in pts.values()], dtype=np.float32).reshape(-1, 3) if len(pts) else None
+        with np.errstate(over="ignore"):  # a float64 beyond float32 becomes inf: reported below
+            xyz = np.array([p.xyz for p in pts.values()], dtype=np.float32).reshape(-1, 3) if len(pts) else None
         rgb = np.array([p.color for p in pts.values()], dtype=np.uint8).reshape(-1, 3) if len(pts) else None
+        if xyz is not None and not np.isfinite(xyz).all():
+            bad = int((~np.isfinite(xyz).all(axis=1)).sum())
+            raise DataError(f"{bad} of {len(xyz)} points have non-finite (or beyond float32) coordinates", model_dir / "points3D.bin")
         scene = self._scene_meta()
         up = torch.tensor(scene["up"], dtype=torch.float32) if scene.get("up") is not None else None
         mpu = float(self.metres_per_unit if self.metres_per_unit is not None else scene.get("metres_per_unit", 1.0))
