@@ -224,3 +224,15 @@ def test_sigterm_saves_like_sigint(tiny_scene, tmp_path):
     assert code != 0 and "interrupted: checkpoint saved" in err, err
     ckpts = list_checkpoints(run_dir)
     assert len(ckpts) == 1 and load_checkpoint(ckpts[0])["step"] > 0
+
+
+def test_os_errors_in_any_front_end_are_one_line(capsys):
+    """A full disk while writing config.yml/eval.json/a PLY was a traceback."""
+    from nerf2gs_plugin.cli.common import run_cli
+
+    def main():
+        raise OSError(errno.ENOSPC, "No space left on device", "/out/eval.json")
+
+    with pytest.raises(SystemExit) as e:
+        run_cli(main)
+    assert e.value.code == 2 and capsys.readouterr().err == "error: /out/eval.json: No space left on device\n"
