@@ -65,7 +65,9 @@ def discover_methods() -> Discovery:
                 continue  # not built yet in this tree: not a failure
             failures[name] = f"{type(e).__name__}: {e}"
             continue
-        except Exception as e:  # noqa: BLE001
+        except KeyboardInterrupt:
+            raise
+        except BaseException as e:  # noqa: BLE001
             failures[name] = f"{type(e).__name__}: {e}"
             continue
         methods[name] = spec

@@ -65,3 +65,21 @@ def test_registry_imports_no_layer_at_import_time():
     assert "engine" not in out and "methods" not in out, out
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True).stdout
     assert "nerf2gs_plugin.engine.reference" not in out, out
+
+
+def test_plugin_calling_sys_exit_at_import_is_isolated(tmp_path, monkeypatch):
+    """issue 17 #5: a plugin that calls sys.exit() at import used to end every ns2gs-train with exit 1."""
+    dist = tmp_path / "exiting_plugin-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: exiting-plugin\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text("[nerf2gs.methods]\nexiting-method = exiting_plugin_mod:spec\n")
+    (tmp_path / "exiting_plugin_mod.py").write_text("import sys\nsys.exit(3)\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    registry.discover_methods.cache_clear()
+    try:
+        disc = registry.discover_methods()
+        assert "exiting-method" in disc.failures and "SystemExit" in disc.failures["exiting-method"]
+        assert "voxel-grid" in disc.methods and "splatfacto" in disc.methods
+    finally:
+        registry.discover_methods.cache_clear()
+        sys.modules.pop("exiting_plugin_mod", None)

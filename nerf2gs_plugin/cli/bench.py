@@ -1,4 +1,4 @@
-"""ns2gs-bench quick | paper-table | ablation | speed-quality | stability | model-size | raster | field
+"""ns2gs-bench quick | paper-table | ablation | speed-quality | stability | model-size | raster | field | faults
 
 Results (JSON + Markdown + PNG, with the machine) go to benchmarks/results/; trained runs are kept
 under benchmarks/runs/ and reused when nothing that matters changed.
@@ -199,10 +199,34 @@ class Field:
         run(self.out, self.scale)
 
 
+@dataclass
+class Faults:
+    """Fault injection: byte flips / truncations of a tiny dataset and run, kill -9 + resume (``faults.*``)."""
+
+    cases: int = 150
+    kills: int = 5
+    seed: int = 0
+    out: Path = RESULTS
+    work: Path = RUNS / "faults"
+
+    def main(self) -> None:
+        import shutil
+
+        from nerf2gs_plugin.eval.bench_faults import run_suite, write_results
+
+        shutil.rmtree(self.work, ignore_errors=True)
+        doc = run_suite(self.work, n_files=self.cases, n_kills=self.kills, seed=self.seed)
+        js, md = write_results(doc, self.out)
+        s = doc["summary"]
+        print(f"{s['cases']} cases: {s['clean_errors']} clean errors, {s['finite_ok']} finite, {s['tracebacks']} tracebacks, "
+              f"{s['hangs']} hangs, {s['wrong_results']} wrong results -> {js}, {md}")
+
+
 def main() -> None:
     cmd = tyro.extras.subcommand_cli_from_dict(
         {"quick": Quick, "paper-table": PaperTable, "ablation": Ablation, "speed-quality": SpeedQuality,
-         "stability": Stability, "model-size": ModelSize, "raster": Raster, "field": Field},
+         "stability": Stability, "model-size": ModelSize, "raster": Raster, "field": Field,
+         "faults": Faults},
         description=__doc__,
     )
     cmd.main()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 import sys
 
 import tyro
@@ -12,6 +13,8 @@ from nerf2gs_plugin.registry import discover_methods, report_failures
 
 
 def train(config: TrainerConfig) -> None:
+    # a scheduler's preemption signal saves like Ctrl-C (SIGINT raises KeyboardInterrupt)
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     trainer = Trainer(config)
     trainer.setup()
     if config.viewer:

@@ -23,6 +23,7 @@ import numpy as np
 import torch
 
 from nerf2gs_plugin.cameras import opencv_w2c_to_opengl_c2w
+from nerf2gs_plugin.data.colmap_binary import check_intrinsics_inside, check_model_dir
 from nerf2gs_plugin.data.base import RawFrame, build_outputs, check_split, find_folder_mask
 from nerf2gs_plugin.data.dataparser_outputs import MASK_KINDS, DataparserOutputs
 from nerf2gs_plugin.data.normalize import NormalizeOptions
@@ -65,8 +66,12 @@ class ColmapDataParserConfig:
         if not groups["train"]:
             raise DataError("split 'train' is empty", model_dir)
         pts = rec.points3D
-        xyz = np.array([p.xyz for p in pts.values()], dtype=np.float32).reshape(-1, 3) if len(pts) else None
+        with np.errstate(over="ignore"):  # a float64 beyond float32 becomes inf: reported below
+            xyz = np.array([p.xyz for p in pts.values()], dtype=np.float32).reshape(-1, 3) if len(pts) else None
         rgb = np.array([p.color for p in pts.values()], dtype=np.uint8).reshape(-1, 3) if len(pts) else None
+        if xyz is not None and not np.isfinite(xyz).all():
+            bad = int((~np.isfinite(xyz).all(axis=1)).sum())
+            raise DataError(f"{bad} of {len(xyz)} points have non-finite (or beyond float32) coordinates", model_dir / "points3D.bin")
         scene = self._scene_meta()
         up = torch.tensor(scene["up"], dtype=torch.float32) if scene.get("up") is not None else None
         mpu = float(self.metres_per_unit if self.metres_per_unit is not None else scene.get("metres_per_unit", 1.0))
@@ -93,6 +98,7 @@ class ColmapDataParserConfig:
         model_dir = find_model_dir(root)
         if model_dir is None:
             raise DataError(f"no COLMAP model (cameras.bin/.txt in one of {', '.join(MODEL_DIRS)})", root)
+        check_model_dir(model_dir)  # counts vs file sizes before pycolmap allocates anything
         try:
             rec = pycolmap.Reconstruction(str(model_dir))
         except Exception as e:  # pycolmap raises ValueError/RuntimeError with a C++ message
@@ -111,6 +117,7 @@ class ColmapDataParserConfig:
                 continue
             cam = rec.cameras[image.camera_id]
             intr = _intrinsics(cam, model_dir, image.name)
+            check_intrinsics_inside(intr, f"camera {cam.camera_id} of image '{image.name}'", model_dir)
             w2c = torch.eye(4, dtype=torch.float64)
             w2c[:3] = torch.from_numpy(np.asarray(image.cam_from_world().matrix(), dtype=np.float64))
             c2w = opencv_w2c_to_opengl_c2w(w2c[None])[0].float()

@@ -149,6 +149,9 @@ def load_depth(path: PathLike, expected_hw: Optional[tuple[int, int]] = None, un
 def _atomic_write(path: Path, write) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    from nerf2gs_plugin.utils.io import default_file_mode
+
+    os.fchmod(fd, default_file_mode())  # mkstemp's 0600 -> what the umask gives
     os.close(fd)
     try:
         write(tmp)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
@@ -39,6 +40,18 @@ from nerf2gs_plugin.data.undistort import Intrinsics
 from nerf2gs_plugin.errors import DataError
 
 _MODELS = ("PINHOLE", "SIMPLE_PINHOLE", "OPENCV")
+
+
+_WARNED_DUPLICATES: set[Path] = set()
+
+
+def warn_duplicate_frames(path: Path, extra: int) -> None:
+    """Usable input, worth one line: the same image listed twice is trained (and weighted) twice."""
+    key = Path(path).resolve()
+    if key not in _WARNED_DUPLICATES:
+        _WARNED_DUPLICATES.add(key)
+        print(f"warning: {path}: {extra} frame(s) repeat the file_path of an earlier frame; each entry is used as given",
+              file=sys.stderr)
 
 
 @dataclass
@@ -95,6 +108,8 @@ class NerfstudioDataParserConfig:
         root = path.parent
         frames = [self._frame(meta, fr, i, root, path, "frames") for i, fr in enumerate(frames_raw)]
         by_path = {f.image.resolve(): f for f in frames}
+        if len(by_path) < len(frames):
+            warn_duplicate_frames(path, len(frames) - len(by_path))
 
         def lookup(name: Any, where: str) -> RawFrame:
             if not isinstance(name, str):

@@ -67,4 +67,11 @@ def load_checkpoint(path: Path, expected_method: Optional[str] = None, map_locat
         raise CheckpointError(f"checkpoint format {ckpt.get('format_version')!r}, expected {CHECKPOINT_FORMAT_VERSION}", path)
     if expected_method is not None and ckpt["method_name"] != expected_method:
         raise CheckpointError(f"checkpoint is of method '{ckpt['method_name']}', not '{expected_method}'", path)
+    if not isinstance(ckpt.get("step"), int) or ckpt["step"] < 0:
+        raise CheckpointError(f"checkpoint has no valid step (got {ckpt.get('step')!r})", path)
+    from nerf2gs_plugin.engine.divergence import describe, nonfinite_counts
+
+    bad = nonfinite_counts(ckpt["model"])
+    if bad:
+        raise CheckpointError(f"checkpoint holds non-finite parameters: {describe(bad)}", path)
     return ckpt

@@ -34,6 +34,8 @@ def read_config_doc(path: Path) -> dict:
         raise ConfigError("config file not found", path)
     try:
         doc = yaml.safe_load(path.read_text())
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"not UTF-8 text (byte {e.start})", path) from None
     except yaml.YAMLError as e:
         first = str(e).splitlines()[0] if str(e) else "parse error"
         raise ConfigError(f"malformed YAML ({first})", path) from None

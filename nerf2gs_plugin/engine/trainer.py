@@ -27,10 +27,13 @@ from nerf2gs_plugin.engine.checkpoints import (
     save_checkpoint,
 )
 from nerf2gs_plugin.engine.config import save_config
-from nerf2gs_plugin.utils.io import atomic_write_text
+from nerf2gs_plugin.engine.divergence import describe, nonfinite_counts, nonfinite_outputs
+from nerf2gs_plugin.engine.run_dir import RunDirLock, unique_run_dir
+from nerf2gs_plugin.engine.validate import check_trainer_config
 from nerf2gs_plugin.engine.optimizers import OptimizerConfig, Optimizers
 from nerf2gs_plugin.engine.pipeline import Pipeline, PipelineConfig
-from nerf2gs_plugin.errors import ConfigError, TrainingDiverged
+from nerf2gs_plugin.errors import CheckpointError, ConfigError, TrainingDiverged
+from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.utils.schedule import scheduled
 
 
@@ -79,9 +82,12 @@ class TrainerConfig:
 
 class Trainer:
     def __init__(self, config: TrainerConfig) -> None:
-        if config.timestamp == "{timestamp}":
+        check_trainer_config(config)
+        self._unique_dir = config.timestamp == "{timestamp}"  # default stamp: a clash gets a new folder
+        if self._unique_dir:
             config = dataclasses.replace(config, timestamp=datetime.now().strftime("%Y-%m-%d_%H%M%S"))
         self.config = config
+        self._lock = RunDirLock(config.run_dir())
         self.device = pick_device(config.device)
         self.run_dir = config.run_dir()
         self.step = 0
@@ -116,6 +122,12 @@ class Trainer:
     def _resume(self, path: Path) -> None:
         _, ckpt_file = resolve_checkpoint(path)
         ckpt = load_checkpoint(ckpt_file, expected_method=self.config.method_name, map_location=self.device)
+        if int(ckpt["step"]) + 1 >= self.config.max_num_iterations:
+            raise ConfigError(f"is {self.config.max_num_iterations} but the checkpoint {ckpt_file} is already at step "
+                              f"{int(ckpt['step'])}: nothing to train (raise it to continue)", "--max-num-iterations")
+        here = dataset_fingerprint(self.pipeline.datamanager.train_data.image_filenames)
+        if ckpt.get("dataset") is not None and ckpt["dataset"] != here:
+            raise CheckpointError(f"was trained on another dataset than {self.config.data} (its training images differ)", ckpt_file)
         self.pipeline.model.load_model_state(ckpt["model"])
         # parameters may have been re-created (densified): rebuild optimizers on the loaded tensors
         self.optimizers = Optimizers(self.config.optimizers, self.pipeline.model.get_param_groups())
@@ -130,15 +142,55 @@ class Trainer:
         self.last_good_checkpoint = ckpt_file
 
     def _write_run_files(self) -> None:
-        self.run_dir.mkdir(parents=True, exist_ok=True)
+        if self._unique_dir:
+            self.run_dir = unique_run_dir(self.run_dir)
+            self.config = dataclasses.replace(self.config, timestamp=self.run_dir.name)
+            self._lock = RunDirLock(self.run_dir)
+        self._lock.acquire(resuming_from=self.last_good_checkpoint)
         save_config(self.run_dir / "config.yml", self.config.method_name, self.config)
         from nerf2gs_plugin.data import save_dataparser_transform
 
         save_dataparser_transform(self.run_dir / "dataparser_transforms.json", self.pipeline.datamanager.train_data)
 
+    def check_finite_state(self, step: int) -> None:
+        """Parameters, optimizer state and one rendered view must be finite before a save."""
+        where = f"; last good checkpoint: {self.last_good_checkpoint}" if self.last_good_checkpoint else "; no checkpoint was written"
+        bad = nonfinite_counts({"model": self.pipeline.model.state_dict(), "optimizers": self.optimizers.state_dict()})
+        if bad:
+            raise TrainingDiverged(f"training diverged by step {step}: non-finite values in {describe(bad)}{where}")
+        imgs = self.pipeline.datamanager.train_images
+        with torch.no_grad():
+            self.pipeline.model.eval()
+            try:
+                out = self.pipeline.model.render_camera(imgs.cameras[0])
+            finally:
+                self.pipeline.model.train()
+        bad_out = nonfinite_outputs(out)
+        if bad_out:
+            raise TrainingDiverged(f"training diverged by step {step}: finite parameters render non-finite {', '.join(bad_out)}{where}")
+
     def save_checkpoint(self, step: int) -> Path:
+        """Write ``step-<step>.ckpt`` (only from finite state) and flush ``train_log.json`` with it."""
+        self.check_finite_state(step)
         path = checkpoint_path(self.run_dir, step)
         dm = self.pipeline.datamanager
+        try:
+            self._write_checkpoint(path, step, dm)
+        except OSError as e:
+            kept = f"; previous checkpoint kept: {self.last_good_checkpoint}" if self.last_good_checkpoint else ""
+            raise CheckpointError(f"cannot write checkpoint ({e.strerror or e}){kept}", path) from None
+        if not self.config.keep_all_checkpoints:
+            for old in list_checkpoints(self.run_dir):
+                if old != path:
+                    old.unlink(missing_ok=True)
+        self.last_good_checkpoint = path
+        return path
+
+    def _write_train_log(self) -> None:
+        atomic_write_text(self.run_dir / "train_log.json", json.dumps(
+            {"train_seconds": self.train_seconds, "history_stride": self.history.stride, "history": self.history.records()}))
+
+    def _write_checkpoint(self, path: Path, step: int, dm: Any) -> None:
         save_checkpoint(
             path,
             {
@@ -153,12 +205,7 @@ class Trainer:
                 "size": self.pipeline.model.size_report(),
             },
         )
-        if not self.config.keep_all_checkpoints:
-            for old in list_checkpoints(self.run_dir):
-                if old != path:
-                    old.unlink(missing_ok=True)
-        self.last_good_checkpoint = path
-        return path
+        self._write_train_log()
 
     # ------------------------------------------------------------------ loop
     def _run_callbacks(self, where: Loc, step: int) -> None:
@@ -189,6 +236,12 @@ class Trainer:
         from nerf2gs_plugin.progress import make_progress
 
         self._write_run_files()
+        try:
+            return self._train_loop(make_progress)
+        finally:
+            self._lock.release()
+
+    def _train_loop(self, make_progress: Any) -> Path:
         cfg = self.config
         start = self.step
         ema: dict[str, float] = {}
@@ -212,8 +265,6 @@ class Trainer:
                     hook(step)
                 progress.update(task, advance=1, stats=_format_stats(ema, self.pipeline.model.num_primitives()))
         self.save_checkpoint(cfg.max_num_iterations - 1)
-        atomic_write_text(self.run_dir / "train_log.json", json.dumps(
-            {"train_seconds": self.train_seconds, "history_stride": self.history.stride, "history": self.history.records()}))
         return self.run_dir
 
 

@@ -26,7 +26,9 @@ def load_entry_points(group: str, expected: type, taken: Iterable[str] = ()) -> 
             obj = ep.load()
             if not isinstance(obj, expected):
                 raise TypeError(f"entry point {ep.value} is a {type(obj).__name__}, not a {expected.__name__}")
-        except Exception as e:  # noqa: BLE001 - a broken plugin must never break the others
+        except KeyboardInterrupt:
+            raise
+        except BaseException as e:  # noqa: BLE001 - a broken plugin (even one calling sys.exit) never breaks the others
             failures[ep.name] = f"{type(e).__name__}: {e}"
             continue
         if ep.name in taken or ep.name in found:

@@ -130,3 +130,12 @@ def test_not_a_dataset_and_bad_flags(tmp_path, monkeypatch, capsys):
         parse_dataset(tmp_path / "empty")
     code, err = _run_cli(monkeypatch, capsys, "synth-street", str(tmp_path / "s"), "--num-train", "1")
     assert code == 2 and err.startswith("error: ") and "num_train" in err
+
+
+def test_duplicate_file_path_frames_warn_once(street_copy, capsys):
+    """issue 17 #6: two frames with the same file_path trained with no warning."""
+    _edit(street_copy, lambda m: m["frames"].append(dict(m["frames"][1])))
+    parse_dataset(street_copy, "train")
+    parse_dataset(street_copy, "train")
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("warning: ") and "transforms.json: 1 frame(s) repeat the file_path" in err[0]

@@ -59,3 +59,16 @@ def test_ascii_ply_and_bad_ply(tmp_path):
     (tmp_path / "b.ply").write_text("hello")
     with pytest.raises(DataError, match="b.ply: not a PLY file"):
         read_ply_points(tmp_path / "b.ply")
+
+
+def test_written_png_follows_umask(tmp_path):
+    """issue 17 #6: PNGs were written 0600 (the temp file's mode)."""
+    import os
+    import stat
+
+    old = os.umask(0o022)
+    try:
+        write_image_atomic(tmp_path / "a.png", np.zeros((4, 4, 3), np.uint8))
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE((tmp_path / "a.png").stat().st_mode) == 0o644

@@ -68,3 +68,17 @@ def test_optimizer_schedule():
     assert cfg.lr_at(0) == pytest.approx(1e-2 * 0.1)
     assert cfg.lr_at(100) == pytest.approx(1e-4)
     assert cfg.lr_at(50) == pytest.approx(1e-3, rel=1e-6)
+
+
+@pytest.mark.parametrize("umask, mode", [(0o022, 0o644), (0o077, 0o600), (0o002, 0o664)])
+def test_atomic_write_follows_umask(tmp_path, umask, mode):
+    """issue 17 #6: files were written 0600 (tempfile.mkstemp's mode) whatever the umask."""
+    import os
+    import stat
+
+    old = os.umask(umask)
+    try:
+        atomic_write_text(tmp_path / "f.txt", "x")
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE((tmp_path / "f.txt").stat().st_mode) == mode

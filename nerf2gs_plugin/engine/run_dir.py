@@ -1,0 +1,67 @@
+"""Exclusive run directories: never two trainings writing into one folder.
+
+With the default timestamp a clash (two runs started in the same second) gets a new unique
+folder (``<stamp>-1``, ``-2``, ...). With an explicit ``--timestamp`` the folder is locked
+(``fcntl.flock`` on ``.lock``, released by the kernel even on kill -9): a second training there
+is an error, as is one that would overwrite another run's checkpoints without resuming them.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+from pathlib import Path
+from typing import Optional
+
+from nerf2gs_plugin.errors import ConfigError
+
+LOCK_NAME = ".lock"
+
+
+def unique_run_dir(path: Path) -> Path:
+    """Create ``path`` (or ``path-1``, ``path-2``, ... if taken) atomically; returns the one made."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    for i in range(10000):
+        cand = path if i == 0 else path.with_name(f"{path.name}-{i}")
+        try:
+            cand.mkdir()
+            return cand
+        except FileExistsError:
+            continue
+    raise ConfigError("no free run directory name", path)
+
+
+class RunDirLock:
+    """An exclusive lock on a run directory for the lifetime of one training."""
+
+    def __init__(self, run_dir: Path) -> None:
+        self.run_dir = Path(run_dir)
+        self.fd: Optional[int] = None
+
+    def acquire(self, resuming_from: Optional[Path] = None) -> None:
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.run_dir / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            other = os.read(fd, 32).decode(errors="replace").strip() or "?"
+            os.close(fd)
+            raise ConfigError(f"run directory is in use by another training (pid {other}); choose another --timestamp", self.run_dir) from None
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        self.fd = fd
+        ckpts = self.run_dir / "checkpoints"
+        own = resuming_from is not None and Path(resuming_from).resolve().is_relative_to(self.run_dir.resolve())
+        if not own and ckpts.is_dir() and any(ckpts.glob("step-*.ckpt")):
+            self.release()
+            raise ConfigError("run directory already holds another run's checkpoints; choose another --timestamp "
+                              "or resume it with --load-checkpoint", self.run_dir)
+
+    def release(self) -> None:
+        if self.fd is not None:
+            try:
+                fcntl.flock(self.fd, fcntl.LOCK_UN)
+            finally:
+                os.close(self.fd)
+                self.fd = None

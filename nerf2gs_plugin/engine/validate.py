@@ -1,0 +1,44 @@
+"""Checks of a training config's numbers before anything runs: one-line errors naming the flag."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from nerf2gs_plugin.errors import ConfigError
+
+# Adam's first step is lr / (1 - beta1) = 10 lr; above ~3e37 that overflows float32 inside torch
+# (a RuntimeError traceback). Anything this large diverges anyway: the divergence guard reports it.
+MAX_LR = 1e30
+
+
+def _flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def check_trainer_config(cfg: Any) -> None:
+    """Step arithmetic, learning rates and augmentation numbers that cannot work."""
+    if cfg.max_num_iterations <= 0:
+        raise ConfigError(f"must be a positive number of steps, got {cfg.max_num_iterations}", _flag("max_num_iterations"))
+    if cfg.steps_per_save <= 0:
+        raise ConfigError(f"must be a positive number of steps, got {cfg.steps_per_save}", _flag("steps_per_save"))
+    if cfg.steps_per_eval_image < 0:
+        raise ConfigError(f"must be 0 (off) or a positive number of steps, got {cfg.steps_per_eval_image}", _flag("steps_per_eval_image"))
+    for name, opt in cfg.optimizers.items():
+        for field in ("lr", "lr_final"):
+            lr = getattr(opt, field)
+            if lr is None:
+                continue
+            if not (isinstance(lr, (int, float)) and math.isfinite(lr) and 0 < lr <= MAX_LR):
+                raise ConfigError(f"learning rate must be in (0, {MAX_LR:g}], got {lr!r}", f"--optimizers.{name}.{field.replace('_', '-')}")
+    aug = cfg.augment
+    for field in ("delta_h", "dilate_px", "feather_px", "extra_weight"):
+        v = getattr(aug, field)
+        if not (math.isfinite(v) and v >= 0):
+            raise ConfigError(f"must be >= 0, got {v}", f"--augment.{field.replace('_', '-')}")
+    if aug.every_n < 1:
+        raise ConfigError(f"must be >= 1, got {aug.every_n}", "--augment.every-n")
+    if aug.extra_prob is not None and not 0 <= aug.extra_prob <= 1:
+        raise ConfigError(f"must be in [0, 1], got {aug.extra_prob}", "--augment.extra-prob")
+    if not math.isfinite(aug.theta_pitch):
+        raise ConfigError(f"must be finite, got {aug.theta_pitch}", "--augment.theta-pitch")
