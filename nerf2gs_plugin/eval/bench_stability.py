@@ -232,7 +232,7 @@ def markdown(rows: list[dict], summary: dict[str, dict]) -> str:
 
 
 def run(plan: list[StressCase], data: Path, runs_root: Path, out_dir: Path, scale: str, synthetic: bool,
-        log: Optional[Callable[[str], None]] = None) -> dict:
+        log: Optional[Callable[[str], None]] = None, rerun: bool = False) -> dict:
     """Run every case (one progress bar over the bench, log in <runs>/logs/stability.log), write
     stability.{json,md,png}; returns the JSON payload."""
     from nerf2gs_plugin.progress import make_progress
@@ -242,7 +242,7 @@ def run(plan: list[StressCase], data: Path, runs_root: Path, out_dir: Path, scal
     with make_progress() as progress:
         bar = BenchProgress(progress, "stability", [planned_steps(c.method, c.overrides) for c in plan])
         logger = log or progress_log(progress, log_file)
-        runner = BenchRunner(runs_root, log=logger)
+        runner = BenchRunner(runs_root, log=logger, rerun=rerun)
         for i, case in enumerate(plan):
             bar.start(i, case.label)
             row = run_case(case, data, runner, synthetic, step_hook=bar.hook)
