@@ -177,7 +177,7 @@ def bench_enhancer(data: Path, runs_root: Path, scale: str) -> str:
     """Train (once) the built-in enhancer on this dataset and the bench's StreetNeRF run (trained
     first, or reused: the plan then reuses it too); returns the --augment.enhancer spec. Without
     the reference's own renders the enhancer learns only synthetic degradations, which made real
-    bird's-eye renders worse (measured -0.15 dB)."""
+    bird's-eye renders worse (measured once, -0.14 dB; not a committed result)."""
     from nerf2gs_plugin.data import folder_fingerprint
     from nerf2gs_plugin.enhance.bench import ensure_bench_enhancer
     from nerf2gs_plugin.eval.bench_paper import _overrides
