@@ -101,7 +101,9 @@ class StreetNeRFModelConfig(ModelConfig):
     """Degree of the view-direction encoding of colour. 0 (view-independent colour) by default: the
     bird's-eye directions were never seen in training, and a view-dependent head extrapolates them to
     grey/dark facades (synthetic street, quick bench: bev_1/bev_2 17.27/16.69 dB at degree 3,
-    18.28/17.95 dB at degree 0).
+    18.28/17.95 dB at degree 0). Caveat: bev_1/bev_2 are the reported test views, and this was an
+    older StreetNeRF (no point-depth loss); the choice is to be re-made on the validation views
+    (val_street, val_bev).
     Raise it (nerfacto: 4) for glossy real scenes seen from the training directions only."""
     anti_alias: bool = True
     """Zip-NeRF level downweighting by the sample footprint."""
