@@ -181,7 +181,8 @@ class BenchRunner:
         """The cached evaluation when its :meth:`eval_key` matches, else a fresh one (labelled)."""
         from nerf2gs_plugin.eval.code_version import device_label
 
-        eval_path = run_dir / "bench_eval.json"
+        name = "bench_eval.json" if self.splits == EVAL_SPLITS else f"bench_eval_{'-'.join(self.splits)}.json"
+        eval_path = run_dir / name  # validation and test evaluations cached side by side
         want = self.eval_key(key)
         res = json.loads(eval_path.read_text()) if eval_path.is_file() else None
         if res is None or res.get("eval_key") != want:
