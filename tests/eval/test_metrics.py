@@ -12,7 +12,6 @@ from nerf2gs_plugin.errors import CheckpointError
 from nerf2gs_plugin.eval import lpips as lpips_mod
 from nerf2gs_plugin.eval.metrics import LPIPS, psnr, ssim, ssim_map
 
-needs_weights = pytest.mark.usefixtures()  # kept for readability: LPIPS weights are required, see below
 DATA = Path(__file__).parent / "data"
 
 
@@ -88,7 +87,6 @@ def test_ssim_is_differentiable_and_handles_tiny_images():
     assert float(ssim(tiny, tiny)) == pytest.approx(1.0, abs=1e-5)
 
 
-@needs_weights
 def test_lpips_port_identity_ordering_and_range():
     lp = LPIPS()
     img = _image()
@@ -107,7 +105,6 @@ def test_lpips_port_identity_ordering_and_range():
     assert float(lp(small, _noisy(small, 0.2))) > float(lp(small, _noisy(small, 0.02))) > 0
 
 
-@needs_weights
 def test_lpips_weights_layout():
     w = lpips_mod.load_weights(lpips_mod.default_weights_path())
     assert tuple(w["conv0.weight"].shape) == (64, 3, 11, 11) and tuple(w["conv4.weight"].shape) == (256, 256, 3, 3)
