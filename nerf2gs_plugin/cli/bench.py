@@ -24,9 +24,15 @@ def ensure_street(data: Optional[Path], runs_root: Path) -> Path:
         return data
     from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_street
 
+    from nerf2gs_plugin.data.synthetic_street import GENERATOR_VERSION, read_generator_version
+
     path = runs_root / "data" / "street"
     if not (path / "transforms.json").is_file():
         generate_street(SynthStreetConfig(out=path))
+    elif read_generator_version(path) != GENERATOR_VERSION:  # written by an older generator: make it again
+        print(f"[bench] {path}: synthetic street of generator version {read_generator_version(path)}, "
+              f"regenerating with version {GENERATOR_VERSION}")
+        generate_street(SynthStreetConfig(out=path, overwrite=True))
     return path
 
 
@@ -37,6 +43,8 @@ class Quick:
     data: Optional[Path] = None
     out: Path = RESULTS
     runs: Path = RUNS
+    rerun: bool = False
+    """Retrain and re-evaluate every run of the bench even when a finished one with its key exists."""
 
     def main(self) -> None:
         from nerf2gs_plugin.eval.bench_paper import paper_table_plan, run_named_bench
@@ -45,7 +53,7 @@ class Quick:
         plan = paper_table_plan("quick", targets=("splatfacto",))
         run_named_bench("quick", plan, data, self.runs, self.out, "Quick paper table (synthetic street, CPU scale)",
                         compare=[("splatfacto + NeRF views", "splatfacto"), ("splatfacto + NeRF views", "StreetNeRF")],
-                        figure_labels=["StreetNeRF", "splatfacto", "splatfacto + NeRF views"])
+                        figure_labels=["StreetNeRF", "splatfacto", "splatfacto + NeRF views"], rerun=self.rerun)
 
 
 @dataclass
@@ -58,6 +66,8 @@ class PaperTable:
     enhancer: bool = True
     out: Path = RESULTS
     runs: Path = RUNS
+    rerun: bool = False
+    """Retrain and re-evaluate every run of the bench even when a finished one with its key exists."""
 
     def main(self) -> None:
         from nerf2gs_plugin.eval.bench_paper import paper_table_plan, run_named_bench
@@ -67,7 +77,7 @@ class PaperTable:
         plan = paper_table_plan(self.scale, self.targets, enh)
         compare = [(f"{t} + NeRF views", t) for t in self.targets] + [(f"{t} + NeRF views + enhancer", t) for t in self.targets if enh]
         run_named_bench("paper_table", plan, data, self.runs, self.out, f"Paper table, synthetic street ({self.scale} scale)",
-                        compare=compare, figure_labels=["StreetNeRF", "splatfacto", "splatfacto + NeRF views"])
+                        compare=compare, figure_labels=["StreetNeRF", "splatfacto", "splatfacto + NeRF views"], rerun=self.rerun)
 
 
 @dataclass
@@ -79,6 +89,8 @@ class Ablation:
     enhancer: bool = True
     out: Path = RESULTS
     runs: Path = RUNS
+    rerun: bool = False
+    """Retrain and re-evaluate every run of the bench even when a finished one with its key exists."""
 
     def main(self) -> None:
         from nerf2gs_plugin.eval.bench_paper import ablation_plan, run_named_bench
@@ -89,7 +101,8 @@ class Ablation:
         t = "splatfacto"
         compare = [(f"{t} + views from {t}", t), (f"{t} + views from StreetNeRF", t)]
         compare += [(f"StreetNeRF w/o {f}", "StreetNeRF") for f in ("sky", "ground_reg", "transient_mask", "appearance", "point_depth")]
-        run_named_bench("ablation", plan, data, self.runs, self.out, f"Ablation, synthetic street ({self.scale} scale)", compare=compare)
+        run_named_bench("ablation", plan, data, self.runs, self.out, f"Ablation, synthetic street ({self.scale} scale)", compare=compare,
+                        rerun=self.rerun)
 
 
 @dataclass
@@ -121,6 +134,8 @@ class Stability:
     """Only the cases whose name starts with one of these (e.g. seed "pose noise"); default all."""
     out: Path = RESULTS
     runs: Path = RUNS
+    rerun: bool = False
+    """Retrain and re-evaluate every run of the bench even when a finished one with its key exists."""
 
     def main(self) -> None:
         from nerf2gs_plugin.errors import ConfigError
@@ -132,7 +147,7 @@ class Stability:
             if not plan:
                 raise ConfigError(f"--cases {' '.join(self.cases)} matches no stability case")
         data = ensure_street(self.data, self.runs)
-        run(plan, data, self.runs, self.out, self.scale, synthetic=self.data is None)
+        run(plan, data, self.runs, self.out, self.scale, synthetic=self.data is None, rerun=self.rerun)
 
 
 @dataclass
@@ -147,20 +162,22 @@ class ModelSize:
     """Train every run on StreetNeRF's views (--augment-from)."""
     out: Path = RESULTS
     runs: Path = RUNS
+    rerun: bool = False
+    """Retrain and re-evaluate every run of the bench even when a finished one with its key exists."""
 
     def main(self) -> None:
         from nerf2gs_plugin.eval.bench_size import run, size_plan
 
         plan = size_plan(self.scale, self.methods, self.augment)  # bad names fail before any work
         data = ensure_street(self.data, self.runs)
-        run(plan, data, self.runs, self.out, self.scale)
+        run(plan, data, self.runs, self.out, self.scale, rerun=self.rerun)
 
 
 def bench_enhancer(data: Path, runs_root: Path, scale: str) -> str:
     """Train (once) the built-in enhancer on this dataset and the bench's StreetNeRF run (trained
     first, or reused: the plan then reuses it too); returns the --augment.enhancer spec. Without
     the reference's own renders the enhancer learns only synthetic degradations, which made real
-    bird's-eye renders worse (measured -0.15 dB)."""
+    bird's-eye renders worse (measured once, -0.14 dB; not a committed result)."""
     from nerf2gs_plugin.data import folder_fingerprint
     from nerf2gs_plugin.enhance.bench import ensure_bench_enhancer
     from nerf2gs_plugin.eval.bench_paper import _overrides

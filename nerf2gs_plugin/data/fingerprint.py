@@ -22,6 +22,44 @@ def dataset_fingerprint(image_filenames: list[Path]) -> str:
     return h.hexdigest()[:16]
 
 
+SMALL_FILE = 1 << 18  # files up to 256 KiB are hashed whole; bigger ones by size, mtime and both ends
+_EDGE = 1 << 16
+
+
+def cheap_file_digest(path: Path) -> bytes:
+    """Content of a small file; size + mtime + first/last 64 KiB of a big one (cheap, still catches
+    a rewrite). A missing file digests as ``missing``."""
+    h = hashlib.sha1()
+    try:
+        st = path.stat()
+        h.update(str(st.st_size).encode())
+        with open(path, "rb") as f:
+            if st.st_size <= SMALL_FILE:
+                h.update(f.read())
+            else:
+                h.update(str(st.st_mtime_ns).encode())
+                h.update(f.read(_EDGE))
+                f.seek(-_EDGE, 2)
+                h.update(f.read(_EDGE))
+    except OSError:
+        h.update(b"missing")
+    return h.digest()
+
+
+def files_fingerprint(files: list[Path], root: Path) -> str:
+    """Fingerprint of every file a run reads (names relative to ``root``, so a moved copy of a
+    dataset of small files keeps it)."""
+    h = hashlib.sha1()
+    root = Path(root).resolve()
+    for p in sorted({Path(f).resolve() for f in files}):
+        try:
+            name = str(p.relative_to(root))
+        except ValueError:
+            name = str(p)
+        h.update(name.encode() + b"\0" + cheap_file_digest(p))
+    return h.hexdigest()[:16]
+
+
 def file_hash(path: Path) -> str:
     h = hashlib.sha1()
     with open(path, "rb") as f:

@@ -8,14 +8,22 @@ all of it and is made in seconds on a CPU. See :mod:`nerf2gs_plugin.data.synthet
 
 Output folder::
 
-    transforms.json        PINHOLE intrinsics, train frames, eval_splits {street, bev_1, bev_2},
+    transforms.json        PINHOLE intrinsics, train frames, eval_splits {street, bev_1, bev_2,
+                           val_street, val_bev}, 
                            metres_per_unit = 1, up = +z, ply_file_path
-    images/<name>.png      train_XXXX (with cars, +-exposure), street_XXXX / bev1_XXXX / bev2_XXXX (no cars)
+    images/<name>.png      train_XXXX (with cars, +-exposure), street_XXXX / bev1_XXXX / bev2_XXXX (no cars),
+                           valstreet_XXXX / valbev_XXXX (no cars)
     masks/{sky,ground,transient}/<name>.png   exact masks (ground = road + sidewalk)
     depth/<name>.npy       z-depth in metres, 0 = sky
     sparse_pc.ply          SfM-like points: static surfaces seen by the training views, with noise
     synth_stats.json       generation time, and how much BEV ground no training view saw
                            (the only file that differs between two runs with the same seed)
+
+Validation splits: ``val_street`` (street-level views between the test street views) and
+``val_bev`` (bird's-eye views at other heights, pitches and circle phases than bev_1/bev_2) are
+for choosing defaults; ``street``/``bev_1``/``bev_2`` are the reported test views and tune nothing.
+The validation poses come from their own random generator and are rendered last, so adding them
+left every train/test image and the sparse points byte-identical (generator version 2 vs 1).
 """
 
 from __future__ import annotations
@@ -40,7 +48,7 @@ from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.progress import make_progress
 from nerf2gs_plugin.utils.io import atomic_write_text
 
-GENERATOR_VERSION = 1
+GENERATOR_VERSION = 2  # 2: val_street, val_bev added (train/test files unchanged)
 
 
 @dataclass
@@ -72,6 +80,13 @@ class SynthStreetConfig:
     bev_1: tuple[float, float] = (10.0, 25.0)
     """bev_1: (metres above the training height, pitch down in degrees)."""
     bev_2: tuple[float, float] = (13.0, 30.0)
+    num_val_street: int = 6
+    """Validation street-level views (val_street; distinct from the street test views)."""
+    num_val_bev: int = 8
+    """Validation bird's-eye views (val_bev): half at val_bev_a, half at val_bev_b, other circle phases."""
+    val_bev_a: tuple[float, float] = (11.5, 27.5)
+    """val_bev first half: (metres above the training height, pitch down in degrees)."""
+    val_bev_b: tuple[float, float] = (8.0, 22.0)
     spp: int = 5
     """Rays per pixel (1 = pixel centre only; up to 5, rotated grid) for anti-aliasing."""
     exposure_jitter: float = 0.05
@@ -96,6 +111,8 @@ def _check(cfg: SynthStreetConfig) -> None:
         problems.append(f"num_train must be at least 2, got {cfg.num_train}")
     if cfg.num_street < 1 or cfg.num_bev < 1:
         problems.append("num_street and num_bev must be at least 1")
+    if cfg.num_val_street < 0 or cfg.num_val_bev < 0:
+        problems.append("num_val_street and num_val_bev must be >= 0")
     if not 10.0 <= cfg.fov_deg <= 150.0:
         problems.append(f"fov_deg must be within [10, 150], got {cfg.fov_deg}")
     if cfg.num_cars < 0 or cfg.num_points < 0 or cfg.spp < 1:
@@ -152,6 +169,7 @@ def _generate(cfg: SynthStreetConfig) -> dict[str, Any]:
         "bev_1": ("bev1", bev_poses(cfg.num_bev, L, h0 + cfg.bev_1[0], cfg.bev_1[1], 0.0, gen)),
         "bev_2": ("bev2", bev_poses(cfg.num_bev, L, h0 + cfg.bev_2[0], cfg.bev_2[1], 0.5, gen)),
     }
+    val_splits = _val_splits(cfg)
     exposure = 1.0 + (torch.rand(cfg.num_train, generator=gen) * 2 - 1) * cfg.exposure_jitter
     tint = 1.0 + (torch.rand(cfg.num_train, 3, generator=gen) * 2 - 1) * 0.015
 
@@ -169,11 +187,11 @@ def _generate(cfg: SynthStreetConfig) -> dict[str, Any]:
             "depth_file_path": f"depth/{name}.npy",
         }
 
-    total = cfg.num_train + cfg.num_street + 2 * cfg.num_bev
+    total = cfg.num_train + cfg.num_street + 2 * cfg.num_bev + sum(p.shape[0] for _, p in val_splits.values())
     frames: list[dict[str, Any]] = []
-    eval_frames: dict[str, list[dict[str, Any]]] = {k: [] for k in splits}
+    eval_frames: dict[str, list[dict[str, Any]]] = {k: [] for k in (*splits, *val_splits)}
     depths, pts, cols, keep = [], [], [], []
-    coverage: dict[str, list[int]] = {k: [0, 0, 0] for k in splits}
+    coverage: dict[str, list[int]] = {k: [0, 0, 0] for k in (*splits, *val_splits)}
     no_cars = empty_boxes()
     with make_progress(cfg.progress) as prog:
         task = prog.add_task("synth-street", total=total, stats="")
@@ -192,7 +210,7 @@ def _generate(cfg: SynthStreetConfig) -> dict[str, Any]:
             cols.append((view.rgb * gain).clamp(0, 1).reshape(-1, 3))
             prog.advance(task)
         train_depth = torch.stack(depths)
-        for split, (prefix, poses) in splits.items():
+        for split, (prefix, poses) in {**splits, **val_splits}.items():
             for i in range(poses.shape[0]):
                 view = render_view(layout, poses[i], intr, no_cars, shadows, cfg.spp)
                 fr = write(f"{prefix}_{i:04d}", view, torch.ones(3))
@@ -228,6 +246,7 @@ def _generate(cfg: SynthStreetConfig) -> dict[str, Any]:
         "synthetic_street": {"generator_version": GENERATOR_VERSION, "seed": cfg.seed,
                              "bev_1": {"delta_h_m": cfg.bev_1[0], "pitch_deg": cfg.bev_1[1]},
                              "bev_2": {"delta_h_m": cfg.bev_2[0], "pitch_deg": cfg.bev_2[1]},
+                             "val_bev": [{"delta_h_m": h, "pitch_deg": p} for h, p in (cfg.val_bev_a, cfg.val_bev_b)],
                              "cam_height_m": cfg.cam_height},
         "frames": frames,
         "eval_splits": eval_frames,
@@ -254,6 +273,33 @@ def _generate(cfg: SynthStreetConfig) -> dict[str, Any]:
     }
     atomic_write_text(out / "synth_stats.json", json.dumps(stats, indent=2))
     return stats
+
+
+def _val_splits(cfg: SynthStreetConfig) -> dict[str, tuple[str, torch.Tensor]]:
+    """Validation poses, from a generator of their own (the train/test draws stay as they were)."""
+    from nerf2gs_plugin.data.synthetic.poses import street_poses_between
+
+    vgen = torch.Generator().manual_seed(cfg.seed * 7919 + 29)
+    L, h0 = cfg.drive_half_len, cfg.cam_height
+    na = (cfg.num_val_bev + 1) // 2
+    bev = [bev_poses(na, L, h0 + cfg.val_bev_a[0], cfg.val_bev_a[1], 0.25, vgen),
+           bev_poses(cfg.num_val_bev - na, L, h0 + cfg.val_bev_b[0], cfg.val_bev_b[1], 0.75, vgen)]
+    out = {}
+    if cfg.num_val_street:
+        out["val_street"] = ("valstreet", street_poses_between(cfg.num_val_street, L, h0, vgen))
+    if cfg.num_val_bev:
+        out["val_bev"] = ("valbev", torch.cat([b for b in bev if b.shape[0]]))
+    return out
+
+
+def read_generator_version(data: Path) -> int | None:
+    """The synthetic-street generator version a dataset was written by (None: not a synthetic street)."""
+    try:
+        meta = json.loads((Path(data) / "transforms.json").read_text())
+    except (OSError, ValueError):
+        return None
+    info = meta.get("synthetic_street") if isinstance(meta, dict) else None
+    return int(info.get("generator_version", 1)) if isinstance(info, dict) else None
 
 
 def summary_lines(stats: dict[str, Any]) -> list[str]:

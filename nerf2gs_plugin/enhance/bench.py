@@ -43,7 +43,10 @@ def ensure_bench_enhancer(data: Path, runs_root: Path, scale: str, reference: Op
         probe = dataclasses.replace(probe, reference=(Path(reference),))
         ref_hash = file_hash(resolve_checkpoint(Path(reference))[1])
     settings = {k: v for k, v in dataclasses.asdict(probe).items() if k not in ("data", "out", "progress", "reference")}
-    key = hashlib.sha1(json.dumps({"data": fingerprint, "cfg": settings, "reference": ref_hash}, sort_keys=True, default=str).encode()).hexdigest()[:12]
+    from nerf2gs_plugin.eval.code_version import model_code_hash  # the enhancer's training code counts too
+
+    doc = {"data": fingerprint, "cfg": settings, "reference": ref_hash, "code": model_code_hash()}
+    key = hashlib.sha1(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:12]
     out = Path(runs_root) / "enhancer" / f"{scale}-{key}" / "enhancer.onnx"
     if out.is_file() and report_path(out).is_file():
         print(f"[bench] reuse enhancer: {out}")

@@ -19,7 +19,7 @@ from nerf2gs_plugin.utils.config import apply_plain
 from nerf2gs_plugin.utils.io import atomic_write_text
 
 EVAL_SPLITS = ("street", "bev_1", "bev_2")
-EVAL_VERSION = 2  # bump when evaluate_run gains a metric: cached bench evaluations are then redone
+VAL_SPLITS = ("val_street", "val_bev")  # the synthetic street's validation views: choose defaults on these
 
 
 class BenchFailed(UserError):
@@ -95,19 +95,44 @@ def failure_reason(outcome: Outcome) -> Optional[str]:
 
 
 class BenchRunner:
-    """Train-or-reuse then evaluate (cached in ``bench_eval.json`` per :data:`EVAL_VERSION`); any
-    error in training or evaluation (NaN/inf divergence, bad data, a runtime error) becomes an
-    :class:`Outcome` with ``error`` set, and the bench goes on. Deterministic failures (user
-    errors, divergence) are remembered so a rerun does not retrain them; others are retried."""
+    """Train-or-reuse then evaluate; any error in training or evaluation (NaN/inf divergence, bad
+    data, a runtime error) becomes an :class:`Outcome` with ``error`` set, and the bench goes on.
 
-    def __init__(self, runs_root: Path, log: Callable[[str], None] = print, device: str = "auto") -> None:
+    The evaluation is cached in ``bench_eval.json`` under :func:`eval_key` (the run key, the metric
+    code's hash, the splits and the device), so a changed metric or another device re-evaluates;
+    FPS and times in a result carry ``measured`` / ``trained`` labels (machine, date, device).
+    Deterministic failures (user errors, divergence) are remembered under the run key, so they
+    expire when the code, data or config change; others are retried. ``rerun=True`` retrains and
+    re-evaluates every run once, ignoring failure markers. ``splits``: the eval splits (the test
+    views by default; :data:`VAL_SPLITS` to choose a default)."""
+
+    def __init__(self, runs_root: Path, log: Callable[[str], None] = print, device: str = "auto", rerun: bool = False,
+                 splits: tuple[str, ...] = EVAL_SPLITS) -> None:
         from nerf2gs_plugin.engine.trainer import pick_device
 
         self.runs_root = Path(runs_root)
         self.log = log
         self.device = pick_device(device)
+        self.rerun = rerun
+        self.splits = tuple(splits)
+        self._rerun_done: set[str] = set()
         self._lpips: Any = None
         self._fingerprints: dict[str, str] = {}
+
+    def key(self, spec: RunSpec, data: Path, reference: Optional[tuple[Path, str]] = None) -> str:
+        """The run key this runner trains ``spec`` under (see :func:`~nerf2gs_plugin.eval.bench_runs.run_key`)."""
+        from nerf2gs_plugin.eval.code_version import device_label
+
+        return run_key(self.fingerprint(data), spec, reference[1] if reference else None, device_label(self.device))
+
+    def eval_key(self, run_key_: str) -> str:
+        """What a cached evaluation must match: the run, the metric code, the splits, the device."""
+        import hashlib
+
+        from nerf2gs_plugin.eval.code_version import device_label, eval_code_hash
+
+        doc = json.dumps([run_key_, eval_code_hash(), list(self.splits), device_label(self.device)])
+        return hashlib.sha1(doc.encode()).hexdigest()[:12]
 
     def fingerprint(self, data: Path) -> str:
         from nerf2gs_plugin.data import folder_fingerprint
@@ -126,23 +151,21 @@ class BenchRunner:
         from nerf2gs_plugin.engine.reference import load_run
         from nerf2gs_plugin.eval.evaluate import evaluate_run
 
-        key = run_key(self.fingerprint(data), spec, reference[1] if reference else None)
+        key = self.key(spec, data, reference)
+        rerun = self.rerun and key not in self._rerun_done
+        self._rerun_done.add(key)
+        # keyed by the run key, which holds the code hash: a marker expires when the code changes
         marker = self.runs_root / "failures" / f"{Path(data).name}-{spec.method}-{key}.json"
-        if marker.is_file():  # a failed run fails again the same way: do not retrain it on every rerun
+        if marker.is_file() and not rerun:  # a failed run fails again the same way: do not retrain it on every rerun
             error = json.loads(marker.read_text())["error"]
-            self.log(f"[bench] {spec.label}: known failure ({error}); delete {marker} to retry")
+            self.log(f"[bench] {spec.label}: known failure ({error}); delete {marker} or pass --rerun to retry")
             return Outcome(spec.label, error=error, key=key)
+        marker.unlink(missing_ok=True)
         try:
             run_dir, _ = train_or_reuse(spec, data, self.runs_root, self.fingerprint(data), reference=reference,
-                                        progress=False, log=self.log, step_hook=step_hook)
-            eval_path = run_dir / "bench_eval.json"
-            res = json.loads(eval_path.read_text()) if eval_path.is_file() else None
-            if res is None or res.get("eval_version") != EVAL_VERSION:  # evaluated by an older ns2gs-eval
-                run = load_run(run_dir, device=self.device)
-                names = [s for s in EVAL_SPLITS if s in run.pipeline.datamanager.eval_split_names()] or None
-                res = evaluate_run(run, names, render_dir=run_dir / "eval_renders", lpips_model=self.lpips())
-                res["eval_version"] = EVAL_VERSION
-                atomic_write_text(eval_path, json.dumps(res, indent=1))
+                                        progress=False, log=self.log, step_hook=step_hook, device=str(self.device),
+                                        rerun=rerun)
+            res = self._evaluate(run_dir, key, load_run, evaluate_run)
         except Exception as e:  # noqa: BLE001 - one failed run must not stop a bench of many
             msg = str(e).splitlines()[0][:300] if str(e) else type(e).__name__
             error = f"{type(e).__name__}: {msg}"
@@ -153,6 +176,27 @@ class BenchRunner:
             return Outcome(spec.label, error=error, key=key)
         res.update(label=spec.label, target=spec.method, run_dir=str(run_dir))
         return Outcome(spec.label, result=res, run_dir=str(run_dir), key=key)
+
+    def _evaluate(self, run_dir: Path, key: str, load_run, evaluate_run) -> dict:
+        """The cached evaluation when its :meth:`eval_key` matches, else a fresh one (labelled)."""
+        from nerf2gs_plugin.eval.code_version import device_label
+
+        name = "bench_eval.json" if self.splits == EVAL_SPLITS else f"bench_eval_{'-'.join(self.splits)}.json"
+        eval_path = run_dir / name  # validation and test evaluations cached side by side
+        want = self.eval_key(key)
+        res = json.loads(eval_path.read_text()) if eval_path.is_file() else None
+        if res is None or res.get("eval_key") != want:
+            run = load_run(run_dir, device=self.device)
+            names = [s for s in self.splits if s in run.pipeline.datamanager.eval_split_names()] or None
+            res = evaluate_run(run, names, render_dir=run_dir / "eval_renders", lpips_model=self.lpips())
+            res["eval_key"] = want
+            res["measured"] = {"machine": machine_line(), "device": device_label(self.device),
+                               "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+            atomic_write_text(eval_path, json.dumps(res, indent=1))
+        trained = run_dir / "bench_run.json"
+        if trained.is_file():
+            res["trained"] = json.loads(trained.read_text()).get("trained")
+        return res
 
 
 def progress_log(progress, log_file: BenchLog) -> Callable[[str], None]:

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from nerf2gs_plugin.errors import ConfigError
-from nerf2gs_plugin.eval.bench_io import EVAL_VERSION, BenchFailed, fmt  # noqa: F401 (EVAL_VERSION: re-exported)
+from nerf2gs_plugin.eval.bench_io import BenchFailed, fmt  # noqa: F401
 from nerf2gs_plugin.eval.bench_runs import RunSpec, train_or_reuse
 from nerf2gs_plugin.eval.figures import image_row
 from nerf2gs_plugin.eval.machine import machine_info, machine_line
@@ -91,7 +91,7 @@ def ablation_plan(scale: str, enhancer: Optional[str] = None) -> list[RunSpec]:
 
 
 def run_plan(plan: list[RunSpec], data: Path, runs_root: Path, log: Optional[Callable[[str], None]] = None,
-             name: str = "bench") -> dict[str, dict]:
+             name: str = "bench", rerun: bool = False) -> dict[str, dict]:
     """Train (or reuse) and evaluate every run of a plan, in order; returns label -> eval result.
     A run that fails (training diverged, an error in training or evaluation, non-finite metrics)
     is a row with ``failed: True`` and its ``error``, as in the stability bench, and the plan goes
@@ -104,7 +104,7 @@ def run_plan(plan: list[RunSpec], data: Path, runs_root: Path, log: Optional[Cal
     with make_progress() as progress:
         bar = BenchProgress(progress, name, [planned_steps(s.method, s.overrides) for s in plan])
         log = log or progress_log(progress, BenchLog(runs_root, name))
-        runner = BenchRunner(runs_root, log=log)
+        runner = BenchRunner(runs_root, log=log, rerun=rerun)
         for i, spec in enumerate(plan):
             bar.start(i, spec.label)
             log(f"[bench] ({i + 1}/{len(plan)}) {spec.label}")
@@ -296,13 +296,13 @@ def ratios_md(results: dict[str, dict], pairs: list[tuple[str, str]]) -> str:
 
 
 def run_named_bench(name: str, plan: list[RunSpec], data: Path, runs_root: Path, out_dir: Path, title: str,
-                    compare: list[tuple[str, str]], figure_labels: Optional[list[str]] = None) -> dict[str, dict]:
+                    compare: list[tuple[str, str]], figure_labels: Optional[list[str]] = None, rerun: bool = False) -> dict[str, dict]:
     """Run the plan and write the table, charts and figures; failed runs are rows of the table,
     and then :class:`BenchFailed` (exit status 2 from ``ns2gs-bench``) names them."""
     from rich.console import Console
 
     t0 = time.time()
-    results = run_plan(plan, data, runs_root, name=name)
+    results = run_plan(plan, data, runs_root, name=name, rerun=rerun)
     md = write_results(out_dir, name, results, title, extra_md="Differences, same bench run:\n\n" + ratios_md(results, compare)
                        + f"\n\nBench wall time: {time.time() - t0:.0f} s (training reused where cached).\n")
     ok = succeeded(results)

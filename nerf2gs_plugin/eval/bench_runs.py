@@ -1,8 +1,10 @@
 """Training runs for benchmarks, reused when nothing that matters changed.
 
-A run is keyed by (dataset fingerprint, method, resolved config, reference run): regenerating a
-table after a change retrains only what changed, and an interrupted bench resumes from the
-run's last checkpoint.
+A run is keyed by (dataset fingerprint, method, resolved config, reference run, augment settings,
+hash of the model code, device): regenerating a table after a change retrains only what changed,
+an edit to a loss or a kernel retrains (:mod:`nerf2gs_plugin.eval.code_version` says which files
+count), a GPU run never reuses a CPU one, and an interrupted bench resumes from the run's last
+checkpoint. ``rerun=True`` retrains even when a finished run with the key exists.
 """
 
 from __future__ import annotations
@@ -10,6 +12,8 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import shutil
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
@@ -31,26 +35,39 @@ class RunSpec:
     augment: dict[str, Any] = field(default_factory=dict)
 
 
-def run_key(dataset: str, spec: RunSpec, reference_key: Optional[str]) -> str:
-    """Keyed by the fully resolved config, not only the overrides: a changed method default retrains."""
+def run_key(dataset: str, spec: RunSpec, reference_key: Optional[str], device: str = "cpu") -> str:
+    """Keyed by the fully resolved config, not only the overrides (a changed method default
+    retrains), the model code's hash and the device label (:func:`~nerf2gs_plugin.eval.code_version.device_label`)."""
+    from nerf2gs_plugin.eval.code_version import model_code_hash
     from nerf2gs_plugin.registry import get_method
 
     resolved = to_plain(apply_plain(get_method(spec.method).config, spec.overrides, where=f"bench run {spec.label}"))
-    doc = {"data": dataset, "method": spec.method, "config": resolved, "ref": reference_key, "augment": spec.augment}
+    doc = {"data": dataset, "method": spec.method, "config": resolved, "ref": reference_key, "augment": spec.augment,
+           "code": model_code_hash(), "device": device}
     return hashlib.sha1(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:12]
 
 
 def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, reference: Optional[tuple[Path, str]] = None,
-                   progress: bool = True, log=print, step_hook=None) -> tuple[Path, str]:
-    """Returns (run_dir, key). A finished run with the same key is reused; a partial one resumes.
-    ``step_hook(step)`` is called after every training step (a bench-wide progress bar)."""
+                   progress: bool = True, log=print, step_hook=None, device: str = "auto",
+                   rerun: bool = False) -> tuple[Path, str]:
+    """Returns (run_dir, key). A finished run with the same key is reused (unless ``rerun``: then
+    its directory is replaced); a partial one resumes. ``step_hook(step)`` is called after every
+    training step (a bench-wide progress bar). ``bench_run.json`` records where and when it trained."""
+    from nerf2gs_plugin.engine.trainer import pick_device
+    from nerf2gs_plugin.eval.code_version import device_label
+    from nerf2gs_plugin.eval.machine import machine_line
     from nerf2gs_plugin.registry import get_method
 
-    key = run_key(dataset, spec, reference[1] if reference else None)
+    torch_device = pick_device(device)
+    key = run_key(dataset, spec, reference[1] if reference else None, device_label(torch_device))
     base = get_method(spec.method).config
     cfg = apply_plain(base, spec.overrides, where=f"bench run {spec.label}")
-    cfg = dataclasses.replace(cfg, data=Path(data), output_dir=Path(runs_root), timestamp=key, progress=progress)
+    cfg = dataclasses.replace(cfg, data=Path(data), output_dir=Path(runs_root), timestamp=key, progress=progress,
+                              device=str(torch_device))
     run_dir = cfg.run_dir()
+    if rerun and run_dir.exists():
+        log(f"[bench] --rerun: retraining {spec.label} (removing {run_dir})")
+        shutil.rmtree(run_dir)
     if reference is not None:
         cfg = dataclasses.replace(cfg, augment_from=reference[0], augment=apply_plain(cfg.augment, spec.augment, where=f"bench run {spec.label}.augment"))
     ckpts = list_checkpoints(run_dir)
@@ -68,5 +85,7 @@ def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, ref
     if step_hook is not None:
         trainer.step_hooks.append(step_hook)
     trainer.train()
-    atomic_write_text(run_dir / "bench_run.json", json.dumps({"label": spec.label, **dataclasses.asdict(spec), "key": key}, indent=1, default=str))
+    trained = {"machine": machine_line(), "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "device": device_label(torch_device)}
+    atomic_write_text(run_dir / "bench_run.json", json.dumps({"label": spec.label, **dataclasses.asdict(spec), "key": key,
+                                                             "trained": trained}, indent=1, default=str))
     return run_dir, key

@@ -146,12 +146,12 @@ def chart(rows: list[dict], best: dict[str, dict], path: Path, title: str) -> No
     save_figure(fig, path)
 
 
-def run(plan: list[RunSpec], data: Path, runs_root: Path, out_dir: Path, scale: str) -> dict:
+def run(plan: list[RunSpec], data: Path, runs_root: Path, out_dir: Path, scale: str, rerun: bool = False) -> dict:
     """Train/evaluate the sweep (failures recorded, not fatal), write model_size.{json,md,png}."""
     rows, done = [], {}
     with make_progress() as progress:
         bar = BenchProgress(progress, "model-size", [planned_steps(s.method, s.overrides) for s in plan])
-        runner = BenchRunner(runs_root, log=progress_log(progress, BenchLog(runs_root, "model_size")))
+        runner = BenchRunner(runs_root, log=progress_log(progress, BenchLog(runs_root, "model_size")), rerun=rerun)
         for i, spec in enumerate(plan):
             bar.start(i, spec.label)
             ref = done.get(spec.augment_from) if spec.augment_from else None

@@ -6,8 +6,9 @@ no sparse points (random initialisation). Datasets for the stress cases are pert
 the bench's dataset (:mod:`nerf2gs_plugin.eval.perturb`).
 
 Outcomes: ``ok``; ``diverged`` (training stopped on NaN/inf; the last good checkpoint is kept by
-the trainer); ``nan`` (metrics not finite); ``collapse`` (final PSNR below the PSNR of the
-untrained model on the same eval images: training made it worse); ``error`` (any other error);
+the trainer); ``nan`` (metrics not finite); ``collapse`` (a quality collapse: street or BEV PSNR
+more than :data:`COLLAPSE_DB` = 3 dB below the mean of the same method's unstressed seed runs, or
+a final PSNR below the untrained model's on the same eval images); ``error`` (any other error);
 ``unsupported`` (the data layer cannot make that stress, e.g. more transients in a user dataset).
 """
 
@@ -36,6 +37,7 @@ METHODS = ("streetnerf", "splatfacto", "scaffold-gs", "2dgs")
 SEEDS = 3  # runs per method with different seeds
 STATUSES = ("ok", "diverged", "nan", "collapse", "error", "unsupported")
 FAILURES = ("diverged", "nan", "collapse", "error")
+COLLAPSE_DB = 3.0  # a case more than this far below the unstressed runs' mean PSNR (street or BEV) failed
 
 
 @dataclass
@@ -189,6 +191,31 @@ def _mean(vals) -> Optional[float]:
     return sum(vals) / len(vals) if vals else None
 
 
+def mark_collapses(rows: list[dict], drop_db: float = COLLAPSE_DB) -> list[dict]:
+    """Rows with every ``ok`` case whose street or BEV PSNR lies more than ``drop_db`` below its
+    method's unstressed mean (the ``ok`` seed runs) turned into ``collapse``, the drop in ``error``.
+    Pure: works on a fresh bench's rows and on the rows of a committed stability.json alike."""
+    base: dict[str, dict[str, float]] = {}
+    for m in dict.fromkeys(r["method"] for r in rows):
+        seeds = [r for r in rows if r["method"] == m and r["variant"].startswith("seed ") and r["status"] == "ok"]
+        for name in ("street_psnr", "bev_psnr"):
+            vals = [r[name] for r in seeds if isinstance(r.get(name), (int, float)) and math.isfinite(r[name])]
+            if vals:
+                base.setdefault(m, {})[name] = statistics.fmean(vals)
+    out = []
+    for r in rows:
+        r = dict(r)
+        if r["status"] == "ok":
+            drops = {name: mean - r[name] for name, mean in base.get(r["method"], {}).items()
+                     if isinstance(r.get(name), (int, float))}
+            bad = {k: d for k, d in drops.items() if d > drop_db}
+            if bad:
+                r["status"] = "collapse"
+                r["error"] = "; ".join(f"{k.split('_')[0]} PSNR {d:.2f} dB below the unstressed mean" for k, d in bad.items())
+        out.append(r)
+    return out
+
+
 def summarize(rows: list[dict]) -> dict[str, dict]:
     """Per method: seed mean/std of street and BEV PSNR, and failures counted by kind."""
     out: dict[str, dict] = {}
@@ -227,12 +254,13 @@ def markdown(rows: list[dict], summary: dict[str, dict]) -> str:
         counts = " | ".join(str(s[k]) for k in FAILURES)
         lines.append(f"| {m} | {st} | {bev} | {s['failures']}/{s['cases'] - s['unsupported']} | {counts} | {s['unsupported']} |")
     lines += ["", "Failures: diverged = training stopped on NaN/inf (last good checkpoint kept); nan = non-finite metrics; "
-              "collapse = final PSNR below the untrained model's on the same eval images; error = any other error."]
+              f"collapse = street or BEV PSNR more than {COLLAPSE_DB:g} dB below the mean of the method's unstressed seed runs, "
+              "or final PSNR below the untrained model's on the same eval images; error = any other error."]
     return "\n".join(lines)
 
 
 def run(plan: list[StressCase], data: Path, runs_root: Path, out_dir: Path, scale: str, synthetic: bool,
-        log: Optional[Callable[[str], None]] = None) -> dict:
+        log: Optional[Callable[[str], None]] = None, rerun: bool = False) -> dict:
     """Run every case (one progress bar over the bench, log in <runs>/logs/stability.log), write
     stability.{json,md,png}; returns the JSON payload."""
     log_file = BenchLog(runs_root, "stability")
@@ -240,20 +268,37 @@ def run(plan: list[StressCase], data: Path, runs_root: Path, out_dir: Path, scal
     with make_progress() as progress:
         bar = BenchProgress(progress, "stability", [planned_steps(c.method, c.overrides) for c in plan])
         logger = log or progress_log(progress, log_file)
-        runner = BenchRunner(runs_root, log=logger)
+        runner = BenchRunner(runs_root, log=logger, rerun=rerun)
         for i, case in enumerate(plan):
             bar.start(i, case.label)
             row = run_case(case, data, runner, synthetic, step_hook=bar.hook)
             logger(f"[stability] {case.label}: {row['status']}" + (f" ({row['error']})" if row.get("error") else ""))
             rows.append(row)
             bar.finish(i)
+    payload = write_outputs(rows, out_dir, scale, str(data))
+    return payload
+
+
+def write_outputs(rows: list[dict], out_dir: Path, scale: str, data: str, machine: Optional[dict] = None) -> dict:
+    """Collapses marked, summary, stability.{json,md,png} written; returns the JSON payload."""
+    rows = mark_collapses(rows)
     summary = summarize(rows)
     title = f"Stability under stress, {Path(data).name} ({scale} scale)"
-    payload = {"scale": scale, "data": str(data), "rows": rows, "summary": summary}
-    md = write_bench_files(out_dir, "stability", title, payload, markdown(rows, summary) + "\n\n![stability](stability.png)\n")
+    payload = {"scale": scale, "data": data, "collapse_db": COLLAPSE_DB, "rows": rows, "summary": summary}
+    md = write_bench_files(out_dir, "stability", title, payload, markdown(rows, summary) + "\n\n![stability](stability.png)\n",
+                           machine=machine)
     chart(rows, Path(out_dir) / "stability.png", title)
     print(md)
     return payload
+
+
+def regenerate(results_json: Path, out_dir: Path) -> dict:
+    """Rewrite stability.{json,md,png} from a committed stability.json's rows (no training): how the
+    committed results got the current failure definition. The machine line stays the one it ran on."""
+    d = json.loads(Path(results_json).read_text())
+    rows = [{**r, "status": "ok", "error": None} if r["status"] == "collapse" and "unstressed mean" in (r.get("error") or "")
+            else r for r in d["rows"]]
+    return write_outputs(rows, out_dir, d["scale"], d["data"], machine=d["machine"])
 
 
 def chart(rows: list[dict], path: Path, title: str) -> None:

@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -47,6 +48,37 @@ def test_export_ply_round_trip(run_dir, tmp_path):
     for key, value in ref.items():
         assert torch.allclose(back[key], value.float().cpu(), atol=1e-6), key
     assert back["features_rest"].shape[1] == 15  # SH degree 3
+
+
+def _parse_ply(path: Path) -> np.ndarray:
+    """A minimal binary little-endian PLY reader of float properties (independent of the package)."""
+    raw = path.read_bytes()
+    end = raw.index(b"end_header\n") + len(b"end_header\n")
+    names = [line.split()[-1] for line in raw[:end].decode().splitlines() if line.startswith("property float ")]
+    return np.frombuffer(raw[end:], dtype=[(n, "<f4") for n in names])
+
+
+def test_export_ply_holds_the_checkpoint_parameters_in_3dgs_layout(run_dir, tmp_path):
+    """Expected values from the checkpoint's raw parameters and the 3DGS file layout (log scales,
+    logit opacity, unit wxyz quaternions, SH rest channel-major), not from the exporter's own code."""
+    out = export(ExportArgs(run=run_dir, output=tmp_path / "s.ply"))
+    ply = _parse_ply(out)
+    ckpt = sorted((run_dir / "checkpoints").glob("*.ckpt"))[-1]
+    state = {k.split("gauss.", 1)[1]: v.numpy() for k, v in torch.load(ckpt, map_location="cpu", weights_only=False)["model"].items()
+             if "gauss." in k}
+    n = state["means"].shape[0]
+    assert len(ply) == n > 0
+    np.testing.assert_allclose(np.stack([ply["x"], ply["y"], ply["z"]], 1), state["means"], atol=1e-6)
+    np.testing.assert_allclose(np.stack([ply[f"scale_{i}"] for i in range(3)], 1), state["scales"], atol=1e-6)
+    np.testing.assert_allclose(ply["opacity"], state["opacities"].reshape(n), atol=1e-6)
+    q = state["quats"] / np.linalg.norm(state["quats"], axis=1, keepdims=True)
+    np.testing.assert_allclose(np.stack([ply[f"rot_{i}"] for i in range(4)], 1), q, atol=1e-6)
+    np.testing.assert_allclose(np.stack([ply[f"f_dc_{i}"] for i in range(3)], 1), state["features_dc"].reshape(n, 3), atol=1e-6)
+    rest = state["features_rest"]  # [N, 15, 3]: f_rest_{c * 15 + k} = rest[:, k, c]
+    for c in range(3):
+        for k in (0, 7, 14):
+            np.testing.assert_allclose(ply[f"f_rest_{c * 15 + k}"], rest[:, k, c], atol=1e-6)
+    assert not any(name.startswith("f_rest_45") for name in ply.dtype.names)
 
 
 def test_export_default_path_and_bad_run(run_dir, tmp_path):

@@ -15,7 +15,8 @@ from nerf2gs_plugin.cameras import opengl_c2w_to_opencv_w2c
 from nerf2gs_plugin.data.ply import read_ply_points
 from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_street
 
-SMALL = dict(width=48, height=32, num_train=6, num_street=2, num_bev=3, num_cars=4, spp=2, num_points=300, progress=False)
+SMALL = dict(width=48, height=32, num_train=6, num_street=2, num_bev=3, num_val_street=2, num_val_bev=2, num_cars=4,
+             spp=2, num_points=300, progress=False)
 
 
 def small_config(out: Path, seed: int = 0, **kw) -> SynthStreetConfig:

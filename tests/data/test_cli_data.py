@@ -21,10 +21,11 @@ def _run(monkeypatch, *args: str) -> None:
 def test_synth_street_cli(tmp_path, monkeypatch, capsys):
     out = tmp_path / "street"
     _run(monkeypatch, "synth-street", str(out), "--seed", "3", "--width", "40", "--height", "24", "--num-train", "4",
-         "--num-street", "1", "--num-bev", "2", "--spp", "1", "--num-points", "100", "--no-progress")
+         "--num-street", "1", "--num-bev", "2", "--num-val-street", "1", "--num-val-bev", "2", "--spp", "1",
+         "--num-points", "100", "--no-progress")
     text = capsys.readouterr().out
     assert "wrote" in text and "bev_1" in text and "within 15 deg" in text
-    assert list_splits(out) == ["train", "street", "bev_1", "bev_2"]
+    assert list_splits(out) == ["train", "street", "bev_1", "bev_2", "val_street", "val_bev"]
     meta = json.loads((out / "transforms.json").read_text())
     assert meta["w"] == 40 and meta["h"] == 24 and meta["synthetic_street"]["seed"] == 3
     assert cv2.imread(str(out / meta["frames"][0]["file_path"])).shape == (24, 40, 3)

@@ -34,9 +34,9 @@ def test_same_seed_same_bytes_other_seed_differs(small_street, make_config, tmp_
 
 
 def test_splits_sizes_and_metadata(small_street):
-    assert list_splits(small_street) == ["train", "street", "bev_1", "bev_2"]
+    assert list_splits(small_street) == ["train", "street", "bev_1", "bev_2", "val_street", "val_bev"]
     sizes = {s: len(parse_dataset(small_street, s)) for s in list_splits(small_street)}
-    assert sizes == {"train": 6, "street": 2, "bev_1": 3, "bev_2": 3}
+    assert sizes == {"train": 6, "street": 2, "bev_1": 3, "bev_2": 3, "val_street": 2, "val_bev": 2}
     train = parse_dataset(small_street, "train")
     assert set(train.mask_filenames) == {"sky", "ground", "transient"}
     assert train.points3D_xyz is not None and len(train.points3D_xyz) == 300
@@ -108,3 +108,26 @@ def test_refuses_to_overwrite_without_flag(small_street, make_config, tmp_path):
         generate_street(make_config(small_street))
     with pytest.raises(ConfigError, match="num_train"):
         generate_street(make_config(tmp_path / "x", num_train=1))
+
+
+def test_validation_splits_are_new_views_and_leave_train_test_bytes_alone(small_street, make_config, tmp_path):
+    """Adding val_street/val_bev must not change a single train/test file (the committed figures
+    stay valid), and no validation camera may coincide with a test camera."""
+    bare = tmp_path / "bare"
+    generate_street(make_config(bare, num_val_street=0, num_val_bev=0))
+    a, b = _files(small_street), _files(bare)
+    shared = [k for k in b if k != "transforms.json"]
+    assert len(shared) > 50 and [k for k in shared if a[k] != b[k]] == []
+    meta_a, meta_b = (json.loads((d / "transforms.json").read_text()) for d in (small_street, bare))
+    assert meta_a["frames"] == meta_b["frames"]
+    assert {k: meta_a["eval_splits"][k] for k in meta_b["eval_splits"]} == meta_b["eval_splits"]
+    assert meta_a["synthetic_street"]["generator_version"] == 2
+    test_c = torch.cat([parse_dataset(small_street, s).cameras.camera_to_worlds for s in ("street", "bev_1", "bev_2")])
+    train = parse_dataset(small_street, "train")
+    for split, pitches in (("val_street", {0.0}), ("val_bev", {27.5, 22.0})):
+        val_c = parse_dataset(small_street, split).cameras.camera_to_worlds
+        dist = train.world_to_metres(torch.cdist(val_c[:, :, 3], test_c[:, :, 3]).min())
+        assert float(dist) > 0.5, split  # metres from the nearest test camera
+        fwd = -val_c[:, :, 2]
+        got = {round(float(v), 1) for v in torch.rad2deg(torch.asin(-fwd[:, 2]))}
+        assert got == pitches, split

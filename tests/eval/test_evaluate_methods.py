@@ -4,6 +4,7 @@ import dataclasses
 import json
 import math
 
+import numpy as np
 import pytest
 
 from nerf2gs_plugin.utils.config import apply_plain
@@ -28,7 +29,11 @@ def test_eval_schema_on_each_method(method, tiny_scene, tmp_path):
     assert res["method_name"] == method and list(res["results"]) == ["bev_1"]
     r = res["results"]["bev_1"]
     assert r["num_images"] == 1 and 3 < r["psnr"] < 60 and -1 <= r["ssim"] <= 1 and r["psnr_std"] == 0.0
-    assert (r["lpips"] is None) == (not res["lpips_available"])
+    assert res["lpips_available"] and 0 < r["lpips"] < 1.5  # LPIPS is required in the test environment
+    cam, batch = next(iter(run.pipeline.datamanager.eval_images("bev_1")))  # PSNR checked independently
+    pred = run.model.render_camera(cam)["rgb"].clamp(0, 1).detach().double().numpy()
+    direct = 10 * np.log10(1.0 / np.mean((pred - batch["image"].double().numpy()) ** 2))
+    assert r["psnr"] == pytest.approx(direct, abs=1e-3)
     assert res["fps"] > 0 and math.isfinite(res["fps"])
     assert res["size"]["primitives"] > 0 and res["size"]["parameters"] > 0 and res["size"]["checkpoint_megabytes"] > 0
     assert res["step"] == 2 and res["train_seconds"] > 0

@@ -50,15 +50,25 @@ def _run(fn, scene: dict, device: str, backend: str, grad_key: str, **kw):
     return [m.detach().cpu() for m in maps], grads, meta
 
 
-def _close_images(a: torch.Tensor, b: torch.Tensor, what: str) -> None:
+# 3DGS: the kernels compute the same thing up to float summation order (measured on an H100: images
+# max |diff| 1.1e-5, gradients relative error 1.6e-5..3.6e-5, benchmarks/results/gpu/gpu_checks_log.txt);
+# the README cites these bounds. 2DGS: our surfel kernel and gsplat's differ in the low-pass blend, so
+# only mean agreement and gradient direction are claimed.
+TIGHT = dict(mean=1e-6, q999=2e-5, max=5e-5)
+LOOSE = dict(mean=2e-3, q999=5e-2, max=None)
+
+
+def _close_images(a: torch.Tensor, b: torch.Tensor, what: str, tol: dict = LOOSE) -> None:
     diff = (a - b).abs()
     print(f"{what}: mean |diff| {float(diff.mean()):.2e}, 99.9% {float(diff.flatten().quantile(0.999)):.2e}, "
           f"max {float(diff.max()):.2e}")
-    assert float(diff.mean()) < 2e-3, what
-    assert float(diff.flatten().quantile(0.999)) < 5e-2, what
+    assert float(diff.mean()) < tol["mean"], what
+    assert float(diff.flatten().quantile(0.999)) < tol["q999"], what
+    if tol["max"] is not None:
+        assert float(diff.max()) < tol["max"], what
 
 
-def _close_grads(ours: dict, ref: dict, skip: tuple[str, ...] = ()) -> None:
+def _close_grads(ours: dict, ref: dict, skip: tuple[str, ...] = (), max_rel: float | None = None) -> None:
     for k, r in ref.items():
         if k in skip:
             continue
@@ -68,6 +78,8 @@ def _close_grads(ours: dict, ref: dict, skip: tuple[str, ...] = ()) -> None:
         print(f"grad {k}: cosine {float(cos):.5f}, relative error {rel:.2e}")
         assert float(r.abs().max()) > 0, k
         assert float(cos) > 0.98, k
+        if max_rel is not None:
+            assert rel < max_rel, k
 
 
 def test_gsplat_3dgs_matches_cpu() -> None:
@@ -78,12 +90,12 @@ def test_gsplat_3dgs_matches_cpu() -> None:
     gs_maps, gs_grads, meta = _run(rasterize_gaussians, {**scene}, "cuda", "gsplat", "means2d", **kw)
     assert gs_maps[0].shape == cpu_maps[0].shape == (2, 90, 160, 4)
     assert float(cpu_maps[1].mean()) > 0.1  # the scene is not empty
-    _close_images(gs_maps[0][..., :3], cpu_maps[0][..., :3], "3DGS rgb")
-    _close_images(gs_maps[1], cpu_maps[1], "3DGS alpha")
+    _close_images(gs_maps[0][..., :3], cpu_maps[0][..., :3], "3DGS rgb", TIGHT)
+    _close_images(gs_maps[1], cpu_maps[1], "3DGS alpha", TIGHT)
     depth_rel = ((gs_maps[0][..., 3] - cpu_maps[0][..., 3]).abs() / cpu_maps[0][..., 3].clamp_min(1e-3)).median()
     assert float(depth_rel) < 1e-3
     assert meta["radii"].shape == (2, scene["means"].shape[0])
-    _close_grads(gs_grads, cpu_grads)  # means2d included: the densification signal matches too
+    _close_grads(gs_grads, cpu_grads, max_rel=1e-4)  # means2d included: the densification signal matches too
 
 
 def _densify_norms(ours: torch.Tensor, ref: torch.Tensor) -> tuple[float, float]:

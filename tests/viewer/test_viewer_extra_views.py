@@ -32,6 +32,17 @@ def test_extra_views_from_manifest_then_recomputed(tiny_scene, tmp_path):
     found = find_extra_views(config, td, dm.train_images.cameras, thumb_side=16)
     assert found.source == str(views.cache_dir / "manifest.json")
     assert len(found.cameras) == 4 and torch.allclose(found.cameras.camera_to_worlds, expected.camera_to_worlds, atol=1e-5)
+    # independently of bev_cameras: every 2nd training camera, raised by delta_h along up, same heading,
+    # pitched 40 deg further down
+    train_c2w = dm.train_images.cameras.camera_to_worlds[::2]
+    got = found.cameras.camera_to_worlds
+    up = td.up / td.up.norm()
+    assert torch.allclose(got[:, :, 3], train_c2w[:, :, 3] + td.metres_to_world(3.0) * up, atol=1e-5)
+    fwd_t, fwd_g = -train_c2w[:, :, 2], -got[:, :, 2]
+    elev = lambda f: torch.rad2deg(torch.asin((f @ up).clamp(-1, 1)))  # noqa: E731
+    assert torch.allclose(elev(fwd_g), elev(fwd_t) - 40.0, atol=1e-3)
+    heading = lambda f: torch.nn.functional.normalize(f - (f @ up)[:, None] * up, dim=-1)  # noqa: E731
+    assert torch.allclose(heading(fwd_g), heading(fwd_t), atol=1e-4)
     thumb = found.thumbnails[0]
     assert thumb is not None and max(thumb.shape[:2]) == 16
     np.testing.assert_allclose(thumb.reshape(-1, 3).mean(0), [51, 204, 102], atol=2)  # the reference's render

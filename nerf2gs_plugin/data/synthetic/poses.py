@@ -54,6 +54,18 @@ def street_poses(n: int, half_len: float, cam_height: float, gen: torch.Generato
     return heading_pose(x, y, torch.full((n,), cam_height), yaw, 0.0)
 
 
+def street_poses_between(n: int, half_len: float, cam_height: float, gen: torch.Generator) -> Tensor:
+    """Validation street-level poses: like :func:`street_poses` but half a spacing further along
+    (between the test street views) and over a shorter stretch, so none coincides with a test view."""
+    spacing = 1.8 * half_len * 0.85 / max(n - 1, 1)
+    x = torch.linspace(-half_len * 0.85, half_len * 0.85, n) + 0.5 * spacing + (torch.rand(n, generator=gen) - 0.5) * 1.0
+    x = x.clamp(-half_len * 0.9, half_len * 0.9)
+    back = torch.arange(n) % 2 == 0
+    y = torch.where(back, ROAD_HALF / 2, -ROAD_HALF / 2) + (torch.rand(n, generator=gen) - 0.5) * 1.2
+    yaw = torch.where(back, math.pi, 0.0) + torch.deg2rad((torch.rand(n, generator=gen) - 0.5) * 16.0)
+    return heading_pose(x, y, torch.full((n,), cam_height), yaw, 0.0)
+
+
 def bev_poses(n: int, half_len: float, height: float, pitch_deg: float, phase: float, gen: torch.Generator) -> Tensor:
     """Bird's-eye poses around the street, looking inward: headings alternate between the two
     street directions, each within +-15 deg of the axis (``phase`` in [0, 1) shifts the pattern),

@@ -39,7 +39,7 @@ class TwoDGSModelConfig(SplatfactoModelConfig):
     """What the densification gradient measures (see ``rasterize_surfels``): ``screen`` is the
     projected centre's gradient as in 3DGS/2DGS/gsplat; ``lowpass`` (our first proxy) grows with the
     surfel's size and kept 2.8x more surfels at the quick scale (43.6k vs 15.4k) for 0.7 dB less
-    from above and 0.2 dB more on the street."""
+    from above and 0.4 dB more on the street."""
     normal_lambda: float = 0.05
     normal_start: int = scheduled(700)
     """Step from which the normal consistency loss is on (2DGS: 7000 of 30000)."""

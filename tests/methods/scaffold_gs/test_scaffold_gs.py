@@ -71,7 +71,21 @@ def test_only_positive_opacity_in_frustum_is_rasterized(scene, trained):
     vis = model.visible_anchors(cams[0])
     w2c = cams[0].viewmats()[0]
     z = (model.anchor["anchors"] @ w2c[:3, :3].T + w2c[:3, 3])[:, 2]
-    assert bool((z[vis] > 0).all()) and vis.numel() < model.num_primitives() + 1
+    assert bool((z[vis] > 0).all())
+
+
+def test_visible_anchors_culls_behind_and_outside_the_frustum(scene):
+    """Anchors placed in front of, behind and far beside the camera: only the first is visible."""
+    cams, _, _ = scene
+    model = _cfg().setup(train_data=make_train_data(cams))
+    c2w = cams.camera_to_worlds[0]
+    centre, right, fwd = c2w[:, 3], c2w[:, 0], -c2w[:, 2]  # OpenGL: the camera looks down -z
+    probes = torch.stack([centre + 2 * fwd, centre - 2 * fwd, centre + 2 * fwd + 50 * right])
+    n = model.anchor["anchors"].shape[0]
+    with torch.no_grad():
+        model.anchor["anchors"].data = torch.cat([model.anchor["anchors"].data, probes])
+    vis = set(model.visible_anchors(cams[0]).tolist())
+    assert n in vis and n + 1 not in vis and n + 2 not in vis
 
 
 def _fresh_with_optimizers(scene):

@@ -1,0 +1,150 @@
+"""Benches cannot serve stale results: the run key holds the model code's hash and the device, the
+cached evaluation the metric code's hash, the dataset fingerprint every file a run reads, and
+``--rerun`` retrains. The code is changed in a temporary copy of the package (the hashed source
+root is pointed at it), one line of a loss at a time."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from nerf2gs_plugin.eval import bench_runs, code_version
+from nerf2gs_plugin.eval.bench_runs import RunSpec
+
+
+@pytest.fixture
+def source_copy(tmp_path, monkeypatch) -> Path:
+    """A private copy of the package source that the code hashes read."""
+    dst = tmp_path / "src" / "nerf2gs_plugin"
+    shutil.copytree(code_version.SOURCE_ROOT, dst, ignore=shutil.ignore_patterns("__pycache__"))
+    monkeypatch.setattr(code_version, "SOURCE_ROOT", dst)
+    return dst
+
+
+def _edit(path: Path, old: str, new: str) -> None:
+    text = path.read_text()
+    assert old in text, f"{path} no longer has {old!r}"
+    path.write_text(text.replace(old, new, 1))
+
+
+def test_model_files_rule():
+    names = {str(p.relative_to(code_version.SOURCE_ROOT)) for p in code_version.model_source_files()}
+    assert "engine/losses.py" in names and "methods/splatfacto/model.py" in names
+    assert any(n.endswith(".cpp") for n in names)  # the kernels count
+    assert not any(n.split("/")[0] in ("eval", "cli", "viewer") for n in names)
+
+
+def test_run_key_changes_with_one_line_of_a_loss_and_with_the_device(source_copy):
+    spec = RunSpec("sf", "splatfacto", {"max_num_iterations": 50})
+    k0 = bench_runs.run_key("data", spec, None, "cpu")
+    assert bench_runs.run_key("data", spec, None, "cpu") == k0
+    assert bench_runs.run_key("data", spec, None, "cuda:NVIDIA H100") != k0
+    e0 = code_version.eval_code_hash()
+    _edit(source_copy / "eval" / "bench_paper.py", "\n", "\n# a table tweak: models do not change\n")
+    assert bench_runs.run_key("data", spec, None, "cpu") == k0
+    _edit(source_copy / "engine" / "losses.py", "\n", "\n# one changed line\n")
+    k1 = bench_runs.run_key("data", spec, None, "cpu")
+    assert k1 != k0
+    assert code_version.eval_code_hash() == e0
+    _edit(source_copy / "eval" / "metrics.py", "\n", "\n# a metric fix\n")
+    assert code_version.eval_code_hash() != e0 and bench_runs.run_key("data", spec, None, "cpu") == k1
+
+
+def test_bench_retrains_after_a_loss_change_reevaluates_after_a_metric_change_and_reruns(tiny_scene, tmp_path, source_copy,
+                                                                                        monkeypatch):
+    from nerf2gs_plugin.eval import lpips as lpips_mod
+    from nerf2gs_plugin.eval.bench_io import BenchRunner
+
+    monkeypatch.setattr(lpips_mod.importlib.util, "find_spec", lambda name: None)  # fast: LPIPS n/a
+    monkeypatch.delenv(lpips_mod.ENV_VAR, raising=False)
+    lines: list[str] = []
+    runner = lambda **kw: BenchRunner(tmp_path / "runs", log=lines.append, device="cpu", **kw)  # noqa: E731
+    spec = RunSpec("vox", "voxel-grid", {"max_num_iterations": 6, "steps_per_save": 6, "steps_per_eval_image": 0,
+                                         "pipeline": {"model": {"resolution": 8, "num_samples": 4}}})
+    first = runner().run(spec, tiny_scene)
+    assert first.error is None and any(line.startswith("[bench] train vox") for line in lines)
+    res = first.result
+    assert res["measured"]["device"] == "cpu" and "cores" in res["measured"]["machine"] and res["measured"]["date"][:2] == "20"
+    assert res["trained"]["device"] == "cpu" and res["trained"]["date"][:2] == "20" and "cores" in res["trained"]["machine"]
+    lines.clear()
+    again = runner().run(spec, tiny_scene)
+    assert again.key == first.key and any(line.startswith("[bench] reuse vox") for line in lines)
+    assert again.result["measured"] == res["measured"]  # cached evaluation served
+
+    _edit(source_copy / "eval" / "metrics.py", "\n", "\n# a metric fix\n")
+    lines.clear()
+    reeval = runner().run(spec, tiny_scene)
+    assert reeval.key == first.key and any(line.startswith("[bench] reuse vox") for line in lines)
+    assert json.loads((Path(reeval.run_dir) / "bench_eval.json").read_text())["eval_key"] != res["eval_key"]
+
+    _edit(source_copy / "engine" / "losses.py", "\n", "\n# one changed line of a loss\n")
+    lines.clear()
+    changed = runner().run(spec, tiny_scene)
+    assert changed.key != first.key and any(line.startswith("[bench] train vox") for line in lines)
+
+    lines.clear()
+    forced = runner(rerun=True).run(spec, tiny_scene)
+    assert forced.key == changed.key and any("--rerun" in line for line in lines)
+    assert any(line.startswith("[bench] train vox") for line in lines)
+
+
+def test_failure_markers_expire_with_the_code(tiny_scene, tmp_path, source_copy):
+    from nerf2gs_plugin.eval.bench_io import BenchRunner
+
+    lines: list[str] = []
+    runner = BenchRunner(tmp_path / "runs", log=lines.append, device="cpu")
+    spec = RunSpec("vox", "voxel-grid", {"max_num_iterations": 4})
+    key = runner.key(spec, tiny_scene)
+    marker = tmp_path / "runs" / "failures" / f"{tiny_scene.name}-voxel-grid-{key}.json"
+    marker.parent.mkdir(parents=True)
+    marker.write_text(json.dumps({"label": "vox", "error": "TrainingDiverged: old"}))
+    assert runner.run(spec, tiny_scene).error == "TrainingDiverged: old"
+    _edit(source_copy / "engine" / "losses.py", "\n", "\n# the fix\n")
+    assert runner.key(spec, tiny_scene) != key  # the old marker no longer matches: the run is retried
+
+
+def test_dataset_fingerprint_covers_every_file_a_run_reads(tiny_scene, tmp_path):
+    from nerf2gs_plugin.data import dataset_files, folder_fingerprint
+
+    data = tmp_path / "scene"
+    shutil.copytree(tiny_scene, data, ignore=shutil.ignore_patterns(".ns2gs_cache"))
+    names = {str(p.relative_to(data)) for p in dataset_files(data)}
+    assert {"transforms.json", "points.ply"} <= names
+    assert any(n.startswith("masks/transient/") for n in names)
+    meta = json.loads((data / "transforms.json").read_text())
+    eval_image = next(iter(meta["eval_splits"].values()))[0]["file_path"]
+    assert eval_image in names
+    f0 = folder_fingerprint(data)
+    moved = tmp_path / "moved"
+    shutil.copytree(data, moved)
+    assert folder_fingerprint(moved) == f0
+    (data / "notes.txt").write_text("not read by a run")
+    assert folder_fingerprint(data) == f0
+    seen = {f0}
+    for rel in (next(n for n in names if n.startswith("masks/sky/")), eval_image, "points.ply"):
+        p = data / rel
+        p.write_bytes(p.read_bytes() + b"\0")
+        seen.add(folder_fingerprint(data))
+    meta["frames"][0]["transform_matrix"][0][3] += 0.01  # a pose
+    (data / "transforms.json").write_text(json.dumps(meta))
+    seen.add(folder_fingerprint(data))
+    assert len(seen) == 5
+
+
+def test_bench_regenerates_a_street_of_an_older_generator(tmp_path, monkeypatch):
+    from nerf2gs_plugin.cli import bench
+    from nerf2gs_plugin.data import synthetic_street
+
+    made = []
+    monkeypatch.setattr(synthetic_street, "generate_street", lambda cfg: made.append(cfg))
+    street = tmp_path / "data" / "street"
+    street.mkdir(parents=True)
+    (street / "transforms.json").write_text(json.dumps({"synthetic_street": {"generator_version": 1}, "frames": []}))
+    assert bench.ensure_street(None, tmp_path) == street
+    assert len(made) == 1 and made[0].overwrite
+    (street / "transforms.json").write_text(json.dumps({"synthetic_street": {"generator_version": synthetic_street.GENERATOR_VERSION}}))
+    bench.ensure_street(None, tmp_path)
+    assert len(made) == 1

@@ -1,0 +1,179 @@
+"""Every number in the README's results tables, and the prose figures tied to them, equals the
+committed bench JSON it cites (rounded as printed). A rerun bench that moves a figure fails here
+until the README says what the results say."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+README = (ROOT / "README.md").read_text()
+RESULTS = ROOT / "benchmarks" / "results"
+
+# README column header -> (split, metric) in a result, or a top-level key
+COLUMNS = {
+    "PSNR street": ("street", "psnr"), "bev_1": ("bev_1", "psnr"), "bev_2": ("bev_2", "psnr"),
+    "LPIPS bev_1": ("bev_1", "lpips"), "road PSNR bev_1": ("bev_1", "psnr_ground"), "road bev_1": ("bev_1", "psnr_ground"),
+    "road bev_2": ("bev_2", "psnr_ground"), "FPS": (None, "fps"), "primitives": (None, "primitives"), "train s": (None, "train_seconds"),
+}
+
+
+def _row_key(label: str) -> str:
+    """README row label -> the bench's result label ("Splatfacto (800 steps)" -> "splatfacto")."""
+    label = re.sub(r"\s*\(.*?\)", "", label).strip()
+    head, _, rest = label.partition(" + ")
+    head = "StreetNeRF" if head.lower() == "streetnerf" else head.lower()
+    return f"{head} + {rest}" if rest else head
+
+
+def _tables() -> list[tuple[Path, list[str], list[list[str]]]]:
+    """(results JSON the table cites, header, rows) for every README table whose first column is 'method'."""
+    lines = README.splitlines()
+    out = []
+    for i, line in enumerate(lines):
+        if not line.startswith("| method |"):
+            continue
+        before = "\n".join(lines[max(0, i - 12):i])
+        cited = re.findall(r"benchmarks/results/[\w/]+\.md", before)
+        assert cited, f"README table at line {i + 1} cites no results file"
+        header = [c.strip() for c in line.strip("|").split("|")]
+        rows = []
+        for row in lines[i + 2:]:
+            if not row.startswith("|"):
+                break
+            rows.append([c.strip() for c in row.strip("|").split("|")])
+        out.append((ROOT / cited[-1].replace(".md", ".json"), header, rows))
+    return out
+
+
+def _value(result: dict, column: str):
+    split, metric = COLUMNS[column]
+    if split is not None:
+        return result["results"][split][metric]
+    return result["size"]["primitives"] if metric == "primitives" else result[metric]
+
+
+def _matches(cell: str, value: float) -> bool:
+    """``cell`` is ``value`` as printed: same rounding to the cell's decimals (commas, bold ignored)."""
+    text = cell.replace("**", "").replace("_", "").replace(",", "")
+    digits = len(text.split(".")[1]) if "." in text else 0
+    return abs(float(text) - value) <= 0.5 * 10 ** -digits + 1e-9
+
+
+def test_every_table_cell_matches_its_json():
+    tables = _tables()
+    assert len(tables) >= 2
+    checked = 0
+    for path, header, rows in tables:
+        results = json.loads(path.read_text())["results"]
+        for row in rows:
+            result = results[_row_key(row[0])]
+            for column, cell in zip(header[1:], row[1:]):
+                if cell.startswith("("):  # "(hash grid)": no count to check
+                    continue
+                assert column in COLUMNS, f"README column '{column}' has no mapping to {path.name}"
+                value = _value(result, column)
+                assert _matches(cell, value), f"{path.relative_to(ROOT)} {row[0]} / {column}: README {cell}, JSON {value}"
+                checked += 1
+    assert checked >= 140  # 7 x 9 quick cells (less the hash-grid one) + 10 x 8 default cells
+
+
+def _r(name: str) -> dict:
+    return json.loads((RESULTS / name).read_text())["results"]
+
+
+def _psnr(res: dict, label: str, split: str, metric: str = "psnr") -> float:
+    return res[label]["results"][split][metric]
+
+
+def _gain(res: dict, target: str, split: str, metric: str = "psnr", variant: str = " + NeRF views", base: str = "") -> float:
+    return _psnr(res, target + variant, split, metric) - _psnr(res, target + base, split, metric)
+
+
+def _stability() -> dict:
+    return json.loads((RESULTS / "stability.json").read_text())
+
+
+def _random_init_drops(splats: bool) -> list[float]:
+    d = _stability()
+    out = []
+    for m, s in d["summary"].items():
+        if (m != "streetnerf") != splats:
+            continue
+        row = next(r for r in d["rows"] if r["method"] == m and r["variant"] == "random init")
+        out += [s["seed_street_mean"] - row["street_psnr"], s["seed_bev_mean"] - row["bev_psnr"]]
+    return out
+
+
+Q, D, GPU = "paper_table.json", "default/paper_table.json", "gpu/quick.json"
+T = ("splatfacto", "scaffold-gs", "2dgs")
+BEV = ("bev_1", "bev_2")
+ENH, AUG = " + NeRF views + enhancer", " + NeRF views"
+
+
+def _below_nerf(res: dict, targets=("splatfacto", "2dgs")) -> list[float]:
+    return [_psnr(res, "StreetNeRF", s) - _psnr(res, t + AUG, s) for t in targets for s in BEV]
+
+
+def _min_max(vals) -> list[float]:
+    vals = list(vals)
+    return [min(vals), max(vals)]
+
+
+# (text in the README, the numbers it prints, the values they stand for, signed as printed)
+PROSE = [
+    ("+2.1 (Splatfacto), +3.2 (Scaffold-GS) and +2.0\n(2DGS) dB on bev_1", "2.1 3.2 2.0", lambda: [_gain(_r(Q), t, "bev_1") for t in T]),
+    ("+1.7 / +3.0 / +1.5 dB on bev_2", "1.7 3.0 1.5", lambda: [_gain(_r(Q), t, "bev_2") for t in T]),
+    ("the road from above by 3.4-5.3 dB", "3.4 5.3", lambda: _min_max(_gain(_r(Q), t, s, "psnr_ground") for t in T for s in BEV)),
+    ("street PSNR by 0.9-1.2 dB", "0.9 1.2", lambda: _min_max(_gain(_r(Q), t, "street") for t in T)),
+    ("(60-98x StreetNeRF's\nFPS)", "60 98", lambda: _min_max(_r(Q)[t + AUG]["fps"] / _r(Q)["StreetNeRF"]["fps"] for t in T)),
+    ("(bev_1 23.2 vs 19.3 dB)", "23.2 19.3", lambda: [_psnr(_r(Q), "StreetNeRF", "bev_1"), _psnr(_r(Q), "splatfacto", "bev_1")]),
+    ("+0.03 to +0.11 dB from above\n(Splatfacto bev_1 21.50, Scaffold-GS 23.37, 2DGS 21.85)", "0.03 0.11 21.50 23.37 21.85",
+     lambda: _min_max(_gain(_r(Q), t, s, variant=ENH, base=AUG) for t in T for s in BEV) + [_psnr(_r(Q), t + ENH, "bev_1") for t in T]),
+    ("1.2-1.8 dB below\nit at the quick scale", "1.2 1.8", lambda: _min_max(_below_nerf(_r(Q)))),
+    ("NeRF views add +3.5 / +2.6 / +2.5 dB bev_1 and +1.9 / +2.3 / +2.0 dB street", "3.5 2.6 2.5 1.9 2.3 2.0",
+     lambda: [_gain(_r(D), t, "bev_1") for t in T] + [_gain(_r(D), t, "street") for t in T]),
+    ("(27.57 / 24.05 / 22.60\nvs 26.47 / 23.69 / 21.93 dB street / bev_1 / bev_2)", "27.57 24.05 22.60 26.47 23.69 21.93",
+     lambda: [_psnr(_r(D), lab, s) for lab in ("scaffold-gs + NeRF views", "StreetNeRF") for s in ("street", *BEV)]),
+    ("(26.12 vs 26.50 dB\nbev_1, 25.11 vs 25.45 bev_2)", "26.12 26.50 25.11 25.45",
+     lambda: [_psnr(_r(D), lab, s, "psnr_ground") for s in BEV for lab in ("scaffold-gs + NeRF views", "StreetNeRF")]),
+    ("(0.136 vs 0.122 bev_1)", "0.136 0.122", lambda: [_psnr(_r(D), lab, "bev_1", "lpips") for lab in ("scaffold-gs + NeRF views", "StreetNeRF")]),
+    ("The enhancer adds +0.06 / +0.09\ndB bev_1 to Splatfacto / Scaffold-GS and costs 2DGS 0.2 / 0.6 dB from above", "0.06 0.09 0.2 0.6",
+     lambda: [_gain(_r(D), t, "bev_1", variant=ENH, base=AUG) for t in T[:2]] + [-_gain(_r(D), "2dgs", s, variant=ENH, base=AUG) for s in BEV]),
+    ("+0.06 /\n+0.09 dB bev_1 for Splatfacto / Scaffold-GS but -0.19 / -0.56 dB bev_1 / bev_2 for 2DGS", "0.06 0.09 -0.19 -0.56",
+     lambda: [_gain(_r(D), t, "bev_1", variant=ENH, base=AUG) for t in T[:2]] + [_gain(_r(D), "2dgs", s, variant=ENH, base=AUG) for s in BEV]),
+    ("4 failures in 32 runs", "4 32", lambda: [sum(s["failures"] for s in _stability()["summary"].values()), len(_stability()["rows"])]),
+    ("3.4-5.1 dB below for the splats", "3.4 5.1", lambda: _min_max(_random_init_drops(True))),
+    ("4.4 dB street / 5.4 dB from\nabove for StreetNeRF", "4.4 5.4", lambda: _random_init_drops(False)),
+    ("street PSNR 0.07-0.17 dB (StreetNeRF 25.61 +- 0.09)", "0.07 0.17 25.61 0.09",
+     lambda: _min_max(s["seed_street_std"] for s in _stability()["summary"].values())
+     + [_stability()["summary"]["streetnerf"]["seed_street_mean"], _stability()["summary"]["streetnerf"]["seed_street_std"]]),
+    ("128 s of training in all (StreetNeRF 105 s", "128 105",
+     lambda: [sum(r["train_seconds"] for r in _r(GPU).values()), _r(GPU)["StreetNeRF"]["train_seconds"]]),
+    ("Splatfacto + NeRF views +2.6 / +2.3 dB from above (CPU +2.1 / +1.7)", "2.6 2.3 2.1 1.7",
+     lambda: [_gain(_r(GPU), "splatfacto", s) for s in BEV] + [_gain(_r("quick.json"), "splatfacto", s) for s in BEV]),
+    ("val_bev 21.15 dB at degree 0 vs 19.46\n  at degree 3, val_street 24.34 vs 24.08", "21.15 19.46 24.34 24.08",
+     lambda: [_r("sh_degree_val.json")[f"sh_degree {d}"]["results"][s]["psnr"] for s in ("val_bev", "val_street") for d in (0, 3)]),
+    ("Splatfacto from above -0.25 /\n-0.27 dB and Splatfacto + NeRF views +0.32 / +0.28 dB", "-0.25 -0.27 0.32 0.28",
+     lambda: [_psnr(_r(GPU), lab, s) - _psnr(_r("quick.json"), lab, s) for lab in ("splatfacto", "splatfacto + NeRF views") for s in BEV]),
+]
+
+
+@pytest.mark.parametrize("text,printed,values", PROSE, ids=[p[0].splitlines()[0][:40] for p in PROSE])
+def test_prose_figure_matches_results(text, printed, values):
+    assert text in README, f"README no longer says: {text!r} (update this test with the sentence)"
+    got = values()
+    printed = printed.split()
+    assert len(printed) == len(got)
+    for cell, value in zip(printed, got):
+        assert cell.lstrip("-") in text and _matches(cell, value), f"{text!r}: prints {cell}, results say {value:.4f}"
+
+
+def test_prose_within_bound():
+    """"within 0.5 dB of the NeRF at the default scale (Scaffold-GS above it)"."""
+    assert "within 0.5 dB of the NeRF at the default scale (Scaffold-GS above it)" in README
+    assert max(_below_nerf(_r(D))) <= 0.5 and max(_below_nerf(_r(D), ("scaffold-gs",))) < 0
