@@ -34,20 +34,15 @@ class GroundPlane:
                 "candidates": self.candidates, "median_camera_height": float(self.median_camera_height)}
 
 
-def _plane_from_3(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Normals ``[T, 3]`` (unnormalised, may be ~0 for degenerate triples) and a point per trial."""
-    return np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 0]
-
-
 def fit_ground_plane(points: np.ndarray, cam_centres: np.ndarray, cam_up: Optional[np.ndarray] = None,
-                     iterations: int = 500, inlier_frac: float = 0.01, max_tilt_deg: float = 45.0,
+                     iterations: int = 2000, rel_thresh: float = 0.05, max_tilt_deg: float = 30.0,
                      min_inliers: int = 30, seed: int = 0) -> Optional[GroundPlane]:
     """RANSAC plane over points below the cameras; ``None`` when no credible plane exists.
 
     ``cam_up`` (the cameras' mean up axis in data units) selects the candidate points (below the
     median camera along it) and rejects planes tilted more than ``max_tilt_deg`` from it (walls).
-    The inlier threshold is ``inlier_frac`` of the camera trajectory's extent (plus 1% of the point
-    spread so a static capture still has a scale to work with).
+    Scale-free: a point is an inlier when its distance to the plane is below ``rel_thresh`` x the
+    median camera height above that plane; the best plane is refitted by least squares on its inliers.
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     cams = np.asarray(cam_centres, dtype=np.float64).reshape(-1, 3)
@@ -55,44 +50,43 @@ def fit_ground_plane(points: np.ndarray, cam_centres: np.ndarray, cam_up: Option
         return None
     up = np.asarray(cam_up, dtype=np.float64) if cam_up is not None else np.array([0.0, 0.0, 1.0])
     up = up / (np.linalg.norm(up) + 1e-12)
-    cam_h = cams @ up
-    cand = pts[pts @ up < np.median(cam_h)]
+    cand = pts[pts @ up < np.median(cams @ up)]
     if len(cand) < min_inliers:
         return None
-    lo, hi = np.percentile(pts, [5, 95], axis=0)
-    extent = float(np.linalg.norm(cams.max(0) - cams.min(0)))
-    thresh = inlier_frac * extent + 0.01 * float(np.linalg.norm(hi - lo))
     rng = np.random.default_rng(seed)
     tri = cand[rng.integers(0, len(cand), size=(iterations, 3))]
-    n, p0 = _plane_from_3(tri)
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     norm = np.linalg.norm(n, axis=1)
     ok = norm > 1e-12
-    n = n[ok] / norm[ok, None]
-    p0 = p0[ok]
-    n = n * np.sign(n @ up)[:, None]  # point toward the cameras' up
-    n[np.sign(n @ up) == 0] = up
+    n, p0 = n[ok] / norm[ok, None], tri[ok, 0]
+    n = n * np.where(n @ up < 0, -1.0, 1.0)[:, None]  # point toward the cameras' up
     ok = n @ up > np.cos(np.radians(max_tilt_deg))
     if not ok.any():
         return None
     n, p0 = n[ok], p0[ok]
     d = -(n * p0).sum(1)
-    # Count inliers per hypothesis in chunks (no loop over points).
+    cam_h = np.median(cams @ n.T + d, axis=0)  # [T] median camera height above each hypothesis
+    valid = cam_h > 0
     counts = np.zeros(len(n), dtype=np.int64)
-    for s in range(0, len(n), 64):
-        counts[s:s + 64] = (np.abs(cand @ n[s:s + 64].T + d[s:s + 64]) < thresh).sum(0)
+    for s in range(0, len(n), 64):  # chunks of hypotheses: no loop over points
+        sl = slice(s, s + 64)
+        counts[sl] = (np.abs(cand @ n[sl].T + d[sl]) < rel_thresh * np.abs(cam_h[sl])).sum(0)
+    counts[~valid] = 0
+    if counts.max() < min_inliers:
+        return None
     best = int(counts.argmax())
-    inl = cand[np.abs(cand @ n[best] + d[best]) < thresh]
-    if len(inl) < min_inliers:
-        return None
-    # Least-squares refit on the inliers (smallest singular vector), oriented up.
-    c = inl.mean(0)
-    normal = np.linalg.svd(inl - c, full_matrices=False)[2][-1]
-    normal = normal if normal @ up > 0 else -normal
-    offset = float(-normal @ c)
-    heights = cams @ normal + offset
-    med = float(np.median(heights))
-    if not med > 0:
-        return None
+    normal, offset, med = n[best], float(d[best]), float(cam_h[best])
+    for _ in range(3):  # least-squares refit on the inliers (smallest singular vector), oriented up
+        inl = cand[np.abs(cand @ normal + offset) < rel_thresh * med]
+        if len(inl) < 3:
+            return None
+        c = inl.mean(0)
+        normal = np.linalg.svd(inl - c, full_matrices=False)[2][-1]
+        normal = normal if normal @ up > 0 else -normal
+        offset = float(-normal @ c)
+        med = float(np.median(cams @ normal + offset))
+        if not med > 0:
+            return None
     return GroundPlane(normal, offset, int(len(inl)), int(len(cand)), med)
 
 

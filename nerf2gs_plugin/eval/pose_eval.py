@@ -67,10 +67,22 @@ class PoseErrors:
     sim3: Sim3
 
 
-def pose_errors(est_c2w: np.ndarray, true_c2w: np.ndarray) -> PoseErrors:
-    """ATE after Sim(3) alignment of the estimated centres to the true ones (same order, ``[N, 3, 4]``)."""
+def align_poses(est_c2w: np.ndarray, true_c2w: np.ndarray) -> Sim3:
+    """Sim(3) from estimated to true cameras ``[N, 3, 4]``. Centres alone leave the rotation about a
+    straight drive free, so each camera also contributes two points along its axes (at a tenth of
+    the trajectory length): a straight dashcam drive aligns by its orientations too."""
     est, true = np.asarray(est_c2w, dtype=np.float64), np.asarray(true_c2w, dtype=np.float64)
-    sim = umeyama(est[:, :, 3], true[:, :, 3])
+    s0 = umeyama(est[:, :, 3], true[:, :, 3]).s
+    arm = max(trajectory_length(true[:, :, 3]) / 10.0, 1e-6)
+    src = np.concatenate([est[:, :, 3]] + [est[:, :, 3] + (arm / s0) * est[:, :, k] for k in (1, 2)])
+    dst = np.concatenate([true[:, :, 3]] + [true[:, :, 3] + arm * true[:, :, k] for k in (1, 2)])
+    return umeyama(src, dst)
+
+
+def pose_errors(est_c2w: np.ndarray, true_c2w: np.ndarray) -> PoseErrors:
+    """ATE after Sim(3) alignment (:func:`align_poses`) of estimated to true cameras (same order, ``[N, 3, 4]``)."""
+    est, true = np.asarray(est_c2w, dtype=np.float64), np.asarray(true_c2w, dtype=np.float64)
+    sim = align_poses(est, true)
     aligned = sim.apply_poses(est)
     err = np.linalg.norm(aligned[:, :, 3] - true[:, :, 3], axis=1)
     rmse = float(np.sqrt((err**2).mean()))

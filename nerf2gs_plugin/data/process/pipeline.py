@@ -27,6 +27,9 @@ class ProcessOptions:
     """Camera height above the road in metres (1.5: car-mounted; ~1.6 for a hand-held walk): sets the metric scale."""
     metres_per_unit: Optional[float] = None
     """Metres per SfM unit, when known (skips the camera-height scale; the ground plane still gives up)."""
+    fov_deg: Optional[float] = None
+    """Horizontal field of view of the camera in degrees, when known (a dashcam's spec, e.g. 90-120): the
+    focal prior for the SfM (photos use their EXIF focal; without either COLMAP guesses ~45 deg and refines)."""
     max_size: int = 1600
     """Frames larger than this (longest side, px) are shrunk before the SfM (0: keep)."""
     min_registered_fraction: float = 0.5
@@ -82,6 +85,12 @@ def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=Non
         times["frames"] = time.perf_counter() - t
         names = fr.names
         focal = focal_px_fn(frame_dir, names) if focal_px_fn else None
+        if opts.fov_deg is not None:
+            from nerf2gs_plugin.data.images import image_size
+
+            if not 1.0 < opts.fov_deg < 179.0:
+                raise DataError(f"--fov-deg must be in (1, 179), got {opts.fov_deg}", "--fov-deg")
+            focal = 0.5 * image_size(frame_dir / names[0])[0] / np.tan(np.radians(opts.fov_deg) / 2)
         t = time.perf_counter()
         sfm.extract(work / "database.db", frame_dir, names, opts.sfm, focal, progress)
         times["features"] = time.perf_counter() - t

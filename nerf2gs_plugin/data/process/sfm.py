@@ -34,7 +34,7 @@ class SfmOptions:
     """SIFT runs on images shrunk to this longest side (speed; the full image is still undistorted)."""
     max_features: int = 4096
     """SIFT features per image at most."""
-    camera_model: str = "OPENCV"
+    camera_model: str = "SIMPLE_RADIAL"
     """COLMAP camera model estimated by the SfM (one camera shared by all frames)."""
     num_threads: int = -1
 
