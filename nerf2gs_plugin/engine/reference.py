@@ -53,6 +53,22 @@ def load_run(path: Path, device: torch.device | str = "cpu", data: Optional[Path
     return LoadedRun(run_dir, ckpt_file, config, pipeline, int(ckpt["step"]), file_hash(ckpt_file), float(ckpt.get("train_seconds", 0.0)))
 
 
+def _same_data_other_downscale(run_dir: Path, datamanager, fingerprint: Optional[str]) -> bool:
+    """True when the reference was trained on this dataset at another ``downscale``: the fingerprint
+    keys the (resized) training files, so it is recomputed at the reference's downscale. The
+    reference then renders at the target's cameras, i.e. at the target's resolution."""
+    from nerf2gs_plugin.data import parse_dataset
+
+    try:
+        doc = read_config_doc(run_dir / "config.yml")
+        ref_ds = float(doc["config"]["pipeline"]["datamanager"]["downscale"])
+    except (KeyError, TypeError, ValueError, ConfigError):
+        return False
+    if fingerprint is None or ref_ds == float(datamanager.config.downscale):
+        return False
+    return dataset_fingerprint(parse_dataset(datamanager.data, "train", downscale=ref_ds).image_filenames) == fingerprint
+
+
 def attach_augmentation(datamanager, reference: Path, augment, device: torch.device | str) -> None:
     """Load the reference run and let the AugmentedDataManager logic rewrite the training set."""
     from nerf2gs_plugin.datamanagers.augmented import augment_datamanager
@@ -60,7 +76,7 @@ def attach_augmentation(datamanager, reference: Path, augment, device: torch.dev
     run_dir, ckpt_file = resolve_checkpoint(reference)
     ckpt = load_checkpoint(ckpt_file, map_location="cpu")
     ours = dataset_fingerprint(datamanager.train_data.image_filenames)
-    if ckpt.get("dataset") != ours:
+    if ckpt.get("dataset") != ours and not _same_data_other_downscale(run_dir, datamanager, ckpt.get("dataset")):
         raise CheckpointError(
             f"reference was trained on a different dataset (fingerprint {ckpt.get('dataset')} vs {ours} for {datamanager.data})", ckpt_file
         )
