@@ -93,12 +93,20 @@ class NerfstudioDataParserConfig:
             raise DataError("no 'frames' list", path)
         root = path.parent
         frames = [self._frame(meta, fr, i, root, path, "frames") for i, fr in enumerate(frames_raw)]
+        missing = {f.image.resolve() for f in frames if not f.image.is_file()}
+        if missing:  # instant-ngp's own samples list absent images: skip them, as instant-ngp does
+            import warnings
+
+            warnings.warn(f"{path}: {len(missing)} of {len(frames)} frames list an image that does not exist; skipped", stacklevel=2)
+            frames = [f for f in frames if f.image.resolve() not in missing]
         by_path = {f.image.resolve(): f for f in frames}
 
-        def lookup(name: Any, where: str) -> RawFrame:
+        def lookup(name: Any, where: str) -> Optional[RawFrame]:
             if not isinstance(name, str):
                 raise DataError(f"{where}: expected a frame dict or a file path, got {type(name).__name__}", path)
             p = _image_path(root, name)
+            if p.resolve() in missing:
+                return None
             if p.resolve() not in by_path:
                 raise DataError(f"{where}: '{name}' is not the file_path of any entry of 'frames'", path)
             return by_path[p.resolve()]
@@ -109,10 +117,10 @@ class NerfstudioDataParserConfig:
         if ev is not None and not isinstance(ev, dict):
             raise DataError("'eval_splits' must be a dict of split name -> list of frames", path)
         if "train_filenames" in meta:
-            groups["train"] = [lookup(n, f"train_filenames[{i}]") for i, n in enumerate(_list(meta, "train_filenames", path))]
+            groups["train"] = _present(lookup(n, f"train_filenames[{i}]") for i, n in enumerate(_list(meta, "train_filenames", path)))
         for key, name in (("val_filenames", "val"), ("test_filenames", "test")):
             if key in meta:
-                groups[name] = [lookup(n, f"{key}[{i}]") for i, n in enumerate(_list(meta, key, path))]
+                groups[name] = _present(lookup(n, f"{key}[{i}]") for i, n in enumerate(_list(meta, key, path)))
                 used.update(id(f) for f in groups[name])
         for name, entries in (ev or {}).items():
             if name == "train" or not isinstance(entries, list):
@@ -120,7 +128,9 @@ class NerfstudioDataParserConfig:
             items = []
             for i, e in enumerate(entries):
                 where = f"eval_splits['{name}'][{i}]"
-                items.append(self._frame(meta, e, i, root, path, f"eval_splits['{name}']") if isinstance(e, dict) else lookup(e, where))
+                item = self._frame(meta, e, i, root, path, f"eval_splits['{name}']") if isinstance(e, dict) else lookup(e, where)
+                if item is not None:
+                    items.append(item)
             used.update(id(f) for f in items)
             groups[name] = items
         if "train" not in groups:
@@ -200,6 +210,10 @@ def _read_json(path: Path) -> dict[str, Any]:
     if not isinstance(meta, dict):
         raise DataError("top level must be a JSON object", path)
     return meta
+
+
+def _present(frames) -> list[RawFrame]:
+    return [f for f in frames if f is not None]
 
 
 def _list(meta: dict, key: str, path: Path) -> list:
