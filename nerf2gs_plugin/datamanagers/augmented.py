@@ -24,7 +24,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from nerf2gs_plugin.cameras import Cameras, birds_eye_poses
+from nerf2gs_plugin.cameras import Cameras, birds_eye_poses, birds_eye_poses_absolute
 from nerf2gs_plugin.datamanagers.image_set import ImageSet
 
 CACHE_FORMAT_VERSION = 1
@@ -47,6 +47,11 @@ class AugmentConfig:
     """Height of the additional views above the input views, in metres."""
     theta_pitch: float = 30.0
     """Downward pitch of the additional views, in degrees."""
+    pitch_mode: str = "absolute"
+    """absolute: theta-pitch below the horizon of the ground plane (the input's tilt and roll removed);
+    relative: theta-pitch added to each input camera's own tilt (the paper's Fig. 3 with level cameras)."""
+    min_coverage: float = 0.5
+    """A bird's-eye render whose fraction of pixels with accumulation > 0.5 is below this is dropped (warned)."""
     every_n: int = 1
     """Use every n-th input pose for an additional view."""
     extra_prob: Optional[float] = None
@@ -58,10 +63,24 @@ class AugmentConfig:
     use_cache: bool = True
 
 
-def bev_cameras(train: Cameras, up: Tensor, delta_h_world: float, theta_pitch: float, every_n: int = 1) -> Cameras:
+def bev_cameras(train: Cameras, up: Tensor, delta_h_world: float, theta_pitch: float, every_n: int = 1,
+                pitch_mode: str = "relative") -> Cameras:
     """The additional-view cameras: input intrinsics, raised and pitched poses."""
     sub = train[torch.arange(0, len(train), max(every_n, 1))]
-    return sub.with_poses(birds_eye_poses(sub.camera_to_worlds, up, delta_h_world, theta_pitch))
+    if pitch_mode not in ("absolute", "relative"):
+        from nerf2gs_plugin.errors import ConfigError
+
+        raise ConfigError(f"--augment.pitch-mode must be absolute or relative, got {pitch_mode!r}")
+    poses = birds_eye_poses_absolute if pitch_mode == "absolute" else birds_eye_poses
+    return sub.with_poses(poses(sub.camera_to_worlds, up, delta_h_world, theta_pitch))
+
+
+def inside_box(centres: Tensor, box: Optional[Tensor]) -> Tensor:
+    """Bool ``[N]``: camera centres inside the scene box ``[2, 3]`` (all True without a box)."""
+    if box is None:
+        return torch.ones(len(centres), dtype=torch.bool)
+    box = box.to(centres)
+    return ((centres >= box[0]) & (centres <= box[1])).all(-1)
 
 
 def composite(real: Tensor, render: Tensor, mask: Tensor, dilate_px: int = 0, feather_px: int = 0) -> Tensor:
@@ -115,10 +134,11 @@ class AugmentedViews:
     extra_raw: Optional[list[Tensor]]  # bird's-eye renders before enhancement
     cache_dir: Path
     reused: bool
+    render_seconds: float = 0.0  # the reference's render time (when rendered, not reused), reported with the training time
 
 
 def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, render_fn: RenderFn, ref_key: str,
-                           dataset: str, cache_root: Path, config: AugmentConfig) -> AugmentedViews:
+                           dataset: str, cache_root: Path, config: AugmentConfig, scene_box: Optional[Tensor] = None) -> AugmentedViews:
     """Render (or reuse from the cache) the composites and the additional views."""
     from nerf2gs_plugin.progress import make_progress
 
@@ -127,7 +147,7 @@ def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, re
         from nerf2gs_plugin.enhance import make_enhancer
 
         enhancer = make_enhancer(config.enhancer)
-    bev = bev_cameras(train.cameras, up, delta_h_world, config.theta_pitch, config.every_n) if config.extra_views else None
+    bev = bev_cameras(train.cameras, up, delta_h_world, config.theta_pitch, config.every_n, config.pitch_mode) if config.extra_views else None
     has_transient = "transient" in train.masks and config.composites
     key = cache_key(ref_key, dataset, config, bev, train.cameras, enhancer.cache_key() if enhancer else "none")
     cache_dir = Path(cache_root) / "augment_cache" / key
@@ -140,6 +160,10 @@ def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, re
             (work / sub).mkdir(parents=True, exist_ok=True)
         comp_idx = [i for i in range(len(train)) if has_transient and bool(train.mask("transient", i).any())]
         n_jobs = len(comp_idx) + (len(bev) if bev is not None else 0)
+        import time
+
+        kept, outside, empty = [], 0, 0
+        t0 = time.perf_counter()
         with make_progress() as progress:
             task = progress.add_task("render reference views", total=n_jobs, stats="")
             for i in comp_idx:
@@ -147,16 +171,27 @@ def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, re
                 comp = composite(train.image(i).cpu(), out, train.mask("transient", i).cpu(), config.dilate_px, config.feather_px)
                 _save_png(work / "composites" / f"{i:05d}.png", comp)
                 progress.update(task, advance=1, stats=f"composite {i}")
+            inside = inside_box(bev.centers, scene_box) if bev is not None else None
             for j in range(len(bev) if bev is not None else 0):
+                if not bool(inside[j]):  # outside the scene box: the reference knows nothing there
+                    outside += 1
+                    progress.update(task, advance=1, stats=f"bird's-eye {j} outside the box")
+                    continue
                 out = render_fn(bev[j])
+                if "accumulation" in out and float((out["accumulation"] > 0.5).float().mean()) < config.min_coverage:
+                    empty += 1
+                    progress.update(task, advance=1, stats=f"bird's-eye {j} mostly empty")
+                    continue
+                k = len(kept)
+                kept.append(j)
                 rgb = out["rgb"].cpu()
-                _save_png(work / "extra_raw" / f"{j:05d}.png", rgb)
+                _save_png(work / "extra_raw" / f"{k:05d}.png", rgb)
                 if "depth" in out:
-                    np.save(work / "extra_raw" / f"{j:05d}_depth.npy", out["depth"].cpu().numpy().astype(np.float16))
+                    np.save(work / "extra_raw" / f"{k:05d}_depth.npy", out["depth"].cpu().numpy().astype(np.float16))
                 if enhancer is not None:
                     src = train.image(j * max(config.every_n, 1)).cpu()
                     rgb = enhancer.enhance(rgb, reference=src)
-                _save_png(work / "extra" / f"{j:05d}.png", rgb)
+                _save_png(work / "extra" / f"{k:05d}.png", rgb)
                 progress.update(task, advance=1, stats=f"bird's-eye {j}")
         manifest = {
             "format_version": CACHE_FORMAT_VERSION,
@@ -165,14 +200,27 @@ def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, re
             "config": asdict(config),
             "enhancer": enhancer.cache_key() if enhancer else "none",
             "composited_images": comp_idx,
-            "num_extra": len(bev) if bev is not None else 0,
-            "extra_camera_to_worlds": bev.camera_to_worlds.cpu().tolist() if bev is not None else [],
+            "num_extra": len(kept),
+            "extra_indices": kept,
+            "dropped_outside_box": outside,
+            "dropped_empty": empty,
+            "render_seconds": round(time.perf_counter() - t0, 2),
+            "extra_camera_to_worlds": bev[torch.tensor(kept, dtype=torch.long)].camera_to_worlds.cpu().tolist() if kept else [],
         }
         (work / "manifest.json").write_text(json.dumps(manifest, indent=1))
         if cache_dir.exists():
             shutil.rmtree(cache_dir)
         os.replace(work, cache_dir)
     manifest = json.loads(manifest_path.read_text())
+    if manifest.get("dropped_outside_box") or manifest.get("dropped_empty"):
+        import warnings
+
+        total = manifest["num_extra"] + manifest.get("dropped_outside_box", 0) + manifest.get("dropped_empty", 0)
+        warnings.warn(f"{total - manifest['num_extra']} of {total} bird's-eye views dropped, never trained on: "
+                      f"{manifest.get('dropped_outside_box', 0)} outside the scene box (lower --augment.delta-h), "
+                      f"{manifest.get('dropped_empty', 0)} mostly empty renders (coverage < {config.min_coverage})", stacklevel=2)
+    if bev is not None:
+        bev = bev[torch.tensor(manifest.get("extra_indices", list(range(manifest["num_extra"]))), dtype=torch.long)]
     composites = None
     if manifest["composited_images"]:
         images = [train.image(i).cpu() for i in range(len(train))]
@@ -186,7 +234,7 @@ def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, re
         extra_raw = [_load_png(cache_dir / "extra_raw" / f"{j:05d}.png") for j in range(manifest["num_extra"])]
         extra = ImageSet.from_images(bev.to("cpu"), imgs, weights=torch.full((len(imgs),), float(config.extra_weight)),
                                      names=[f"bev_{j:05d}" for j in range(len(imgs))])
-    return AugmentedViews(composites, extra, extra_raw, cache_dir, reused)
+    return AugmentedViews(composites, extra, extra_raw, cache_dir, reused, float(manifest.get("render_seconds", 0.0)))
 
 
 def augment_datamanager(datamanager, render_fn: RenderFn, ref_key: str, cache_root: Path, config: AugmentConfig) -> AugmentedViews:
@@ -200,8 +248,9 @@ def augment_datamanager(datamanager, render_fn: RenderFn, ref_key: str, cache_ro
     train_data = datamanager.train_data
     views = render_augmented_views(
         datamanager.train_images, train_data.up, train_data.metres_to_world(config.delta_h), render_fn, ref_key,
-        dataset_fingerprint(train_data.image_filenames), cache_root, config,
+        dataset_fingerprint(train_data.image_filenames), cache_root, config, train_data.scene_box,
     )
+    print(f"reference renders: {views.render_seconds:.1f} s" + (" (reused from the cache)" if views.reused else ""))
     datamanager.original_train_images = datamanager.train_images
     datamanager.augment_every_n = max(config.every_n, 1)
     if views.composites is not None:
