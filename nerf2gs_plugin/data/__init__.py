@@ -38,23 +38,25 @@ __all__ = [
 ParserConfig = Union[NerfstudioDataParserConfig, ColmapDataParserConfig]
 
 
-def dataparser_config(data: Union[str, Path], downscale: float = 1.0) -> ParserConfig:
-    """The parser config for a dataset folder (or a ``transforms.json`` file), by auto-detection."""
+def dataparser_config(data: Union[str, Path], downscale: float = 1.0, **options) -> ParserConfig:
+    """The parser config for a dataset folder (or a ``transforms.json`` file), by auto-detection.
+    ``options``: ``holdout_every``, ``metres_per_unit``, ``camera_height`` (None = the parser's default)."""
     data = Path(data)
+    options = {k: v for k, v in options.items() if v is not None}
     if data.is_file() and data.suffix.lower() == ".json":
-        return NerfstudioDataParserConfig(data=data, downscale=downscale)
+        return NerfstudioDataParserConfig(data=data, downscale=downscale, **options)
     if not data.exists():
         raise DataError("dataset folder does not exist", data)
     if (data / "transforms.json").is_file():
-        return NerfstudioDataParserConfig(data=data, downscale=downscale)
+        return NerfstudioDataParserConfig(data=data, downscale=downscale, **options)
     if find_model_dir(data) is not None:
-        return ColmapDataParserConfig(data=data, downscale=downscale)
+        return ColmapDataParserConfig(data=data, downscale=downscale, **options)
     raise DataError("not a dataset: no transforms.json and no COLMAP model (sparse/0 or sparse/)", data)
 
 
-def parse_dataset(data: Union[str, Path], split: str = "train", downscale: float = 1.0) -> DataparserOutputs:
+def parse_dataset(data: Union[str, Path], split: str = "train", downscale: float = 1.0, **options) -> DataparserOutputs:
     """One split of the dataset at ``data``, normalised (same transform for every split)."""
-    return dataparser_config(data, downscale).parse(split)
+    return dataparser_config(data, downscale, **options).parse(split)
 
 
 def folder_fingerprint(data: Union[str, Path]) -> str:
@@ -65,6 +67,6 @@ def folder_fingerprint(data: Union[str, Path]) -> str:
     return dataset_fingerprint(parse_dataset(data, "train").image_filenames)
 
 
-def list_splits(data: Union[str, Path]) -> list[str]:
+def list_splits(data: Union[str, Path], **options) -> list[str]:
     """Split names of the dataset at ``data``: "train" first, then its eval splits."""
-    return dataparser_config(data).splits()
+    return dataparser_config(data, **options).splits()

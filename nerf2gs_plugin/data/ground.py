@@ -114,3 +114,15 @@ def estimate_metric_scale(points: np.ndarray, cam_centres: np.ndarray, cam_up: n
     if not camera_height > 0:
         raise DataError(f"--camera-height must be positive, got {camera_height}", where)
     return MetricScale(float(camera_height / plane.median_camera_height), plane.normal, "camera-height", plane)
+
+
+def scale_from_frames(train_c2w, points_xyz, camera_height: float, where) -> tuple[float, "np.ndarray"]:
+    """Metres-per-unit and up for a parsed dataset (``--pipeline.datamanager.camera-height``):
+    train cameras ``[N, 3, 4]`` OpenGL (their y axis is up) and the sparse points, original frame."""
+    c2w = np.asarray(train_c2w, dtype=np.float64)
+    if points_xyz is None or len(points_xyz) == 0:
+        raise DataError("--camera-height needs sparse points (a COLMAP model or ply_file_path) to find the ground; "
+                        "pass --metres-per-unit instead", where)
+    s = estimate_metric_scale(np.asarray(points_xyz), c2w[:, :, 3], c2w[:, :, 1].mean(0), camera_height, where=where)
+    print(f"metric scale: {s.metres_per_unit:.4g} metres per data unit (camera {camera_height} m above the ground plane)")
+    return s.metres_per_unit, s.up

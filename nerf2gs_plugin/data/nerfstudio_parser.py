@@ -53,6 +53,8 @@ class NerfstudioDataParserConfig:
     """Override the file's metres_per_unit/scale_metric (metres per unit of the data frame)."""
     holdout_every: int = 8
     """Without split keys in the file, every N-th frame is the "test" split (0: none)."""
+    camera_height: Optional[float] = None
+    """Metric scale and up from the ground plane under the cameras at this height (m); see data/ground.py."""
 
     @property
     def json_path(self) -> Path:
@@ -82,6 +84,11 @@ class NerfstudioDataParserConfig:
                 raise DataError(f"'up' must be a nonzero 3-vector, got {meta.get('up')!r}", path) from None
         mpu = self.metres_per_unit if self.metres_per_unit is not None else meta.get("metres_per_unit", meta.get("scale_metric", 1.0))
         mpu = _positive(mpu, "metres_per_unit", path)
+        if self.camera_height is not None and self.metres_per_unit is None:
+            from nerf2gs_plugin.data.ground import scale_from_frames
+
+            mpu, up_np = scale_from_frames(torch.stack([f.c2w for f in groups["train"]]).numpy(), xyz, self.camera_height, path)
+            up = torch.tensor(up_np, dtype=torch.float32)
         return build_outputs(split, groups[split], groups["train"], path.parent, self.normalize, float(self.downscale), up, mpu, xyz, rgb)
 
     # ------------------------------------------------------------------ reading

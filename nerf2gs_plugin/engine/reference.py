@@ -66,7 +66,8 @@ def _same_data_other_downscale(run_dir: Path, datamanager, fingerprint: Optional
         return False
     if fingerprint is None or ref_ds == float(datamanager.config.downscale):
         return False
-    return dataset_fingerprint(parse_dataset(datamanager.data, "train", downscale=ref_ds).image_filenames) == fingerprint
+    options = datamanager.config.data_options() if hasattr(datamanager.config, "data_options") else {}
+    return dataset_fingerprint(parse_dataset(datamanager.data, "train", downscale=ref_ds, **options).image_filenames) == fingerprint
 
 
 def attach_augmentation(datamanager, reference: Path, augment, device: torch.device | str) -> None:
