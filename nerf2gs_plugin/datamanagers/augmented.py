@@ -4,8 +4,10 @@ Any DataManager is augmented in place, so every target method (built-in or plugi
   (a) input-view composites: the real image with only its (dilated) transient-mask pixels
       replaced by the reference render at that pose;
   (b) bird's-eye additional views: every ``every_n``-th input pose raised by ``delta_h`` metres
-      along the scene's up vector and pitched down by ``theta_pitch`` degrees (paper Fig. 3),
-      rendered by the reference and optionally passed through an enhancer.
+      along the scene's up vector and pitched down by ``theta_pitch`` degrees below the ground
+      plane's horizon (paper Fig. 3; ``pitch_mode="relative"`` adds it to the input's own tilt),
+      rendered by the reference and optionally passed through an enhancer. A view outside the
+      scene box or a mostly empty render (low accumulation) is dropped with one warning.
 Renders are cached under the reference run, keyed by everything that changes them.
 """
 
@@ -17,7 +19,7 @@ import os
 import shutil
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Callable, Literal, Optional
 
 import numpy as np
 import torch
@@ -47,7 +49,7 @@ class AugmentConfig:
     """Height of the additional views above the input views, in metres."""
     theta_pitch: float = 30.0
     """Downward pitch of the additional views, in degrees."""
-    pitch_mode: str = "absolute"
+    pitch_mode: Literal["absolute", "relative"] = "absolute"
     """absolute: theta-pitch below the horizon of the ground plane (the input's tilt and roll removed);
     relative: theta-pitch added to each input camera's own tilt (the paper's Fig. 3 with level cameras)."""
     min_coverage: float = 0.5

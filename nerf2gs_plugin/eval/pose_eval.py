@@ -90,3 +90,21 @@ def pose_errors(est_c2w: np.ndarray, true_c2w: np.ndarray) -> PoseErrors:
     rel = np.einsum("nji,njk->nik", aligned[:, :, :3], true[:, :, :3])  # R_a^T R_t
     cos = np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
     return PoseErrors(rmse, 100.0 * rmse / length if length > 0 else float("nan"), float(np.degrees(np.arccos(cos)).mean()), sim.s, sim)
+
+
+def capture_report(est_c2w: np.ndarray, true_c2w: np.ndarray, est_metres_per_unit: float, est_up: np.ndarray,
+                   true_up: np.ndarray, registered: int, total: int) -> dict:
+    """The figures ``ns2gs-bench real`` reports for a processed capture against its true cameras
+    (true frame in metres): registered fraction, ATE (% of trajectory), rotation error, the error of
+    the camera-height scale against the Sim(3) scale, and the angle between estimated and true up."""
+    pe = pose_errors(est_c2w, true_c2w)
+    up = pe.sim3.R @ (np.asarray(est_up, dtype=np.float64) / np.linalg.norm(est_up))
+    tu = np.asarray(true_up, dtype=np.float64) / np.linalg.norm(true_up)
+    return {
+        "registered_fraction": registered / max(total, 1),
+        "ate_percent": pe.ate_percent,
+        "ate_m": pe.ate_rmse,
+        "rotation_error_deg": pe.rotation_deg_mean,
+        "scale_error_percent": 100.0 * (est_metres_per_unit / pe.scale - 1.0),
+        "up_error_deg": float(np.degrees(np.arccos(np.clip(up @ tu, -1.0, 1.0)))),
+    }

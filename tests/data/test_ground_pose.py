@@ -64,3 +64,17 @@ def test_umeyama_and_ate():
     est[5, :, 3] += 0.3 * s  # one camera 0.3 m off
     pe = pose_errors(est, true)
     assert 0.0 < pe.ate_percent < 1.0
+
+
+def test_capture_report_scale_error():
+    from nerf2gs_plugin.eval.pose_eval import capture_report
+
+    rng = np.random.default_rng(4)
+    true = np.zeros((10, 3, 4))
+    true[:, :, :3] = np.eye(3)
+    true[:, :, 3] = rng.normal(size=(10, 3)) * 5
+    est = true.copy()
+    est[:, :, 3] = true[:, :, 3] / 2.0  # 2 m per estimated unit
+    r = capture_report(est, true, 2.1, np.array([0, 0, 1.0]), np.array([0, 0, 1.0]), 10, 12)
+    assert abs(r["scale_error_percent"] - 5.0) < 1e-6 and r["ate_percent"] < 1e-9 and r["up_error_deg"] < 1e-6
+    assert abs(r["registered_fraction"] - 10 / 12) < 1e-12
