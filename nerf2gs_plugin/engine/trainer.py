@@ -204,7 +204,9 @@ class Trainer:
                 progress.update(task, advance=1, stats=_format_stats(ema, self.pipeline.model.num_primitives()))
         self.save_checkpoint(cfg.max_num_iterations - 1)
         atomic_write_text(self.run_dir / "train_log.json", json.dumps(
-            {"train_seconds": self.train_seconds, "history_stride": self.history.stride, "history": self.history.records()}))
+            {"train_seconds": self.train_seconds,
+             "reference_render_seconds": getattr(getattr(self.pipeline.datamanager, "augmented_views", None), "render_seconds", 0.0),
+             "history_stride": self.history.stride, "history": self.history.records()}))
         return self.run_dir
 
 

@@ -103,10 +103,10 @@ def test_interrupted_render_leaves_no_cache_entry(tiny_scene, tmp_path):
             return super().__call__(camera)
 
     with pytest.raises(KeyboardInterrupt):
-        augment_datamanager(_dm(tiny_scene), Failing(), "ref:x", tmp_path, AugmentConfig())
+        augment_datamanager(_dm(tiny_scene), Failing(), "ref:x", tmp_path, AugmentConfig(delta_h=2.0))
     assert not [p for p in (tmp_path / "augment_cache").iterdir() if not p.name.startswith(".tmp-")]
     r = CountingRenderer()
-    augment_datamanager(_dm(tiny_scene), r, "ref:x", tmp_path, AugmentConfig())
+    augment_datamanager(_dm(tiny_scene), r, "ref:x", tmp_path, AugmentConfig(delta_h=2.0))
     assert r.calls > 0
 
 
@@ -125,6 +125,10 @@ def test_plugin_trains_with_augment_from_cli(tiny_scene, tmp_path):
                         "--output-dir", str(tmp_path / "tgt")], capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr[-2000:]
     assert list((ref / "augment_cache").glob("*/manifest.json"))
+    import json
+
+    log = json.loads(next((tmp_path / "tgt").rglob("train_log.json")).read_text())
+    assert log["reference_render_seconds"] > 0  # reported with the training time
 
 
 def test_bad_references(tiny_scene, tmp_path):
