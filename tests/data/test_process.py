@@ -110,8 +110,9 @@ def test_process_video_end_to_end(tmp_path, make_config):
     assert abs(est["metres_per_unit"] / pe.scale - 1) < 0.5
     train = parse_dataset(out, "train")
     assert len(train.image_filenames) > 10 and train.points3D_xyz is not None
-    db_mtime = (out / "colmap" / "database.db").stat().st_mtime
-    model_mtime = (out / "colmap" / "distorted" / "done.json").stat().st_mtime
-    main(args)  # resumed: nothing recomputed
-    assert (out / "colmap" / "database.db").stat().st_mtime == db_mtime
-    assert (out / "colmap" / "distorted" / "done.json").stat().st_mtime == model_mtime
+    stamps = {p: (out / "colmap" / p).stat().st_mtime for p in ("matching.json", "distorted/done.json")}
+    main(args)  # resumed: features, matches and model reused
+    assert {p: (out / "colmap" / p).stat().st_mtime for p in stamps} == stamps
+    main(args[:6] + ["19"] + args[7:])  # other frames: stale features and matches are not mixed in
+    est = json.loads((out / "transforms.json").read_text())
+    assert est["process"]["frames"] == len(list((out / "colmap" / "frames").iterdir())) <= 19

@@ -84,6 +84,9 @@ def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=Non
         fr = frames_fn(frame_dir, progress)
         times["frames"] = time.perf_counter() - t
         names = fr.names
+        for p in frame_dir.iterdir():  # frames of an earlier run with other options
+            if p.is_file() and p.name not in set(names):
+                p.unlink()
         focal = focal_px_fn(frame_dir, names) if focal_px_fn else None
         if opts.fov_deg is not None:
             from nerf2gs_plugin.data.images import image_size

@@ -69,7 +69,13 @@ def extract(db: Path, image_dir: Path, names: list[str], opt: SfmOptions, focal_
     done: set[str] = set()
     if db.is_file():
         with pycolmap.Database.open(str(db)) as d:
-            done = {im.name for im in d.read_all_images() if d.exists_keypoints(im.image_id)}
+            images = d.read_all_images()
+            done = {im.name for im in images if d.exists_keypoints(im.image_id)}
+            stale = any(im.name not in set(names) for im in images)
+        if stale:  # another frame set (other --num-frames/--fps): start the database over
+            for p in db.parent.glob(db.name + "*"):
+                p.unlink()
+            done = set()
     todo = [n for n in names if n not in done]
     task = progress.add_task("features (SIFT)", total=len(names), completed=len(names) - len(todo), stats="") if progress else None
     for s in range(0, len(todo), chunk):
@@ -110,7 +116,11 @@ def match(db: Path, method: str, opt: SfmOptions, marker: Path, progress=None) -
     """Match (or reuse the matches when ``marker`` records the same method and options)."""
     import pycolmap
 
-    key = {"method": method, "overlap": opt.overlap, "vocab_tree": str(opt.vocab_tree or ""), "max_features": opt.max_features,
+    import hashlib
+
+    with pycolmap.Database.open(str(db)) as d:
+        names = sorted(im.name for im in d.read_all_images())
+    key = {"images": hashlib.sha1("|".join(names).encode()).hexdigest(), "method": method, "overlap": opt.overlap, "vocab_tree": str(opt.vocab_tree or ""), "max_features": opt.max_features,
            "max_image_size": opt.max_image_size}
     if _marker(marker, key):
         return False
