@@ -34,6 +34,8 @@ class SfmOptions:
     """SIFT runs on images shrunk to this longest side (speed; the full image is still undistorted)."""
     max_features: int = 4096
     """SIFT features per image at most."""
+    mapping_attempts: int = 3
+    """Incremental mapping is retried with another seed (up to this many runs) while < 90% of frames register."""
     camera_model: str = "SIMPLE_RADIAL"
     """COLMAP camera model estimated by the SfM (one camera shared by all frames)."""
     num_threads: int = -1
@@ -177,15 +179,29 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
         if task is not None:
             progress.update(task, completed=min(count[0] + 1, total), stats=f"{count[0] + 1} registered")
 
-    options = pycolmap.IncrementalPipelineOptions()
-    options.num_threads = opt.num_threads
-    options.multiple_models = True
-    models = pycolmap.incremental_mapping(db, image_dir, work, options=options, next_image_callback=on_image)
-    if not models:
+    best = None
+    for attempt in range(max(opt.mapping_attempts, 1)):
+        # The incremental mapper can start from a poor initial pair on small or repetitive captures
+        # and stall after a few images: another seed usually registers everything.
+        options = pycolmap.IncrementalPipelineOptions()
+        options.num_threads = opt.num_threads
+        options.multiple_models = True
+        options.random_seed = attempt
+        count[0] = 0
+        shutil.rmtree(work, ignore_errors=True)
+        work.mkdir(parents=True)
+        models = pycolmap.incremental_mapping(db, image_dir, work, options=options, next_image_callback=on_image)
+        for r in models.values():
+            if best is None or r.num_reg_images() > best.num_reg_images():
+                best = r
+        if best is not None and best.num_reg_images() >= 0.9 * total:
+            break
+        if task is not None:
+            progress.update(task, completed=0, stats=f"retry {attempt + 1}: {best.num_reg_images() if best else 0} registered")
+    if best is None:
         shutil.rmtree(work, ignore_errors=True)
         raise DataError(f"registration failed: 0 of {total} images registered (no initial pair; try --matching exhaustive, "
                         "more frames, or less blur)", image_dir)
-    best = max(models.values(), key=lambda r: r.num_reg_images())
     out_dir.mkdir(parents=True, exist_ok=True)
     final.mkdir(parents=True, exist_ok=True)
     best.write(str(final))
