@@ -36,7 +36,7 @@ class GroundPlane:
 
 def fit_ground_plane(points: np.ndarray, cam_centres: np.ndarray, cam_up: Optional[np.ndarray] = None,
                      iterations: int = 2000, rel_thresh: float = 0.05, max_tilt_deg: float = 30.0,
-                     min_inliers: int = 30, seed: int = 0) -> Optional[GroundPlane]:
+                     min_inliers: int = 15, seed: int = 0) -> Optional[GroundPlane]:
     """RANSAC plane over points below the cameras; ``None`` when no credible plane exists.
 
     ``cam_up`` (the cameras' mean up axis in data units) selects the candidate points (below the

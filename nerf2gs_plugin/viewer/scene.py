@@ -138,13 +138,16 @@ def find_extra_views(config, train_data, train_cameras: Cameras, thumb_side: int
             except (OSError, ValueError, KeyError, TypeError):
                 continue
             same = (doc.get("dataset") == fingerprint and float(cfg.get("delta_h", -1)) == float(aug.delta_h)
-                    and float(cfg.get("theta_pitch", -1)) == float(aug.theta_pitch) and int(cfg.get("every_n", 1)) == every_n)
-            if not same or poses.ndim != 3 or len(poses) != len(sub):
+                    and float(cfg.get("theta_pitch", -1)) == float(aug.theta_pitch) and int(cfg.get("every_n", 1)) == every_n
+                    and cfg.get("pitch_mode", "relative") == getattr(aug, "pitch_mode", "relative"))
+            kept = torch.tensor(doc.get("extra_indices", list(range(len(sub)))), dtype=torch.long)  # dropped views left out
+            if not same or poses.ndim != 3 or len(poses) != len(kept) or (len(kept) and int(kept.max()) >= len(sub)):
                 continue
             thumbs: list[Optional[np.ndarray]] = []
             for j in range(len(poses)):
                 png = path.parent / "extra" / f"{j:05d}.png"
                 thumbs.append(thumbnail(_load_png(png), thumb_side) if png.is_file() else None)
-            return ExtraViews(sub.with_poses(poses.to(sub.device)), thumbs, str(path))
-    cams = bev_cameras(train_cameras, train_data.up, train_data.metres_to_world(aug.delta_h), aug.theta_pitch, every_n)
+            return ExtraViews(sub[kept].with_poses(poses.to(sub.device)), thumbs, str(path))
+    cams = bev_cameras(train_cameras, train_data.up, train_data.metres_to_world(aug.delta_h), aug.theta_pitch, every_n,
+                       getattr(aug, "pitch_mode", "relative"))
     return ExtraViews(cams, [None] * len(cams), "recomputed from the run's --augment config (no cache manifest found)")

@@ -35,7 +35,7 @@ class SfmOptions:
     max_features: int = 4096
     """SIFT features per image at most."""
     mapping_attempts: int = 3
-    """Incremental mapping is retried with another seed (up to this many runs) while < 90% of frames register."""
+    """Incremental mapping is retried from another initial pair (up to this many runs) while < 90% of frames register."""
     camera_model: str = "SIMPLE_RADIAL"
     """COLMAP camera model estimated by the SfM (one camera shared by all frames)."""
     num_threads: int = -1
@@ -179,6 +179,8 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
         if task is not None:
             progress.update(task, completed=min(count[0] + 1, total), stats=f"{count[0] + 1} registered")
 
+    with pycolmap.Database.open(str(db)) as d:
+        ids = [int(im.image_id) for im in sorted(d.read_all_images(), key=lambda im: im.name)]
     best = None
     for attempt in range(max(opt.mapping_attempts, 1)):
         # The incremental mapper can start from a poor initial pair on small or repetitive captures
@@ -187,6 +189,13 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
         options.num_threads = opt.num_threads
         options.multiple_models = True
         options.random_seed = attempt
+        if attempt > 0 and len(ids) > 6:  # COLMAP's own choice stalled: start from a pair at another point of the capture
+            a = (attempt * len(ids)) // (max(opt.mapping_attempts, 2) + 1)
+            options.init_image_id1, options.init_image_id2 = ids[a], ids[min(a + 2, len(ids) - 1)]
+            # and accept what a forward-moving camera with few features gives: smaller angles, fewer inliers
+            options.mapper.init_min_tri_angle = 8.0
+            options.mapper.init_max_forward_motion = 0.99
+            options.mapper.abs_pose_min_num_inliers = 15
         count[0] = 0
         shutil.rmtree(work, ignore_errors=True)
         work.mkdir(parents=True)
