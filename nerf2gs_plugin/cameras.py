@@ -266,6 +266,28 @@ def birds_eye_poses(camera_to_worlds: Tensor, up: Tensor, delta_h: float, theta_
     return torch.cat([R_new, t[:, :, None]], dim=-1)
 
 
+def birds_eye_poses_absolute(camera_to_worlds: Tensor, up: Tensor, delta_h: float, theta_pitch_deg: float) -> Tensor:
+    """Bird's-eye views pitched ``theta_pitch`` below the HORIZON of the ground plane (normal ``up``),
+    whatever the input camera's own tilt and roll: each camera's forward direction is projected on
+    the ground plane, pitched down by ``theta_pitch``, and the view is levelled (no roll). For level
+    input cameras (a car-mounted camera) this equals :func:`birds_eye_poses`; for walking photos
+    pointing 9-24 deg up it is what "30 deg down" means."""
+    up = torch.nn.functional.normalize(up.to(camera_to_worlds), dim=0)
+    R = camera_to_worlds[:, :, :3]
+    fwd = -R[:, :, 2]
+    flat = fwd - (fwd @ up)[:, None] * up
+    # A camera looking straight up or down has no horizontal forward: use its own up axis instead.
+    cam_up = R[:, :, 1] - (R[:, :, 1] @ up)[:, None] * up
+    weak = flat.norm(dim=-1, keepdim=True) < 1e-4
+    flat = torch.nn.functional.normalize(torch.where(weak, cam_up, flat), dim=-1)
+    a = math.radians(theta_pitch_deg)
+    f = math.cos(a) * flat - math.sin(a) * up
+    right = torch.nn.functional.normalize(torch.cross(f, up.expand_as(f), dim=-1), dim=-1)
+    new_up = torch.cross(right, f, dim=-1)
+    t = camera_to_worlds[:, :, 3] + delta_h * up
+    return torch.stack([right, new_up, -f, t], dim=-1)
+
+
 def _axis_angle(axis: Tensor, angle: float) -> Tensor:
     """Rotation matrices ``[N, 3, 3]`` about unit axes ``[N, 3]`` by one angle (radians)."""
     axis = torch.nn.functional.normalize(axis, dim=-1)

@@ -1,7 +1,9 @@
-"""ns2gs-data synth-street | preview | export-augmented | preview-augmented
+"""ns2gs-data synth-street | preview | process images | process video | export-augmented | preview-augmented
 
   ns2gs-data synth-street data/street [--seed 0 --width 200 --height 112 --num-train 60 ...]
   ns2gs-data preview data/street [--out preview.png]
+  ns2gs-data process video drive.mp4 --out data/drive [--num-frames 150 | --fps 2] [--camera-height 1.5]
+  ns2gs-data process images photos/ --out data/photos [--matching exhaustive]
 """
 
 from __future__ import annotations
@@ -46,8 +48,17 @@ class Preview:
         print(f"wrote {write_preview(self.data, self.out or Path(self.data) / 'preview.png', self.rows)}")
 
 
+@dataclass
+class Process:
+    """A raw capture -> posed, metric dataset: `process video FILE --out DATA` or `process images DIR --out DATA`
+    (see `ns2gs-data process video --help`)."""
+
+    def main(self) -> None:  # pragma: no cover - dispatched in main()
+        raise SystemExit("usage: ns2gs-data process {images,video} ...")
+
+
 def _subcommands() -> dict[str, type]:
-    subs: dict[str, type] = {"synth-street": SynthStreet, "preview": Preview}
+    subs: dict[str, type] = {"synth-street": SynthStreet, "preview": Preview, "process": Process}
     from nerf2gs_plugin.cli.augmented_data import AUGMENTED_SUBCOMMANDS
 
     subs.update(AUGMENTED_SUBCOMMANDS)
@@ -56,6 +67,15 @@ def _subcommands() -> dict[str, type]:
 
 def main(args: Optional[Sequence[str]] = None) -> None:
     """Parse ``args`` (default: sys.argv) and run the chosen subcommand."""
+    import sys
+
+    argv = list(sys.argv[1:] if args is None else args)
+    if argv and argv[0] == "process":
+        from nerf2gs_plugin.cli.process import ProcessImages, ProcessVideo
+
+        sub = tyro.extras.subcommand_cli_from_dict({"images": ProcessImages, "video": ProcessVideo}, prog="ns2gs-data process", args=argv[1:])
+        sub.main()
+        return
     cmd = tyro.extras.subcommand_cli_from_dict(_subcommands(), prog="ns2gs-data", args=args)
     cmd.main()
 

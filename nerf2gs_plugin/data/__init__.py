@@ -40,21 +40,23 @@ __all__ = [
     "save_dataparser_transform",
 ]
 
-def dataparser_config(data: Union[str, Path], downscale: float = 1.0) -> Any:
+def dataparser_config(data: Union[str, Path], downscale: float = 1.0, **options) -> Any:
     """The parser config for a dataset folder (or a ``transforms.json`` file): the first registered
-    dataparser that detects its format."""
+    dataparser that detects its format. ``options``: ``holdout_every``, ``metres_per_unit``,
+    ``camera_height`` (None = the parser's default)."""
     data = Path(data)
+    options = {k: v for k, v in options.items() if v is not None}
     if not data.exists():
         raise DataError("dataset folder does not exist", data)
     for spec in discover_dataparsers().parsers.values():
         if spec.detect(data):
-            return spec.config(data, downscale)
+            return spec.config(data, downscale, **options)
     raise DataError("not a dataset: no transforms.json and no COLMAP model (sparse/0 or sparse/)", data)
 
 
-def parse_dataset(data: Union[str, Path], split: str = "train", downscale: float = 1.0) -> DataparserOutputs:
+def parse_dataset(data: Union[str, Path], split: str = "train", downscale: float = 1.0, **options) -> DataparserOutputs:
     """One split of the dataset at ``data``, normalised (same transform for every split)."""
-    return dataparser_config(data, downscale).parse(split)
+    return dataparser_config(data, downscale, **options).parse(split)
 
 
 def dataset_files(data: Union[str, Path]) -> list[Path]:
@@ -96,6 +98,6 @@ def folder_fingerprint(data: Union[str, Path]) -> str:
     return files_fingerprint(dataset_files(data), data.parent if data.is_file() else data)
 
 
-def list_splits(data: Union[str, Path]) -> list[str]:
+def list_splits(data: Union[str, Path], **options) -> list[str]:
     """Split names of the dataset at ``data``: "train" first, then its eval splits."""
-    return dataparser_config(data).splits()
+    return dataparser_config(data, **options).splits()

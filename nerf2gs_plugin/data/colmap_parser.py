@@ -8,8 +8,10 @@ OPENCV (k1, k2, p1, p2) and are undistorted (see :mod:`undistort`). ``points3D``
 Splits: ``<data>/splits.json`` = ``{"train": [image names], "<split>": [image names], ...}``
 (without "train", train = the images in no other split); without the file, every
 ``holdout_every``-th image sorted by name (the 0th, 8th, ...) is the "test" split, as the
-mip-NeRF 360 / nerfstudio convention. Optional ``<data>/scene.json`` gives ``metres_per_unit`` and
-``up`` for the COLMAP world.
+mip-NeRF 360 / nerfstudio convention. Metric scale: ``--pipeline.datamanager.metres-per-unit``, or
+``--pipeline.datamanager.camera-height`` (ground plane, see :mod:`nerf2gs_plugin.data.ground`), or the
+older ``<data>/scene.json`` (``metres_per_unit`` and ``up`` for the COLMAP world); ``ns2gs-data process``
+writes a transforms.json with both instead.
 """
 
 from __future__ import annotations
@@ -56,6 +58,8 @@ class ColmapDataParserConfig:
     """Metres per COLMAP unit (overrides scene.json; default 1)."""
     holdout_every: int = 8
     """Without splits.json, every N-th image is the "test" split (0: none)."""
+    camera_height: Optional[float] = None
+    """Metric scale and up from the ground plane under the cameras at this height (m); see data/ground.py."""
 
     def splits(self) -> list[str]:
         return list(self._groups()[0])
@@ -77,6 +81,11 @@ class ColmapDataParserConfig:
         mpu = float(self.metres_per_unit if self.metres_per_unit is not None else scene.get("metres_per_unit", 1.0))
         if not mpu > 0:
             raise DataError(f"metres_per_unit must be positive, got {mpu}", Path(self.data) / "scene.json")
+        if self.camera_height is not None and self.metres_per_unit is None:
+            from nerf2gs_plugin.data.ground import scale_from_frames
+
+            mpu, up_np = scale_from_frames(torch.stack([f.c2w for f in groups["train"]]).numpy(), xyz, self.camera_height, model_dir)
+            up = torch.tensor(up_np, dtype=torch.float32)
         return build_outputs(split, groups[split], groups["train"], Path(self.data), self.normalize, float(self.downscale), up, mpu, xyz, rgb)
 
     # ------------------------------------------------------------------ reading
@@ -175,5 +184,5 @@ def _intrinsics(cam, model_dir: Path, image_name: str) -> Intrinsics:
 
 colmap_dataparser = DataParserSpecification(
     detect=lambda data: data.is_dir() and find_model_dir(data) is not None,
-    config=lambda data, downscale: ColmapDataParserConfig(data=data, downscale=downscale),
+    config=lambda data, downscale, **options: ColmapDataParserConfig(data=data, downscale=downscale, **options),
     description="COLMAP sparse model (binary or text, via pycolmap) with its images")

@@ -67,6 +67,8 @@ class NerfstudioDataParserConfig:
     """Override the file's metres_per_unit/scale_metric (metres per unit of the data frame)."""
     holdout_every: int = 8
     """Without split keys in the file, every N-th frame is the "test" split (0: none)."""
+    camera_height: Optional[float] = None
+    """Metric scale and up from the ground plane under the cameras at this height (m); see data/ground.py."""
 
     @property
     def json_path(self) -> Path:
@@ -96,6 +98,11 @@ class NerfstudioDataParserConfig:
                 raise DataError(f"'up' must be a nonzero 3-vector, got {meta.get('up')!r}", path) from None
         mpu = self.metres_per_unit if self.metres_per_unit is not None else meta.get("metres_per_unit", meta.get("scale_metric", 1.0))
         mpu = _positive(mpu, "metres_per_unit", path)
+        if self.camera_height is not None and self.metres_per_unit is None:
+            from nerf2gs_plugin.data.ground import scale_from_frames
+
+            mpu, up_np = scale_from_frames(torch.stack([f.c2w for f in groups["train"]]).numpy(), xyz, self.camera_height, path)
+            up = torch.tensor(up_np, dtype=torch.float32)
         return build_outputs(split, groups[split], groups["train"], path.parent, self.normalize, float(self.downscale), up, mpu, xyz, rgb)
 
     # ------------------------------------------------------------------ reading
@@ -107,14 +114,22 @@ class NerfstudioDataParserConfig:
             raise DataError("no 'frames' list", path)
         root = path.parent
         frames = [self._frame(meta, fr, i, root, path, "frames") for i, fr in enumerate(frames_raw)]
+        missing = {f.image.resolve() for f in frames if not f.image.is_file()}
+        if missing:  # instant-ngp's own samples list absent images: skip them, as instant-ngp does
+            import warnings
+
+            warnings.warn(f"{path}: {len(missing)} of {len(frames)} frames list an image that does not exist; skipped", stacklevel=2)
+            frames = [f for f in frames if f.image.resolve() not in missing]
         by_path = {f.image.resolve(): f for f in frames}
         if len(by_path) < len(frames):
             warn_duplicate_frames(path, len(frames) - len(by_path))
 
-        def lookup(name: Any, where: str) -> RawFrame:
+        def lookup(name: Any, where: str) -> Optional[RawFrame]:
             if not isinstance(name, str):
                 raise DataError(f"{where}: expected a frame dict or a file path, got {type(name).__name__}", path)
             p = _image_path(root, name)
+            if p.resolve() in missing:
+                return None
             if p.resolve() not in by_path:
                 raise DataError(f"{where}: '{name}' is not the file_path of any entry of 'frames'", path)
             return by_path[p.resolve()]
@@ -125,10 +140,10 @@ class NerfstudioDataParserConfig:
         if ev is not None and not isinstance(ev, dict):
             raise DataError("'eval_splits' must be a dict of split name -> list of frames", path)
         if "train_filenames" in meta:
-            groups["train"] = [lookup(n, f"train_filenames[{i}]") for i, n in enumerate(_list(meta, "train_filenames", path))]
+            groups["train"] = _present(lookup(n, f"train_filenames[{i}]") for i, n in enumerate(_list(meta, "train_filenames", path)))
         for key, name in (("val_filenames", "val"), ("test_filenames", "test")):
             if key in meta:
-                groups[name] = [lookup(n, f"{key}[{i}]") for i, n in enumerate(_list(meta, key, path))]
+                groups[name] = _present(lookup(n, f"{key}[{i}]") for i, n in enumerate(_list(meta, key, path)))
                 used.update(id(f) for f in groups[name])
         for name, entries in (ev or {}).items():
             if name == "train" or not isinstance(entries, list):
@@ -136,7 +151,9 @@ class NerfstudioDataParserConfig:
             items = []
             for i, e in enumerate(entries):
                 where = f"eval_splits['{name}'][{i}]"
-                items.append(self._frame(meta, e, i, root, path, f"eval_splits['{name}']") if isinstance(e, dict) else lookup(e, where))
+                item = self._frame(meta, e, i, root, path, f"eval_splits['{name}']") if isinstance(e, dict) else lookup(e, where)
+                if item is not None:
+                    items.append(item)
             used.update(id(f) for f in items)
             groups[name] = items
         if "train" not in groups:
@@ -218,6 +235,10 @@ def _read_json(path: Path) -> dict[str, Any]:
     return meta
 
 
+def _present(frames) -> list[RawFrame]:
+    return [f for f in frames if f is not None]
+
+
 def _list(meta: dict, key: str, path: Path) -> list:
     v = meta[key]
     if not isinstance(v, list):
@@ -249,5 +270,5 @@ def _detect(data: Path) -> bool:
 
 
 nerfstudio_dataparser = DataParserSpecification(
-    detect=_detect, config=lambda data, downscale: NerfstudioDataParserConfig(data=data, downscale=downscale),
+    detect=_detect, config=lambda data, downscale, **options: NerfstudioDataParserConfig(data=data, downscale=downscale, **options),
     description="nerfstudio transforms.json (PINHOLE/OPENCV, instant-ngp keys, masks, eval splits)")

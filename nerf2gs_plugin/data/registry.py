@@ -26,7 +26,7 @@ class DataParserSpecification:
     """A dataset format: whether a folder holds it, and the parser config that reads it."""
 
     detect: Callable[[Path], bool]
-    config: Callable[[Path, float], Any]  # (data folder, downscale) -> config with splits() and parse(split)
+    config: Callable[..., Any]  # (data folder, downscale, **options) -> config with splits() and parse(split)
     description: str
 
 

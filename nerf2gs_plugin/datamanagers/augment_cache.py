@@ -41,6 +41,10 @@ class CacheManifest:
     composited_images: list[int]
     num_extra: int
     extra_camera_to_worlds: list = field(default_factory=list)  # [num_extra][3][4]
+    extra_indices: list = field(default_factory=list)  # which input poses' views were kept (the rest dropped)
+    dropped_outside_box: int = 0
+    dropped_empty: int = 0
+    render_seconds: float = 0.0  # the reference's render time for this entry
     format_version: int = CACHE_FORMAT_VERSION
     path: Optional[Path] = None  # where it was read from (not written)
 
@@ -59,11 +63,12 @@ class CacheManifest:
         """``[num_extra, 3, 4]`` camera-to-world poses of the bird's-eye views."""
         return torch.tensor(self.extra_camera_to_worlds, dtype=torch.float32).reshape(-1, 3, 4)
 
-    def same_geometry(self, dataset: str, delta_h: float, theta_pitch: float, every_n: int) -> bool:
+    def same_geometry(self, dataset: str, delta_h: float, theta_pitch: float, every_n: int, pitch_mode: str = "absolute") -> bool:
         """True when this entry's bird's-eye views are those of a run with these settings."""
         cfg = self.config
         return (self.dataset == dataset and float(cfg.get("delta_h", -1)) == float(delta_h)
-                and float(cfg.get("theta_pitch", -1)) == float(theta_pitch) and int(cfg.get("every_n", 1)) == int(every_n))
+                and float(cfg.get("theta_pitch", -1)) == float(theta_pitch) and int(cfg.get("every_n", 1)) == int(every_n)
+                and cfg.get("pitch_mode", "relative") == pitch_mode)
 
     def write(self, entry: Path) -> None:
         doc = {k: v for k, v in asdict(self).items() if k != "path"}
@@ -84,7 +89,10 @@ def read_manifest(path: Path) -> CacheManifest:
         manifest = CacheManifest(
             reference=str(doc["reference"]), dataset=str(doc["dataset"]), config=dict(doc["config"]),
             enhancer=str(doc["enhancer"]), composited_images=[int(i) for i in doc["composited_images"]],
-            num_extra=int(doc["num_extra"]), extra_camera_to_worlds=list(doc["extra_camera_to_worlds"]), path=path,
+            num_extra=int(doc["num_extra"]), extra_camera_to_worlds=list(doc["extra_camera_to_worlds"]),
+            extra_indices=[int(i) for i in doc.get("extra_indices", range(int(doc["num_extra"])))],
+            dropped_outside_box=int(doc.get("dropped_outside_box", 0)), dropped_empty=int(doc.get("dropped_empty", 0)),
+            render_seconds=float(doc.get("render_seconds", 0.0)), path=path,
         )
         if manifest.num_extra and manifest.extra_poses().shape[0] != manifest.num_extra:
             raise ValueError("extra_camera_to_worlds does not match num_extra")

@@ -5,8 +5,10 @@ plugin) gains it and never knows the views are not real:
   (a) input-view composites: the real image with only its (dilated) transient-mask pixels
       replaced by the reference render at that pose;
   (b) bird's-eye additional views: every ``every_n``-th input pose raised by ``delta_h`` metres
-      along the scene's up vector and pitched down by ``theta_pitch`` degrees (paper Fig. 3),
-      rendered by the reference and optionally passed through an enhancer.
+      along the scene's up vector and pitched down by ``theta_pitch`` degrees below the ground
+      plane's horizon (paper Fig. 3; ``pitch_mode="relative"`` adds it to the input's own tilt),
+      rendered by the reference and optionally passed through an enhancer. A view outside the
+      scene box or a mostly empty render (low accumulation) is dropped with one warning.
 Renders are cached under the reference run, keyed by everything that changes them (the cache
 format: :mod:`nerf2gs_plugin.datamanagers.augment_cache`). This module knows no reference method,
 no enhancer implementation and no engine: the engine loads the reference and builds the enhancer.
@@ -19,14 +21,14 @@ import shutil
 import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterator, Optional, Protocol
+from typing import Any, Callable, Iterator, Literal, Optional, Protocol
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from nerf2gs_plugin.cameras import Cameras, birds_eye_poses
+from nerf2gs_plugin.cameras import Cameras, birds_eye_poses, birds_eye_poses_absolute
 from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
 from nerf2gs_plugin.datamanagers.augment_cache import (
@@ -78,6 +80,11 @@ class AugmentConfig:
     """Height of the additional views above the input views, in metres."""
     theta_pitch: float = 30.0
     """Downward pitch of the additional views, in degrees."""
+    pitch_mode: Literal["absolute", "relative"] = "absolute"
+    """absolute: theta-pitch below the horizon of the ground plane (the input's tilt and roll removed);
+    relative: theta-pitch added to each input camera's own tilt (the paper's Fig. 3 with level cameras)."""
+    min_coverage: float = 0.5
+    """A bird's-eye render whose fraction of pixels with accumulation > 0.5 is below this is dropped (warned)."""
     every_n: int = 1
     """Use every n-th input pose for an additional view."""
     extra_prob: Optional[float] = None
@@ -89,10 +96,24 @@ class AugmentConfig:
     use_cache: bool = True
 
 
-def bev_cameras(train: Cameras, up: Tensor, delta_h_world: float, theta_pitch: float, every_n: int = 1) -> Cameras:
+def bev_cameras(train: Cameras, up: Tensor, delta_h_world: float, theta_pitch: float, every_n: int = 1,
+                pitch_mode: str = "relative") -> Cameras:
     """The additional-view cameras: input intrinsics, raised and pitched poses."""
     sub = train[torch.arange(0, len(train), max(every_n, 1))]
-    return sub.with_poses(birds_eye_poses(sub.camera_to_worlds, up, delta_h_world, theta_pitch))
+    if pitch_mode not in ("absolute", "relative"):
+        from nerf2gs_plugin.errors import ConfigError
+
+        raise ConfigError(f"--augment.pitch-mode must be absolute or relative, got {pitch_mode!r}")
+    poses = birds_eye_poses_absolute if pitch_mode == "absolute" else birds_eye_poses
+    return sub.with_poses(poses(sub.camera_to_worlds, up, delta_h_world, theta_pitch))
+
+
+def inside_box(centres: Tensor, box: Optional[Tensor]) -> Tensor:
+    """Bool ``[N]``: camera centres inside the scene box ``[2, 3]`` (all True without a box)."""
+    if box is None:
+        return torch.ones(len(centres), dtype=torch.bool)
+    box = box.to(centres)
+    return ((centres >= box[0]) & (centres <= box[1])).all(-1)
 
 
 def composite(real: Tensor, render: Tensor, mask: Tensor, dilate_px: int = 0, feather_px: int = 0) -> Tensor:
@@ -119,15 +140,27 @@ class AugmentedViews:
     reused: bool
     manifest: Optional[CacheManifest] = None
 
+    @property
+    def render_seconds(self) -> float:
+        """The reference's render time for this entry (as measured when it was rendered)."""
+        return self.manifest.render_seconds if self.manifest is not None else 0.0
+
 
 def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn: RenderFn, config: AugmentConfig,
-                  enhancer: Optional[ViewEnhancer], comp_idx: list[int]) -> None:
-    """Render every image of a cache entry into ``work`` (not yet the entry: it is renamed after)."""
+                  enhancer: Optional[ViewEnhancer], comp_idx: list[int], scene_box: Optional[Tensor]) -> dict[str, Any]:
+    """Render every image of a cache entry into ``work`` (not yet the entry: it is renamed after).
+    Bird's-eye views outside the scene box or with mostly empty renders are left out; returns the
+    manifest fields that say which were kept and how long it took."""
+    import time
+
     from nerf2gs_plugin.progress import make_progress
 
     for sub in ("composites", "extra", "extra_raw"):
         (work / sub).mkdir(parents=True, exist_ok=True)
     n_jobs = len(comp_idx) + (len(bev) if bev is not None else 0)
+    kept: list[int] = []
+    outside = empty = 0
+    t0 = time.perf_counter()
     with make_progress() as progress:
         task = progress.add_task("render reference views", total=n_jobs, stats="")
         for i in comp_idx:
@@ -135,24 +168,37 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
             comp = composite(train.image(i).cpu(), out, train.mask("transient", i).cpu(), config.dilate_px, config.feather_px)
             save_png(work / "composites" / f"{i:05d}.png", comp)
             progress.update(task, advance=1, stats=f"composite {i}")
+        inside = inside_box(bev.centers, scene_box) if bev is not None else None
         for j in range(len(bev) if bev is not None else 0):
+            if not bool(inside[j]):  # outside the scene box: the reference knows nothing there
+                outside += 1
+                progress.update(task, advance=1, stats=f"bird's-eye {j} outside the box")
+                continue
             out = render_fn(bev[j])
+            if "accumulation" in out and float((out["accumulation"] > 0.5).float().mean()) < config.min_coverage:
+                empty += 1
+                progress.update(task, advance=1, stats=f"bird's-eye {j} mostly empty")
+                continue
+            k = len(kept)
+            kept.append(j)
             rgb = out["rgb"].cpu()
-            save_png(work / "extra_raw" / f"{j:05d}.png", rgb)
+            save_png(work / "extra_raw" / f"{k:05d}.png", rgb)
             if "depth" in out:
-                np.save(work / "extra_raw" / f"{j:05d}_depth.npy", out["depth"].cpu().numpy().astype(np.float16))
+                np.save(work / "extra_raw" / f"{k:05d}_depth.npy", out["depth"].cpu().numpy().astype(np.float16))
             if enhancer is not None:
                 src = train.image(j * max(config.every_n, 1)).cpu()
                 rgb = enhancer.enhance(rgb, reference=src)
-            save_png(work / "extra" / f"{j:05d}.png", rgb)
+            save_png(work / "extra" / f"{k:05d}.png", rgb)
             progress.update(task, advance=1, stats=f"bird's-eye {j}")
+    return {"extra_indices": kept, "dropped_outside_box": outside, "dropped_empty": empty,
+            "render_seconds": round(time.perf_counter() - t0, 2)}
 
 
 def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, render_fn: RenderFn, ref_key: str,
                            dataset: str, cache_root: Path, config: AugmentConfig,
-                           enhancer: Optional[ViewEnhancer] = None) -> AugmentedViews:
+                           enhancer: Optional[ViewEnhancer] = None, scene_box: Optional[Tensor] = None) -> AugmentedViews:
     """Render (or reuse from the cache) the composites and the additional views."""
-    bev = bev_cameras(train.cameras, up, delta_h_world, config.theta_pitch, config.every_n) if config.extra_views else None
+    bev = bev_cameras(train.cameras, up, delta_h_world, config.theta_pitch, config.every_n, config.pitch_mode) if config.extra_views else None
     has_transient = "transient" in train.masks and config.composites
     enhancer_key = enhancer.cache_key() if enhancer is not None else "none"
     key = cache_key(ref_key, dataset, asdict(config), bev, train.cameras, enhancer_key)
@@ -162,14 +208,23 @@ def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, re
         work = cache_dir.with_name(f".tmp-{key}-{os.getpid()}")
         shutil.rmtree(work, ignore_errors=True)
         comp_idx = [i for i in range(len(train)) if has_transient and bool(train.mask("transient", i).any())]
-        _render_entry(work, train, bev, render_fn, config, enhancer, comp_idx)
+        done = _render_entry(work, train, bev, render_fn, config, enhancer, comp_idx, scene_box)
+        kept = done["extra_indices"]
         CacheManifest(reference=ref_key, dataset=dataset, config=asdict(config), enhancer=enhancer_key,
-                      composited_images=comp_idx, num_extra=len(bev) if bev is not None else 0,
-                      extra_camera_to_worlds=bev.camera_to_worlds.cpu().tolist() if bev is not None else []).write(work)
+                      composited_images=comp_idx, num_extra=len(kept),
+                      extra_camera_to_worlds=bev[torch.tensor(kept, dtype=torch.long)].camera_to_worlds.cpu().tolist() if kept else [],
+                      **done).write(work)
         if cache_dir.exists():
             shutil.rmtree(cache_dir)
         os.replace(work, cache_dir)
     manifest = read_manifest(cache_dir)
+    dropped = manifest.dropped_outside_box + manifest.dropped_empty
+    if dropped:
+        warnings.warn(f"{dropped} of {dropped + manifest.num_extra} bird's-eye views dropped, never trained on: "
+                      f"{manifest.dropped_outside_box} outside the scene box (lower --augment.delta-h), "
+                      f"{manifest.dropped_empty} mostly empty renders (coverage < {config.min_coverage})", stacklevel=2)
+    if bev is not None:
+        bev = bev[torch.tensor(manifest.extra_indices, dtype=torch.long)]
     composites = None
     if manifest.composited_images:
         images = [train.image(i).cpu() for i in range(len(train))]
@@ -209,8 +264,9 @@ class AugmentedDataManager(DataManager):
         td = inner.train_data
         self.views: AugmentedViews = render_augmented_views(
             inner.train_images, td.up, td.metres_to_world(augment.delta_h), reference.render, reference.key,
-            dataset_fingerprint(td.image_filenames), reference.cache_root, augment, enhancer,
+            dataset_fingerprint(td.image_filenames), reference.cache_root, augment, enhancer, td.scene_box,
         )
+        print(f"reference renders: {self.views.render_seconds:.1f} s" + (" (reused from the cache)" if self.views.reused else ""))
         if self.views.composites is not None:
             inner.set_train_images(self.views.composites)
         if self.views.extra is not None:
@@ -289,11 +345,11 @@ class AugmentedDataManager(DataManager):
 
 
 def find_cached_extra_views(cache_root: Path, dataset: str, augment: AugmentConfig, num_views: int) -> Optional[CacheManifest]:
-    """The newest cache entry under a reference run whose ``num_views`` bird's-eye views are those
-    of ``augment`` (what the viewer shows for a finished augmented run), or None."""
+    """The newest cache entry under a reference run whose bird's-eye views are those of ``augment``
+    for ``num_views`` input poses (some may have been dropped: ``extra_indices``), or None."""
     for manifest in cache_manifests(cache_root):
-        same = manifest.same_geometry(dataset, augment.delta_h, augment.theta_pitch, max(int(augment.every_n), 1))
-        if same and manifest.num_extra == num_views:
+        same = manifest.same_geometry(dataset, augment.delta_h, augment.theta_pitch, max(int(augment.every_n), 1), augment.pitch_mode)
+        if same and manifest.num_extra == len(manifest.extra_indices) and all(0 <= i < num_views for i in manifest.extra_indices):
             return manifest
     return None
 

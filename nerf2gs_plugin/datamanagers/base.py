@@ -30,6 +30,16 @@ class DataManagerConfig(InstantiateConfig):
     _target: type = field(default_factory=lambda: DataManager)
     downscale: float = 1.0
     """Shrink images on load by this factor (2 = half size)."""
+    holdout_every: Optional[int] = None
+    """Datasets without split keys: every N-th frame is the "test" split (None: the parser's 8; 0: none)."""
+    metres_per_unit: Optional[float] = None
+    """Metres per data unit (overrides the dataset's metres_per_unit / scene.json)."""
+    camera_height: Optional[float] = None
+    """Metric scale and up from the ground plane fitted to the sparse points, the train cameras being this
+    many metres above it (e.g. 1.5 for a car); for captures in arbitrary units. --augment.delta-h is then metres."""
+
+    def data_options(self) -> dict:
+        return {"holdout_every": self.holdout_every, "metres_per_unit": self.metres_per_unit, "camera_height": self.camera_height}
 
 
 class DataManager(ABC):
@@ -42,13 +52,13 @@ class DataManager(ABC):
         self.config = config
         self.data = Path(data)
         self.device = torch.device(device)
-        self.train_data: DataparserOutputs = parse_dataset(self.data, "train", downscale=config.downscale)
+        self.train_data: DataparserOutputs = parse_dataset(self.data, "train", downscale=config.downscale, **config.data_options())
         if len(self.train_data) == 0:
             raise DataError("the train split is empty", self.data)
         self.train_images: ImageSet = load_image_set(self.train_data).to(self.device)
         self.extra_images: Optional[ImageSet] = None
         self.extra_prob = 0.0
-        self._split_names = [s for s in list_splits(self.data) if s != "train"]
+        self._split_names = [s for s in list_splits(self.data, **config.data_options()) if s != "train"]
         self._eval_cache: dict[str, tuple[DataparserOutputs, ImageSet]] = {}
         self.generator = torch.Generator().manual_seed(seed)
 
@@ -78,7 +88,7 @@ class DataManager(ABC):
         if name not in self._eval_cache:
             if name not in self._split_names:
                 raise DataError(f"no eval split '{name}' (the dataset has: {', '.join(self.eval_split_names()) or 'none'})", self.data)
-            outputs = parse_dataset(self.data, name, downscale=self.config.downscale)
+            outputs = parse_dataset(self.data, name, downscale=self.config.downscale, **self.config.data_options())
             if len(outputs) == 0:
                 raise DataError(f"eval split '{name}' is empty", self.data)
             self._eval_cache[name] = (outputs, load_image_set(outputs).to(self.device))

@@ -15,6 +15,7 @@ from nerf2gs_plugin.engine.checkpoints import dataset_fingerprint, file_hash, lo
 from nerf2gs_plugin.engine.config import load_config, read_config_doc
 from nerf2gs_plugin.engine.pipeline import Pipeline
 from nerf2gs_plugin.enhancers import make_enhancer
+from nerf2gs_plugin.data import parse_dataset
 from nerf2gs_plugin.errors import CheckpointError, ConfigError
 from nerf2gs_plugin.registry import get_method
 
@@ -57,13 +58,28 @@ def load_run(path: Path, device: torch.device | str = "cpu", data: Optional[Path
     return LoadedRun(run_dir, ckpt_file, config, pipeline, int(ckpt["step"]), file_hash(ckpt_file), float(ckpt.get("train_seconds", 0.0)))
 
 
+def _same_data_other_downscale(run_dir: Path, datamanager, fingerprint: Optional[str]) -> bool:
+    """True when the reference was trained on this dataset at another ``downscale``: the fingerprint
+    keys the (resized) training files, so it is recomputed at the reference's downscale. The
+    reference then renders at the target's cameras, i.e. at the target's resolution."""
+    try:
+        doc = read_config_doc(run_dir / "config.yml")
+        ref_ds = float(doc["config"]["pipeline"]["datamanager"]["downscale"])
+    except (KeyError, TypeError, ValueError, ConfigError):
+        return False
+    if fingerprint is None or ref_ds == float(datamanager.config.downscale):
+        return False
+    options = datamanager.config.data_options() if hasattr(datamanager.config, "data_options") else {}
+    return dataset_fingerprint(parse_dataset(datamanager.data, "train", downscale=ref_ds, **options).image_filenames) == fingerprint
+
+
 def load_reference(reference: Path, datamanager, device: torch.device | str) -> Reference:
     """A reference run (directory or .ckpt) for the augmentation of ``datamanager``'s dataset: it must
     have been trained on the same images and its method must render whole cameras."""
     run_dir, ckpt_file = resolve_checkpoint(reference)
     ckpt = load_checkpoint(ckpt_file, map_location="cpu")
     ours = dataset_fingerprint(datamanager.train_data.image_filenames)
-    if ckpt.get("dataset") != ours:
+    if ckpt.get("dataset") != ours and not _same_data_other_downscale(run_dir, datamanager, ckpt.get("dataset")):
         raise CheckpointError(
             f"reference was trained on a different dataset (fingerprint {ckpt.get('dataset')} vs {ours} for {datamanager.data})", ckpt_file
         )

@@ -187,8 +187,10 @@ class Trainer:
         return path
 
     def _write_train_log(self) -> None:
+        views = getattr(self.pipeline.datamanager, "views", None)  # an AugmentedDataManager's reference renders
         atomic_write_text(self.run_dir / "train_log.json", json.dumps(
-            {"train_seconds": self.train_seconds, "history_stride": self.history.stride, "history": self.history.records()}))
+            {"train_seconds": self.train_seconds, "reference_render_seconds": getattr(views, "render_seconds", 0.0),
+             "history_stride": self.history.stride, "history": self.history.records()}))
 
     def _write_checkpoint(self, path: Path, step: int, dm: Any) -> None:
         save_checkpoint(

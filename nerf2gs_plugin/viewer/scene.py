@@ -134,6 +134,8 @@ def find_extra_views(config, train_data, train_cameras: Cameras, thumb_side: int
         for j in range(manifest.num_extra):
             png = manifest.extra_png(j)
             thumbs.append(thumbnail(load_png(png), thumb_side) if png.is_file() else None)
-        return ExtraViews(sub.with_poses(manifest.extra_poses().to(sub.device)), thumbs, str(manifest.path))
-    cams = bev_cameras(train_cameras, train_data.up, train_data.metres_to_world(aug.delta_h), aug.theta_pitch, every_n)
+        return ExtraViews(sub[torch.tensor(manifest.extra_indices, dtype=torch.long)].with_poses(manifest.extra_poses().to(sub.device)),
+                          thumbs, str(manifest.path))
+    cams = bev_cameras(train_cameras, train_data.up, train_data.metres_to_world(aug.delta_h), aug.theta_pitch, every_n,
+                       aug.pitch_mode)
     return ExtraViews(cams, [None] * len(cams), "recomputed from the run's --augment config (no cache manifest found)")

@@ -110,10 +110,10 @@ def test_interrupted_render_leaves_no_cache_entry(tiny_scene, tmp_path):
             return super().__call__(camera)
 
     with pytest.raises(KeyboardInterrupt):
-        _augment(_dm(tiny_scene), Failing(), "ref:x", tmp_path, AugmentConfig())
+        _augment(_dm(tiny_scene), Failing(), "ref:x", tmp_path, AugmentConfig(delta_h=2.0))
     assert not [p for p in (tmp_path / "augment_cache").iterdir() if not p.name.startswith(".tmp-")]
     r = CountingRenderer()
-    _augment(_dm(tiny_scene), r, "ref:x", tmp_path, AugmentConfig())
+    _augment(_dm(tiny_scene), r, "ref:x", tmp_path, AugmentConfig(delta_h=2.0))
     assert r.calls > 0
 
 
@@ -148,6 +148,8 @@ def test_plugin_trains_with_augment_from_cli(tiny_scene, tmp_path):
     assert torch.allclose(rise, torch.full_like(rise, float(train.metres_to_world(2.0))), atol=1e-4)
     cfg = (next((tmp_path / "tgt").rglob("config.yml"))).read_text()
     assert str(ref) in cfg and "delta_h: 2.0" in cfg
+    log = json.loads(next((tmp_path / "tgt").rglob("train_log.json")).read_text())
+    assert log["reference_render_seconds"] > 0  # reported with the training time
 
 
 def test_bad_references(tiny_scene, tmp_path):

@@ -26,7 +26,7 @@ def test_extra_views_from_manifest_then_recomputed(tiny_scene, tmp_path):
     aug = AugmentConfig(delta_h=3.0, theta_pitch=40.0, every_n=2, composites=False)
     views = render_augmented_views(dm.train_images, td.up, td.metres_to_world(aug.delta_h), _constant_render, "ref:test",
                                    dataset_fingerprint(td.image_filenames), ref, aug)
-    expected = bev_cameras(dm.train_images.cameras, td.up, td.metres_to_world(aug.delta_h), aug.theta_pitch, aug.every_n)
+    expected = bev_cameras(dm.train_images.cameras, td.up, td.metres_to_world(aug.delta_h), aug.theta_pitch, aug.every_n, aug.pitch_mode)
     config = SimpleNamespace(augment_from=ref, augment=aug)
 
     found = find_extra_views(config, td, dm.train_images.cameras, thumb_side=16)

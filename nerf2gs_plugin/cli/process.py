@@ -1,0 +1,60 @@
+"""``ns2gs-data process video FILE --out DATA`` and ``ns2gs-data process images DIR --out DATA``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import tyro
+
+from nerf2gs_plugin.data.process.pipeline import ProcessOptions
+
+
+@dataclass
+class ProcessVideo(ProcessOptions):
+    """A video (e.g. a dashcam drive) -> frames (sharpest per window, blurry ones dropped) -> pycolmap
+    SfM (sequential matching) -> undistorted PINHOLE dataset with metric scale from the ground plane."""
+
+    video: tyro.conf.Positional[Path] = Path("video.mp4")
+    """The video file (anything OpenCV decodes: mp4, avi, mov, ...)."""
+    num_frames: Optional[int] = 150
+    """Frames to keep, evenly spread over the video (ignored when --fps is set)."""
+    fps: Optional[float] = None
+    """Frames per second of video to keep (instead of --num-frames)."""
+    blur_ratio: float = 0.5
+    """Drop a frame whose sharpness (variance of Laplacian) is below this x its neighbours' median (0: keep all)."""
+
+    def main(self) -> None:
+        from nerf2gs_plugin.data.process.frames import extract_video_frames
+        from nerf2gs_plugin.data.process.pipeline import run_process
+
+        n = None if self.fps else self.num_frames
+
+        def frames(frame_dir: Path, progress):
+            return extract_video_frames(self.video, frame_dir, self.fps, n, self.blur_ratio, self.max_size, progress=progress)
+
+        for line in run_process(frames, self, is_video=True).lines():
+            print(line)
+
+
+@dataclass
+class ProcessImages(ProcessOptions):
+    """A folder of JPEG/PNG photos (capture order = natural name order) -> pycolmap SfM (exhaustive
+    matching up to --exhaustive-max photos, sequential beyond; EXIF focal used when present) ->
+    undistorted PINHOLE dataset with metric scale from the ground plane."""
+
+    images: tyro.conf.Positional[Path] = Path("images")
+    """Folder of photos."""
+
+    def main(self) -> None:
+        from nerf2gs_plugin.data.process.frames import collect_images, list_images
+        from nerf2gs_plugin.data.process.pipeline import exif_focal_for, run_process
+
+        def frames(frame_dir: Path, progress):
+            return collect_images(self.images, frame_dir, self.max_size, progress)
+
+        sources = list_images(self.images)
+        report = run_process(frames, self, is_video=False, focal_px_fn=lambda d, names: exif_focal_for(sources, d, names))
+        for line in report.lines():
+            print(line)

@@ -1,0 +1,103 @@
+"""Stages 5-6: undistortion to PINHOLE and the dataset layout the parsers read.
+
+Layout written into DATA::
+
+    images/            undistorted frames (PINHOLE)
+    images_2|4|8/      downscaled copies (area averaging; same names)
+    sparse/0/          the undistorted COLMAP model (PINHOLE cameras, points3D)
+    sparse_pc.ply      the sparse points (initialises splats)
+    transforms.json    nerfstudio format: PINHOLE intrinsics, frames in capture order, metres_per_unit
+                       and up from the ground plane (see :mod:`nerf2gs_plugin.data.ground`), ground_plane
+    colmap/            work files: frames/, database.db, distorted/ (the raw SfM model)
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+from typing import Optional
+
+import cv2
+import numpy as np
+import torch
+
+from nerf2gs_plugin.cameras import opencv_w2c_to_opengl_c2w
+from nerf2gs_plugin.data.images import scaled_size
+from nerf2gs_plugin.data.ply import write_ply_points
+
+DOWNSCALES = (2, 4, 8)
+
+
+def undistort(model_dir: Path, image_dir: Path, out_root: Path, progress=None) -> Path:
+    """PINHOLE images + model into ``out_root/{images,sparse}`` (via a temp folder, then renamed)."""
+    import pycolmap
+
+    task = progress.add_task("undistort (PINHOLE)", total=1, stats="") if progress else None
+    work = out_root.with_name(out_root.name + ".tmp")
+    shutil.rmtree(work, ignore_errors=True)
+    pycolmap.undistort_images(str(work), str(model_dir), str(image_dir), output_type="COLMAP")
+    shutil.rmtree(out_root, ignore_errors=True)
+    os.replace(work, out_root)
+    if task is not None:
+        progress.update(task, advance=1)
+    return out_root
+
+
+def camera_arrays(rec) -> tuple[list[str], np.ndarray, list]:
+    """Registered image names (sorted = capture order), OpenGL c2w ``[N, 3, 4]``, cameras."""
+    imgs = sorted((im for im in rec.images.values() if im.has_pose), key=lambda im: im.name)
+    w2c = np.tile(np.eye(4), (len(imgs), 1, 1))
+    for k, im in enumerate(imgs):
+        w2c[k, :3] = np.asarray(im.cam_from_world().matrix(), dtype=np.float64)
+    c2w = opencv_w2c_to_opengl_c2w(torch.from_numpy(w2c)).numpy()
+    return [im.name for im in imgs], c2w, [rec.cameras[im.camera_id] for im in imgs]
+
+
+def points_arrays(rec) -> tuple[np.ndarray, np.ndarray]:
+    pts = rec.points3D
+    if not len(pts):
+        return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8)
+    return (np.array([p.xyz for p in pts.values()], dtype=np.float32).reshape(-1, 3),
+            np.array([p.color for p in pts.values()], dtype=np.uint8).reshape(-1, 3))
+
+
+def write_downscaled(root: Path, names: list[str], progress=None) -> None:
+    """``images_{2,4,8}/`` copies of ``images/`` (skipped per file when already there)."""
+    task = progress.add_task("downscaled copies", total=len(names) * len(DOWNSCALES), stats="") if progress else None
+    for d in DOWNSCALES:
+        out = root / f"images_{d}"
+        out.mkdir(exist_ok=True)
+        for n in names:
+            dst = out / n
+            if not dst.is_file():
+                img = cv2.imread(str(root / "images" / n), cv2.IMREAD_UNCHANGED)
+                small = cv2.resize(img, scaled_size(img.shape[1], img.shape[0], d), interpolation=cv2.INTER_AREA)
+                tmp = dst.with_name(f".{dst.stem}.tmp{dst.suffix}")
+                cv2.imwrite(str(tmp), small)
+                os.replace(tmp, dst)
+            if task is not None:
+                progress.update(task, advance=1)
+
+
+def write_transforms(root: Path, rec, metres_per_unit: float, up: Optional[np.ndarray], extra: dict) -> Path:
+    """``transforms.json`` (+ ``sparse_pc.ply``) from the undistorted model, atomically."""
+    names, c2w, cams = camera_arrays(rec)
+    xyz, rgb = points_arrays(rec)
+    write_ply_points(root / "sparse_pc.ply", xyz, rgb)
+    frames = []
+    for n, m, cam in zip(names, c2w, cams):
+        p = [float(v) for v in cam.params]
+        fx, fy, cx, cy = (p[0], p[0], p[1], p[2]) if cam.model.name == "SIMPLE_PINHOLE" else p[:4]
+        frames.append({"file_path": f"images/{n}", "transform_matrix": np.vstack([m, [0, 0, 0, 1]]).tolist(),
+                       "fl_x": fx, "fl_y": fy, "cx": cx, "cy": cy, "w": int(cam.width), "h": int(cam.height)})
+    meta = {"camera_model": "PINHOLE", "frames": frames, "ply_file_path": "sparse_pc.ply", "metres_per_unit": float(metres_per_unit)}
+    if up is not None:
+        meta["up"] = [float(v) for v in up]
+    meta.update(extra)
+    path = root / "transforms.json"
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(meta, indent=1))
+    os.replace(tmp, path)
+    return path

@@ -1,0 +1,158 @@
+"""The ``ns2gs-data process`` pipeline: stages in order, each timed, reported and resumable."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Literal, Optional
+
+import numpy as np
+import tyro
+
+from nerf2gs_plugin.data.process.sfm import SfmOptions
+from nerf2gs_plugin.errors import DataError
+
+
+@dataclass
+class ProcessOptions:
+    """Options shared by ``process images`` and ``process video``."""
+
+    out: Path = Path("data/capture")
+    """Output dataset folder (re-running reuses finished stages)."""
+    sfm: tyro.conf.OmitArgPrefixes[SfmOptions] = field(default_factory=SfmOptions)
+    camera_height: float = 1.5
+    """Camera height above the road in metres (1.5: car-mounted; ~1.6 for a hand-held walk): sets the metric scale."""
+    metres_per_unit: Optional[float] = None
+    """Metres per SfM unit, when known (skips the camera-height scale; the ground plane still gives up)."""
+    fov_deg: Optional[float] = None
+    """Horizontal field of view of the camera in degrees, when known (a dashcam's spec, e.g. 90-120): the
+    focal prior for the SfM (photos use their EXIF focal; without either COLMAP guesses ~45 deg and refines)."""
+    max_size: int = 1600
+    """Frames larger than this (longest side, px) are shrunk before the SfM (0: keep)."""
+    min_registered_fraction: float = 0.5
+    """Fewer registered frames than this fraction is an error."""
+    progress: bool = True
+
+
+@dataclass
+class ProcessReport:
+    out: Path
+    frames: int
+    registered: int
+    points: int
+    matching: str
+    metres_per_unit: float
+    scale_source: str
+    stage_seconds: dict[str, float]
+    dropped_blurry: int = 0
+
+    def lines(self) -> list[str]:
+        t = ", ".join(f"{k} {v:.1f} s" for k, v in self.stage_seconds.items())
+        return [
+            f"registered {self.registered} of {self.frames} frames ({100.0 * self.registered / max(self.frames, 1):.0f}%), "
+            f"{self.points} sparse points, matching {self.matching}"
+            + (f"; {self.dropped_blurry} blurry frames dropped" if self.dropped_blurry else ""),
+            f"metric scale: {self.metres_per_unit:.4g} metres per SfM unit ({self.scale_source}); stored in transforms.json",
+            f"time per stage: {t}",
+            f"dataset: {self.out} (train with: ns2gs-train streetnerf --data {self.out})",
+        ]
+
+
+def _silence_colmap() -> None:
+    import pycolmap
+
+    pycolmap.logging.minloglevel = 2  # errors only: COLMAP's INFO stream would bury the progress bars
+
+
+def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=None) -> ProcessReport:
+    """``frames_fn(frame_dir, progress) -> FrameReport`` makes the frames; the rest is shared."""
+    from nerf2gs_plugin.data.ground import estimate_metric_scale
+    from nerf2gs_plugin.data.process import export, sfm
+    from nerf2gs_plugin.progress import make_progress
+
+    _silence_colmap()
+    root = Path(opts.out)
+    work = root / "colmap"
+    frame_dir = work / "frames"
+    work.mkdir(parents=True, exist_ok=True)
+    times: dict[str, float] = {}
+    with make_progress(enabled=opts.progress) as progress:
+        t = time.perf_counter()
+        fr = frames_fn(frame_dir, progress)
+        times["frames"] = time.perf_counter() - t
+        names = fr.names
+        for p in frame_dir.iterdir():  # frames of an earlier run with other options
+            if p.is_file() and p.name not in set(names):
+                p.unlink()
+        focal = focal_px_fn(frame_dir, names) if focal_px_fn else None
+        if opts.fov_deg is not None:
+            from nerf2gs_plugin.data.images import image_size
+
+            if not 1.0 < opts.fov_deg < 179.0:
+                raise DataError(f"--fov-deg must be in (1, 179), got {opts.fov_deg}", "--fov-deg")
+            focal = 0.5 * image_size(frame_dir / names[0])[0] / np.tan(np.radians(opts.fov_deg) / 2)
+        t = time.perf_counter()
+        sfm.extract(work / "database.db", frame_dir, names, opts.sfm, focal, progress)
+        times["features"] = time.perf_counter() - t
+        method = sfm.choose_matching(opts.sfm, len(names), is_video)
+        t = time.perf_counter()
+        changed = sfm.match(work / "database.db", method, opts.sfm, work / "matching.json", progress)
+        times["matching"] = time.perf_counter() - t
+        t = time.perf_counter()
+        mapped = sfm.reconstruct(work / "database.db", frame_dir, work / "distorted", len(names), opts.sfm, changed, progress)
+        times["mapping"] = time.perf_counter() - t
+        if mapped.registered < opts.min_registered_fraction * len(names):
+            raise DataError(f"registration failed: only {mapped.registered} of {len(names)} frames registered (fewer than "
+                            f"{opts.min_registered_fraction:.0%}); try --matching exhaustive, more overlap, or less blur", root)
+        t = time.perf_counter()
+        und = export.undistort(mapped.model_dir, frame_dir, work / "undistorted", progress)
+        for sub, dst in (("images", root / "images"), ("sparse", root / "sparse" / "0")):
+            shutil.rmtree(dst, ignore_errors=True)
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(und / sub, dst)
+        for d in export.DOWNSCALES:
+            shutil.rmtree(root / f"images_{d}", ignore_errors=True)
+        times["undistort"] = time.perf_counter() - t
+        t = time.perf_counter()
+        import pycolmap
+
+        rec = pycolmap.Reconstruction(str(root / "sparse" / "0"))
+        reg_names, c2w, _ = export.camera_arrays(rec)
+        xyz, _ = export.points_arrays(rec)
+        scale = estimate_metric_scale(xyz, c2w[:, :, 3], c2w[:, :, 1].mean(0), opts.camera_height, opts.metres_per_unit,
+                                      where="--camera-height")
+        export.write_downscaled(root, reg_names, progress)
+        times["export"] = time.perf_counter() - t
+        extra = {"process": {"source": "video" if is_video else "images", "frames": len(names), "registered": mapped.registered,
+                             "matching": method, "camera_height_m": opts.camera_height, "scale_source": scale.source,
+                             "stage_seconds": {k: round(v, 2) for k, v in times.items()}}}
+        if scale.plane is not None:
+            extra["ground_plane"] = scale.plane.to_json()
+        export.write_transforms(root, rec, scale.metres_per_unit, scale.up, extra)
+    return ProcessReport(root, len(names), mapped.registered, mapped.points, method, scale.metres_per_unit, scale.source, times,
+                         fr.dropped_blurry)
+
+
+def exif_focal_for(sources: list[Path], frame_dir: Path, names: list[str]) -> Optional[float]:
+    """The shared EXIF focal (px, at the copied frames' size) when the first photos agree on one."""
+    from nerf2gs_plugin.data.images import image_size
+    from nerf2gs_plugin.data.process.exif import exif_focal_px
+
+    by_name = {p.name: p for p in sources}
+    vals = []
+    for n in names[:5]:
+        src = by_name.get(n)
+        if src is None:
+            return None
+        w, h = image_size(src)
+        f = exif_focal_px(src, w, h)
+        if f is None:
+            return None
+        vals.append(f * image_size(frame_dir / n)[0] / w)
+    return float(np.median(vals)) if vals else None
+
+
+ProcessKind = Literal["images", "video"]

@@ -1,0 +1,221 @@
+"""Stages 2-4 on pycolmap (CPU SIFT): features, matching, incremental mapping.
+
+Resumable: the COLMAP database is reused (images that already have features are skipped by COLMAP
+itself; matching writes a marker keyed by its options), the mapping output is reused when its
+marker matches. Feature extraction runs in chunks so the progress bar moves.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Literal, Optional
+
+from nerf2gs_plugin.errors import DataError
+
+Matching = Literal["auto", "sequential", "exhaustive"]
+
+
+@dataclass
+class SfmOptions:
+    """SfM options (flags without a prefix: --matching, --overlap, ...)."""
+
+    matching: Matching = "auto"
+    """auto: sequential for a video, exhaustive for up to ``exhaustive_max`` photos, sequential beyond."""
+    exhaustive_max: int = 40
+    overlap: int = 10
+    """Sequential matching: each frame is matched with this many following frames (plus quadratic hops)."""
+    vocab_tree: Optional[Path] = None
+    """Sequential matching: a COLMAP vocabulary tree file turns on loop detection (none is shipped)."""
+    max_image_size: int = 1600
+    """SIFT runs on images shrunk to this longest side (speed; the full image is still undistorted)."""
+    max_features: int = 4096
+    """SIFT features per image at most."""
+    mapping_attempts: int = 3
+    """Incremental mapping is retried from another initial pair (up to this many runs) while < 90% of frames register."""
+    camera_model: str = "SIMPLE_RADIAL"
+    """COLMAP camera model estimated by the SfM (one camera shared by all frames)."""
+    num_threads: int = -1
+
+
+def choose_matching(opt: SfmOptions, num_images: int, is_video: bool) -> str:
+    if opt.matching != "auto":
+        return opt.matching
+    return "sequential" if is_video or num_images > opt.exhaustive_max else "exhaustive"
+
+
+def _marker(path: Path, key: dict) -> bool:
+    try:
+        return json.loads(path.read_text()) == key
+    except (OSError, json.JSONDecodeError):
+        return False
+
+
+def _write_marker(path: Path, key: dict) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(key, sort_keys=True))
+    os.replace(tmp, path)
+
+
+def extract(db: Path, image_dir: Path, names: list[str], opt: SfmOptions, focal_px: Optional[float], progress=None, chunk: int = 16) -> None:
+    """SIFT features for ``names`` into ``db`` (one shared camera; EXIF focal as its prior)."""
+    import pycolmap
+
+    ext = pycolmap.FeatureExtractionOptions()
+    ext.max_image_size = opt.max_image_size
+    ext.num_threads = opt.num_threads
+    ext.sift.max_num_features = opt.max_features
+    done: set[str] = set()
+    if db.is_file():
+        with pycolmap.Database.open(str(db)) as d:
+            images = d.read_all_images()
+            done = {im.name for im in images if d.exists_keypoints(im.image_id)}
+            stale = any(im.name not in set(names) for im in images)
+        if stale:  # another frame set (other --num-frames/--fps): start the database over
+            for p in db.parent.glob(db.name + "*"):
+                p.unlink()
+            done = set()
+    todo = [n for n in names if n not in done]
+    task = progress.add_task("features (SIFT)", total=len(names), completed=len(names) - len(todo), stats="") if progress else None
+    for s in range(0, len(todo), chunk):
+        reader = pycolmap.ImageReaderOptions()
+        reader.camera_model = opt.camera_model
+        cam_ids = []
+        if db.is_file():
+            with pycolmap.Database.open(str(db)) as d:
+                cam_ids = [c.camera_id for c in d.read_all_cameras()]
+        if cam_ids:
+            reader.existing_camera_id = int(cam_ids[0])
+        elif focal_px is not None:
+            reader.camera_params = _camera_params(opt.camera_model, focal_px, image_dir / todo[s])
+        pycolmap.extract_features(db, image_dir, image_names=todo[s:s + chunk], camera_mode=pycolmap.CameraMode.SINGLE,
+                                  reader_options=reader, extraction_options=ext, device=pycolmap.Device.cpu)
+        if task is not None:
+            progress.update(task, advance=len(todo[s:s + chunk]))
+
+
+def _camera_params(model: str, f: float, image: Path) -> str:
+    """A COLMAP params string with focal ``f`` and the principal point at the centre."""
+    import cv2
+
+    img = cv2.imread(str(image), cv2.IMREAD_UNCHANGED)
+    h, w = img.shape[:2]
+    cx, cy = w / 2.0, h / 2.0
+    extra = {"SIMPLE_PINHOLE": [], "PINHOLE": None, "SIMPLE_RADIAL": [0.0], "RADIAL": [0.0, 0.0], "OPENCV": None}.get(model, [])
+    if model == "PINHOLE":
+        vals = [f, f, cx, cy]
+    elif model == "OPENCV":
+        vals = [f, f, cx, cy, 0.0, 0.0, 0.0, 0.0]
+    else:
+        vals = [f, cx, cy] + (extra or [])
+    return ",".join(f"{v:.6f}" for v in vals)
+
+
+def match(db: Path, method: str, opt: SfmOptions, marker: Path, progress=None) -> bool:
+    """Match (or reuse the matches when ``marker`` records the same method and options)."""
+    import pycolmap
+
+    import hashlib
+
+    with pycolmap.Database.open(str(db)) as d:
+        names = sorted(im.name for im in d.read_all_images())
+    key = {"images": hashlib.sha1("|".join(names).encode()).hexdigest(), "method": method, "overlap": opt.overlap, "vocab_tree": str(opt.vocab_tree or ""), "max_features": opt.max_features,
+           "max_image_size": opt.max_image_size}
+    if _marker(marker, key):
+        return False
+    task = progress.add_task(f"matching ({method})", total=1, stats="") if progress else None
+    m = pycolmap.FeatureMatchingOptions()
+    m.num_threads = opt.num_threads
+    if method == "sequential":
+        pair = pycolmap.SequentialPairingOptions()
+        pair.overlap = opt.overlap
+        if opt.vocab_tree is not None:
+            if not Path(opt.vocab_tree).is_file():
+                raise DataError("vocabulary tree file does not exist (--vocab-tree)", opt.vocab_tree)
+            pair.loop_detection = True
+            pair.vocab_tree_path = str(opt.vocab_tree)
+        pycolmap.match_sequential(db, matching_options=m, pairing_options=pair, device=pycolmap.Device.cpu)
+    elif method == "exhaustive":
+        pycolmap.match_exhaustive(db, matching_options=m, device=pycolmap.Device.cpu)
+    else:
+        raise DataError(f"unknown matching '{method}' (auto, sequential, exhaustive)", "--matching")
+    _write_marker(marker, key)
+    if task is not None:
+        progress.update(task, advance=1)
+    return True
+
+
+@dataclass
+class MapResult:
+    model_dir: Path
+    registered: int
+    total: int
+    points: int
+    reused: bool
+
+
+def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOptions, matches_changed: bool, progress=None) -> MapResult:
+    """Incremental mapping; the largest model is kept as ``out_dir/0``."""
+    import pycolmap
+
+    marker = out_dir / "done.json"
+    final = out_dir / "0"
+    key = {"total": total, "camera_model": opt.camera_model}
+    if not matches_changed and _marker(marker, key) and (final / "cameras.bin").is_file():
+        rec = pycolmap.Reconstruction(str(final))
+        return MapResult(final, rec.num_reg_images(), total, rec.num_points3D(), True)
+    shutil.rmtree(out_dir, ignore_errors=True)
+    work = out_dir.with_name(out_dir.name + ".tmp")
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir(parents=True)
+    task = progress.add_task("mapping (incremental)", total=total, stats="") if progress else None
+    count = [0]
+
+    def on_image() -> None:
+        count[0] += 1
+        if task is not None:
+            progress.update(task, completed=min(count[0] + 1, total), stats=f"{count[0] + 1} registered")
+
+    with pycolmap.Database.open(str(db)) as d:
+        ids = [int(im.image_id) for im in sorted(d.read_all_images(), key=lambda im: im.name)]
+    best = None
+    for attempt in range(max(opt.mapping_attempts, 1)):
+        # The incremental mapper can start from a poor initial pair on small or repetitive captures
+        # and stall after a few images: another seed usually registers everything.
+        options = pycolmap.IncrementalPipelineOptions()
+        options.num_threads = opt.num_threads
+        options.multiple_models = True
+        options.random_seed = attempt
+        if attempt > 0 and len(ids) > 6:  # COLMAP's own choice stalled: start from a pair at another point of the capture
+            a = (attempt * len(ids)) // (max(opt.mapping_attempts, 2) + 1)
+            options.init_image_id1, options.init_image_id2 = ids[a], ids[min(a + 2, len(ids) - 1)]
+            # and accept what a forward-moving camera with few features gives: smaller angles, fewer inliers
+            options.mapper.init_min_tri_angle = 8.0
+            options.mapper.init_max_forward_motion = 0.99
+            options.mapper.abs_pose_min_num_inliers = 15
+        count[0] = 0
+        shutil.rmtree(work, ignore_errors=True)
+        work.mkdir(parents=True)
+        models = pycolmap.incremental_mapping(db, image_dir, work, options=options, next_image_callback=on_image)
+        for r in models.values():
+            if best is None or r.num_reg_images() > best.num_reg_images():
+                best = r
+        if best is not None and best.num_reg_images() >= 0.9 * total:
+            break
+        if task is not None:
+            progress.update(task, completed=0, stats=f"retry {attempt + 1}: {best.num_reg_images() if best else 0} registered")
+    if best is None:
+        shutil.rmtree(work, ignore_errors=True)
+        raise DataError(f"registration failed: 0 of {total} images registered (no initial pair; try --matching exhaustive, "
+                        "more frames, or less blur)", image_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    final.mkdir(parents=True, exist_ok=True)
+    best.write(str(final))
+    shutil.rmtree(work, ignore_errors=True)
+    _write_marker(marker, key)
+    if task is not None:
+        progress.update(task, completed=total, stats=f"{best.num_reg_images()} registered")
+    return MapResult(final, best.num_reg_images(), total, best.num_points3D(), False)

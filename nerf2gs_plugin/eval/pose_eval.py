@@ -1,0 +1,110 @@
+"""Pose accuracy of an estimated trajectory against the true one: Sim(3) alignment and ATE.
+
+Why: SfM poses live in an arbitrary similarity frame, so they are compared only after the best
+Sim(3) (Umeyama 1991) maps them onto the truth; ATE is then the RMS position error, reported as a
+percentage of the true trajectory length so captures of any size compare.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class Sim3:
+    """``x -> s * R @ x + t``."""
+
+    s: float
+    R: np.ndarray  # [3, 3]
+    t: np.ndarray  # [3]
+
+    def apply(self, x: np.ndarray) -> np.ndarray:
+        """Points ``[N, 3]``."""
+        return self.s * np.asarray(x, dtype=np.float64) @ self.R.T + self.t
+
+    def apply_poses(self, c2w: np.ndarray) -> np.ndarray:
+        """Camera-to-world ``[N, 3, 4]``: rotations turned by R, centres mapped."""
+        c2w = np.asarray(c2w, dtype=np.float64)
+        out = np.empty_like(c2w)
+        out[:, :, :3] = self.R @ c2w[:, :, :3]
+        out[:, :, 3] = self.apply(c2w[:, :, 3])
+        return out
+
+
+def umeyama(src: np.ndarray, dst: np.ndarray, with_scale: bool = True) -> Sim3:
+    """The least-squares similarity taking ``src [N, 3]`` onto ``dst [N, 3]`` (N >= 3, not collinear
+    for a unique rotation)."""
+    src, dst = np.asarray(src, dtype=np.float64), np.asarray(dst, dtype=np.float64)
+    if src.shape != dst.shape or src.ndim != 2 or src.shape[1] != 3 or len(src) < 3:
+        raise ValueError(f"umeyama needs two [N>=3, 3] arrays, got {src.shape} and {dst.shape}")
+    mu_s, mu_d = src.mean(0), dst.mean(0)
+    xs, xd = src - mu_s, dst - mu_d
+    cov = xd.T @ xs / len(src)
+    U, D, Vt = np.linalg.svd(cov)
+    S = np.eye(3)
+    if np.linalg.det(U) * np.linalg.det(Vt) < 0:
+        S[2, 2] = -1.0
+    R = U @ S @ Vt
+    var_s = (xs**2).sum() / len(src)
+    s = float(np.trace(np.diag(D) @ S) / var_s) if with_scale and var_s > 0 else 1.0
+    return Sim3(s, R, mu_d - s * R @ mu_s)
+
+
+def trajectory_length(centres: np.ndarray) -> float:
+    """Sum of the distances between consecutive camera centres ``[N, 3]`` (in order)."""
+    c = np.asarray(centres, dtype=np.float64)
+    return float(np.linalg.norm(np.diff(c, axis=0), axis=1).sum()) if len(c) > 1 else 0.0
+
+
+@dataclass
+class PoseErrors:
+    ate_rmse: float  # in the true frame's units
+    ate_percent: float  # of the true trajectory length
+    rotation_deg_mean: float  # mean angle between aligned and true camera rotations
+    scale: float  # the similarity's scale (true units per estimated unit)
+    sim3: Sim3
+
+
+def align_poses(est_c2w: np.ndarray, true_c2w: np.ndarray) -> Sim3:
+    """Sim(3) from estimated to true cameras ``[N, 3, 4]``. Centres alone leave the rotation about a
+    straight drive free, so each camera also contributes two points along its axes (at a tenth of
+    the trajectory length): a straight dashcam drive aligns by its orientations too."""
+    est, true = np.asarray(est_c2w, dtype=np.float64), np.asarray(true_c2w, dtype=np.float64)
+    s0 = umeyama(est[:, :, 3], true[:, :, 3]).s
+    arm = max(trajectory_length(true[:, :, 3]) / 10.0, 1e-6)
+    src = np.concatenate([est[:, :, 3]] + [est[:, :, 3] + (arm / s0) * est[:, :, k] for k in (1, 2)])
+    dst = np.concatenate([true[:, :, 3]] + [true[:, :, 3] + arm * true[:, :, k] for k in (1, 2)])
+    return umeyama(src, dst)
+
+
+def pose_errors(est_c2w: np.ndarray, true_c2w: np.ndarray) -> PoseErrors:
+    """ATE after Sim(3) alignment (:func:`align_poses`) of estimated to true cameras (same order, ``[N, 3, 4]``)."""
+    est, true = np.asarray(est_c2w, dtype=np.float64), np.asarray(true_c2w, dtype=np.float64)
+    sim = align_poses(est, true)
+    aligned = sim.apply_poses(est)
+    err = np.linalg.norm(aligned[:, :, 3] - true[:, :, 3], axis=1)
+    rmse = float(np.sqrt((err**2).mean()))
+    length = trajectory_length(true[:, :, 3])
+    rel = np.einsum("nji,njk->nik", aligned[:, :, :3], true[:, :, :3])  # R_a^T R_t
+    cos = np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
+    return PoseErrors(rmse, 100.0 * rmse / length if length > 0 else float("nan"), float(np.degrees(np.arccos(cos)).mean()), sim.s, sim)
+
+
+def capture_report(est_c2w: np.ndarray, true_c2w: np.ndarray, est_metres_per_unit: float, est_up: np.ndarray,
+                   true_up: np.ndarray, registered: int, total: int) -> dict:
+    """The figures ``ns2gs-bench real`` reports for a processed capture against its true cameras
+    (true frame in metres): registered fraction, ATE (% of trajectory), rotation error, the error of
+    the camera-height scale against the Sim(3) scale, and the angle between estimated and true up."""
+    pe = pose_errors(est_c2w, true_c2w)
+    up = pe.sim3.R @ (np.asarray(est_up, dtype=np.float64) / np.linalg.norm(est_up))
+    tu = np.asarray(true_up, dtype=np.float64) / np.linalg.norm(true_up)
+    return {
+        "registered_fraction": registered / max(total, 1),
+        "ate_percent": pe.ate_percent,
+        "ate_m": pe.ate_rmse,
+        "rotation_error_deg": pe.rotation_deg_mean,
+        "scale_error_percent": 100.0 * (est_metres_per_unit / pe.scale - 1.0),
+        "up_error_deg": float(np.degrees(np.arccos(np.clip(up @ tu, -1.0, 1.0)))),
+    }
