@@ -126,6 +126,9 @@ class Trainer:
         from nerf2gs_plugin.data import save_dataparser_transform
 
         save_dataparser_transform(self.run_dir / "dataparser_transforms.json", self.pipeline.datamanager.train_data)
+        from nerf2gs_plugin.engine.run_cameras import save_train_cameras
+
+        save_train_cameras(self.run_dir, self.pipeline.datamanager.train_data.cameras)  # export without the dataset
 
     def save_checkpoint(self, step: int) -> Path:
         path = checkpoint_path(self.run_dir, step)
