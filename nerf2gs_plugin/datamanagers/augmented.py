@@ -33,7 +33,7 @@ RenderFn = Callable[[Cameras], dict[str, Tensor]]
 
 @dataclass
 class AugmentConfig:
-    """``--augment.*`` flags; used only with ``--augment-from``."""
+    """The --augment.* flags; used only with --augment-from."""
 
     composites: bool = True
     """Replace transient-mask pixels of input views by the reference render."""
@@ -56,6 +56,7 @@ class AugmentConfig:
     enhancer: str = "none"
     """none | builtin | builtin:PATH | onnx:PATH: image enhancement of the additional views."""
     use_cache: bool = True
+    """Reuse the reference's cached renders when their manifest matches (False: render again)."""
 
 
 def bev_cameras(train: Cameras, up: Tensor, delta_h_world: float, theta_pitch: float, every_n: int = 1) -> Cameras:

@@ -46,18 +46,27 @@ class TrainerConfig:
     """Everything one training run needs; ``ns2gs-train <method>`` exposes every field as a flag."""
 
     method_name: str = "unnamed"
+    """Name of the method; set by the subcommand, names the run folder."""
     data: Path = Path("data/street")
     """Dataset folder (nerfstudio transforms.json or a COLMAP model)."""
     output_dir: Path = Path("outputs")
+    """Root folder of the runs."""
     experiment_name: Optional[str] = None
     """Defaults to the dataset folder's name: runs go to output_dir/experiment/method/timestamp."""
     timestamp: str = "{timestamp}"
+    """Name of the run folder; the default is the start time (YYYY-MM-DD_HHMMSS)."""
     max_num_iterations: int = 2000
+    """Number of training steps."""
     steps_per_eval_image: int = 250
+    """Every this many steps, render the eval views and log their mean PSNR (0 = never)."""
     steps_per_save: int = 1000
+    """Write a checkpoint every this many steps (and always at the end)."""
     keep_all_checkpoints: bool = False
+    """Keep every checkpoint instead of only the latest."""
     seed: int = 42
+    """Random seed (torch, numpy, python)."""
     device: str = "auto"
+    """auto (CUDA when present, else CPU), cpu, cuda or cuda:N."""
     load_checkpoint: Optional[Path] = None
     """Resume from this run directory or .ckpt file (same method)."""
     augment_from: Optional[Path] = None

@@ -31,36 +31,60 @@ from nerf2gs_plugin.methods.splatfacto.shared import Background, BackgroundMode,
 class ScaffoldGSModelConfig(ModelConfig):
     _target: type = field(default_factory=lambda: ScaffoldGSModel)
     feat_dim: int = 32
+    """Length of each anchor's feature vector."""
     n_offsets: int = 10
+    """Neural Gaussians spawned per anchor."""
     voxel_size: float = 0.0
     """Anchor voxel size in normalised units; 0 = the median nearest-neighbour distance of the points."""
     appearance_dim: int = 0
     """Per-training-image appearance code fed to the colour MLP (0 = off)."""
     hidden_dim: int = 32
+    """Width of the opacity, covariance and colour MLPs."""
     num_random: int = 5000
+    """Random points in the scene box when the dataset has no sparse points."""
     ssim_lambda: float = 0.2
+    """Weight of the (1 - SSIM) term of the image loss (the rest is L1)."""
     volume_reg: float = 0.01
+    """Weight of the volume (scale product) regulariser of the neural Gaussians."""
     background: BackgroundMode = "sky"
+    """sky: learned view-direction background; random: random colour per step; learned; black; white."""
     sky_sh_degree: int = 3
+    """SH degree of the sky background's view-direction colour."""
     sky_alpha_weight: float = 0.05
+    """Push accumulation to 0 on sky-mask pixels (when the dataset has sky masks)."""
     mask_transients: bool = False
+    """Ignore transient-mask pixels in the loss (the baseline-with-masks variant)."""
     frustum_margin: float = 0.15
     """Anchors projecting this fraction of the image outside the frame still spawn Gaussians."""
     near_plane: float = 0.01
+    """Gaussians nearer to the camera than this are not drawn."""
     far_plane: float = 1e10
+    """Gaussians farther than this are not drawn."""
     rasterize_mode: Literal["classic", "antialiased"] = "classic"
+    """classic (3DGS) or antialiased (Mip-Splatting's opacity compensation)."""
     backend: str = "auto"
+    """Rasterizer: auto (gsplat on CUDA, else our C++ kernel, else torch), cpu, torch or gsplat."""
     # ---- anchor growing / pruning (Scaffold-GS names; CPU-scale values, paper values in config.py)
     start_stat: int = 50
+    """Step from which the growing statistics are gathered."""
     update_from: int = 150
+    """First anchor growing / pruning step."""
     update_interval: int = 100
+    """Grow and prune anchors every this many steps."""
     update_until: int = 1500
+    """Last anchor growing / pruning step."""
     grow_threshold: float = 0.0002
+    """Mean screen-space gradient of a neural Gaussian above which an anchor grows there."""
     update_depth: int = 3
+    """Voxel levels at which anchors grow (each finer by update-hierarchy-factor)."""
     update_init_factor: int = 16
+    """Voxel size of the coarsest growing level, in anchor voxels."""
     update_hierarchy_factor: int = 4
+    """Ratio of voxel sizes between growing levels."""
     success_threshold: float = 0.8
+    """An anchor is grown from or pruned once seen in this fraction of update-interval steps."""
     min_opacity: float = 0.005
+    """Prune anchors whose neural Gaussians' mean opacity is below this."""
     max_anchors: int = 20000
     """Soft budget on anchors for a CPU (0 = unlimited)."""
 

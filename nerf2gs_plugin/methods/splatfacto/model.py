@@ -32,36 +32,44 @@ from nerf2gs_plugin.methods.splatfacto.strategy import (
 
 @dataclass
 class SplatfactoModelConfig(ModelConfig):
-    """Defaults are the CPU scale (see ``config.py`` for the step counts and the paper-scale flags)."""
+    """Defaults are the CPU scale (the step counts and the paper-scale values are in methods/splatfacto/config.py)."""
 
     _target: type = field(default_factory=lambda: SplatfactoModel)
     sh_degree: int = 3
+    """Maximum degree of the spherical harmonics of the colour."""
     sh_degree_interval: int = 300
     """Raise the SH degree every this many steps (nerfstudio: 1000 of 30000)."""
     ssim_lambda: float = 0.2
+    """Weight of the (1 - SSIM) term of the image loss (the rest is L1)."""
     num_random: int = 5000
     """Random Gaussians in the scene box when the dataset has no sparse points (nerfstudio: 50000)."""
     init_opacity: float = 0.1
+    """Opacity of the initial Gaussians."""
     background: BackgroundMode = "sky"
     """sky: learned view-direction background; random: random colour per step; learned; black; white."""
     sky_sh_degree: int = 3
+    """SH degree of the sky background's view-direction colour."""
     sky_alpha_weight: float = 0.05
     """Push accumulation to 0 on sky-mask pixels (when the dataset has sky masks)."""
     mask_transients: bool = False
     """Ignore transient-mask pixels in the loss (the baseline-with-masks variant)."""
     rasterize_mode: Literal["classic", "antialiased"] = "classic"
+    """classic (3DGS) or antialiased (Mip-Splatting's opacity compensation)."""
     backend: str = "auto"
+    """Rasterizer: auto (gsplat on CUDA, else our C++ kernel, else torch), cpu, torch or gsplat."""
     near_plane: float = 0.01
+    """Gaussians nearer to the camera than this are not drawn."""
     far_plane: float = 1e10
+    """Gaussians farther than this are not drawn."""
     strategy_type: Literal["default", "mcmc"] = "default"
-    """Densification: ``default`` (clone / split / prune, settings in ``strategy``) or ``mcmc`` (in ``mcmc``)."""
+    """Densification: default (clone / split / prune, settings under strategy) or mcmc (settings under mcmc)."""
     strategy: DefaultStrategyConfig = field(default_factory=lambda: DefaultStrategyConfig(
         warmup_length=300, reset_alpha_every=1000, stop_split_at=1500, stop_screen_size_at=400,
         max_pause_after_reset=300, max_gaussians=60000))
     """The default strategy at CPU scale (paper values in config.py): 60k-Gaussian soft budget."""
     mcmc: MCMCStrategyConfig = field(default_factory=lambda: MCMCStrategyConfig(
         cap_max=30000, refine_start_iter=300, refine_stop_iter=2500))
-    """The MCMC strategy at CPU scale (``--pipeline.model.strategy-type mcmc``): 30k-Gaussian hard budget."""
+    """The MCMC strategy at CPU scale (with --pipeline.model.strategy-type mcmc): 30k-Gaussian hard budget."""
 
 
 class SplatfactoModel(Model):

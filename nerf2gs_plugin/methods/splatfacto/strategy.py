@@ -77,18 +77,31 @@ class DefaultStrategyConfig:
     """nerfstudio's names and (30k-step) values; the model config sets the CPU-scale ones."""
 
     warmup_length: int = 500
+    """No densification before this step."""
     refine_every: int = 100
+    """Densify and prune every this many steps."""
     reset_alpha_every: int = 3000
+    """Reset opacities every this many steps (0 = never)."""
     stop_split_at: int = 15000
+    """No densification after this step."""
     densify_grad_thresh: float = 0.0008
+    """Screen-space gradient above which a Gaussian is cloned or split."""
     densify_size_thresh: float = 0.01
+    """Gaussians larger than this (scene units) are split, smaller are cloned."""
     n_split_samples: int = 2
+    """Gaussians a split Gaussian becomes."""
     cull_alpha_thresh: float = 0.1
+    """Prune Gaussians with opacity below this."""
     cull_scale_thresh: float = 0.5
+    """Prune Gaussians larger than this (scene units)."""
     cull_screen_size: float = 0.15
+    """Prune Gaussians whose screen radius exceeds this fraction of the image size."""
     split_screen_size: float = 0.05
+    """Split Gaussians whose screen radius exceeds this fraction of the image size."""
     stop_screen_size_at: int = 4000
+    """No screen-size culling or splitting after this step."""
     continue_cull_post_densification: bool = True
+    """Keep pruning after the last densification step."""
     max_pause_after_reset: int = 1000
     """Cap on nerfstudio's pause after an opacity reset (num_images + refine_every steps)."""
     max_gaussians: int = 0
@@ -237,11 +250,17 @@ class MCMCStrategyConfig:
     cap_max: int = 100_000
     """Hard budget of Gaussians."""
     noise_lr: float = 5e5
+    """Scale of the position noise, times the means' learning rate."""
     refine_start_iter: int = 500
+    """First relocation / growth step."""
     refine_stop_iter: int = 25_000
+    """Last relocation / growth step."""
     refine_every: int = 100
+    """Relocate and grow every this many steps."""
     min_opacity: float = 0.005
+    """Gaussians below this opacity are relocated."""
     grow_factor: float = 0.05
+    """Grow the count by this fraction per refinement, up to cap-max."""
     init_opacity: float = 0.5
     """Initial opacity (the model's; MCMC starts from opaque but small Gaussians)."""
     init_scale: float = 0.1
