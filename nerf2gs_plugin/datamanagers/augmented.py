@@ -26,9 +26,11 @@ from torch import Tensor
 
 from nerf2gs_plugin.cameras import Cameras, birds_eye_poses
 from nerf2gs_plugin.datamanagers.image_set import ImageSet
+from nerf2gs_plugin.warn import warn
 
 CACHE_FORMAT_VERSION = 1
 RenderFn = Callable[[Cameras], dict[str, Tensor]]
+
 
 
 @dataclass
@@ -195,9 +197,7 @@ def augment_datamanager(datamanager, render_fn: RenderFn, ref_key: str, cache_ro
     from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
 
     if config.composites and "transient" not in datamanager.train_images.masks:
-        import warnings
-
-        warnings.warn("the dataset has no transient masks: input-view composites are off", stacklevel=2)
+        warn("the dataset has no transient masks", "input-view composites are off (only the bird's-eye views are added)")
     train_data = datamanager.train_data
     views = render_augmented_views(
         datamanager.train_images, train_data.up, train_data.metres_to_world(config.delta_h), render_fn, ref_key,

@@ -44,7 +44,10 @@ def load_run(path: Path, device: torch.device | str = "cpu", data: Optional[Path
     if not Path(config.data).exists():
         raise ConfigError(f"the run's dataset {config.data} does not exist (pass the dataset path explicitly)", run_dir / "config.yml")
     ckpt = load_checkpoint(ckpt_file, expected_method=doc["method_name"], map_location=device)
-    pipeline = Pipeline(config.pipeline, config.data, device)
+    from nerf2gs_plugin.warn import quiet
+
+    with quiet():  # what the data lacks was said when the run was trained
+        pipeline = Pipeline(config.pipeline, config.data, device)
     try:
         pipeline.model.load_model_state(ckpt["model"])
     except (RuntimeError, KeyError) as e:

@@ -55,7 +55,10 @@ def load_run_model(path: Path, device: torch.device | str = "cpu", data: Optiona
         metres_per_unit=tf.metres_per_unit, up=tf.up,
     )
     ckpt = load_checkpoint(ckpt_file, expected_method=doc["method_name"], map_location=device)
-    model = config.pipeline.model.setup(train_data=stub).to(device)
+    from nerf2gs_plugin.warn import quiet
+
+    with quiet():
+        model = config.pipeline.model.setup(train_data=stub).to(device)
     try:
         model.load_model_state(ckpt["model"])
     except (RuntimeError, KeyError) as e:

@@ -98,6 +98,9 @@ class ScaffoldGSModel(Model):
         if train_data.points3D_xyz is not None and len(train_data.points3D_xyz) > 0:
             pts = train_data.points3D_xyz.float()
         else:
+            from nerf2gs_plugin.warn import warn
+
+            warn("no sparse points", f"placing anchors on {c.num_random} random points in the scene box", stacklevel=3)
             lo, hi = self.scene_box[0], self.scene_box[1]
             pts = lo + (hi - lo) * torch.rand(c.num_random, 3, generator=gen)
         voxel = c.voxel_size if c.voxel_size > 0 else float(knn_mean_distance(pts, k=1).median().clamp_min(1e-4))

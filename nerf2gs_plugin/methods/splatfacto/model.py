@@ -109,6 +109,9 @@ class SplatfactoModel(Model):
             xyz = data.points3D_xyz.float().clone()
             rgb = data.points3D_rgb.float() / 255.0 if data.points3D_rgb is not None else torch.full_like(xyz, 0.5)
             return xyz, rgb
+        from nerf2gs_plugin.warn import warn
+
+        warn("no sparse points", f"starting from {self.config.num_random} random Gaussians in the scene box", stacklevel=3)
         lo, hi = self.scene_box[0], self.scene_box[1]
         xyz = lo + (hi - lo) * torch.rand(self.config.num_random, 3, generator=gen)
         return xyz, torch.rand(self.config.num_random, 3, generator=gen)

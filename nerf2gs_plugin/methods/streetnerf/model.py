@@ -45,7 +45,6 @@ Any mask kind the data lacks turns its term off with one warning.
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, field
 from typing import Any, Optional
 
@@ -61,6 +60,7 @@ from nerf2gs_plugin.fields.appearance import AppearanceTransforms
 from nerf2gs_plugin.fields.hash_encoding import HashGridSpec
 from nerf2gs_plugin.fields.sky import SkyModel
 from nerf2gs_plugin.fields.street_field import ProposalField, StreetField
+from nerf2gs_plugin.warn import warn
 from nerf2gs_plugin.methods.streetnerf.point_depth import line_of_sight_loss, visible_point_rays
 from nerf2gs_plugin.methods.streetnerf.sampling import (
     distortion_loss,
@@ -208,11 +208,11 @@ class StreetNeRFModel(Model):
         if not self.config.point_depth:
             return
         if train_data.points3D_xyz is None or len(train_data.points3D_xyz) == 0:
-            warnings.warn("StreetNeRF: the dataset has no sparse points; training without the point depth loss", stacklevel=3)
+            warn("the dataset has no sparse points", "StreetNeRF trains without its point-depth loss", stacklevel=3)
             return
         pr = visible_point_rays(train_data.cameras, train_data.points3D_xyz)
         if len(pr) == 0:
-            warnings.warn("StreetNeRF: no sparse point is visible in a training view; training without the point depth loss", stacklevel=3)
+            warn("no sparse point is visible in any training view", "StreetNeRF trains without its point-depth loss", stacklevel=3)
             return
         rays = pr.rays
         for name, value in (("pt_origins", rays.origins), ("pt_directions", rays.directions), ("pt_radius", rays.pixel_radius),
@@ -223,7 +223,7 @@ class StreetNeRFModel(Model):
     @staticmethod
     def _mask_available(kind: str, kinds: set[str], term: str) -> bool:
         if kind not in kinds:
-            warnings.warn(f"StreetNeRF: the dataset has no {kind} masks; training without the {term}", stacklevel=3)
+            warn(f"the dataset has no {kind} masks", f"StreetNeRF trains without the {term}", stacklevel=3)
             return False
         return True
 
