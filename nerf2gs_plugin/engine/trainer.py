@@ -58,7 +58,8 @@ class TrainerConfig:
     max_num_iterations: int = 2000
     """Number of training steps."""
     steps_per_eval_image: int = 250
-    """Every this many steps, render the eval views and log their mean PSNR (0 = never)."""
+    """Every this many steps, render one eval view (the next in turn) and log its PSNR as
+    eval_psnr_1view: a cheap signal, not ns2gs-eval's PSNR over all views (0 = never)."""
     steps_per_save: int = 1000
     """Write a checkpoint every this many steps (and always at the end)."""
     keep_all_checkpoints: bool = False
@@ -75,7 +76,8 @@ class TrainerConfig:
     pipeline: PipelineConfig = field(default_factory=PipelineConfig)
     optimizers: dict[str, OptimizerConfig] = field(default_factory=dict)
     progress: bool = True
-    """Show a rich progress bar."""
+    """A live progress bar on a terminal; False (and whenever the output is not a terminal): one
+    plain line every 10 s with step, rate, ETA and loss."""
     viewer: bool = False
     """Serve the live viewer (viser) while training."""
 
@@ -195,7 +197,9 @@ class Trainer:
         cfg = self.config
         start = self.step
         ema: dict[str, float] = {}
-        with make_progress(enabled=cfg.progress) as progress:
+        # progress False: no live bar, a plain line every 10 s (step, rate, ETA, loss), unless a step
+        # hook follows the steps (a bench's own bar): then nothing, so lines do not cut through it
+        with make_progress(enabled=cfg.progress or not self.step_hooks, live=cfg.progress) as progress:
             task = progress.add_task(f"train {cfg.method_name}", total=cfg.max_num_iterations, completed=start, stats="")
             for step in range(start, cfg.max_num_iterations):
                 t0 = time.perf_counter()
@@ -207,7 +211,7 @@ class Trainer:
                 record = {"step": step, **stats}
                 if cfg.steps_per_eval_image and (step + 1) % cfg.steps_per_eval_image == 0:
                     record.update(self.pipeline.get_eval_image_metrics(step))
-                    ema["eval_psnr"] = record["eval_psnr"]
+                    ema["eval_psnr_1view"] = record["eval_psnr_1view"]
                 self.history.append(record)
                 if (step + 1) % cfg.steps_per_save == 0 and step + 1 < cfg.max_num_iterations:
                     self.save_checkpoint(step)
@@ -260,9 +264,9 @@ class StepHistory:
 def _format_stats(ema: dict[str, float], primitives: int) -> str:
     parts = [f"loss {ema['loss']:.4f}"] if "loss" in ema else []
     if "psnr" in ema:
-        parts.append(f"psnr {ema['psnr']:.2f}")
-    if "eval_psnr" in ema:
-        parts.append(f"eval {ema['eval_psnr']:.2f}")
+        parts.append(f"train psnr {ema['psnr']:.2f}")
+    if "eval_psnr_1view" in ema:
+        parts.append(f"eval psnr (1 view) {ema['eval_psnr_1view']:.2f}")
     if primitives:
         parts.append(f"prims {primitives}")
     return " ".join(parts)
