@@ -33,6 +33,8 @@ def print_table(result: dict) -> None:
     from rich.console import Console
     from rich.table import Table
 
+    from nerf2gs_plugin.eval.table_print import print_table as print_whole, table_console
+
     table = Table(title=f"{result['method_name']} @ step {result['step']}")
     for col in ("split", "PSNR", "SSIM", "LPIPS", "FPS", "images"):
         table.add_column(col, justify="right")
@@ -41,9 +43,9 @@ def print_table(result: dict) -> None:
         fps = f"{r['fps']:.2f}" if r.get("fps") is not None else "n/a"
         table.add_row(split, f"{r['psnr']:.2f}", f"{r['ssim']:.3f}", lp, fps, str(r["num_images"]))
     size = result["size"]
-    Console().print(table)
+    print_whole(table)
     fps = f"{result['fps']:.2f}" if result.get("fps") is not None else "n/a"
-    Console().print(f"render {fps} FPS | {size['primitives']} primitives, {size['parameters']} parameters, "
+    table_console().print(f"render {fps} FPS | {size['primitives']} primitives, {size['parameters']} parameters, "
                     f"{size['megabytes']:.2f} MB in memory, {size.get('checkpoint_megabytes', 0):.2f} MB on disk | "
                     f"trained {result['train_seconds']:.0f} s")
     if not result.get("lpips_available", True):

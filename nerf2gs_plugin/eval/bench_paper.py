@@ -307,7 +307,6 @@ def run_named_bench(name: str, plan: list[RunSpec], data: Path, runs_root: Path,
                     compare: list[tuple[str, str]], figure_labels: Optional[list[str]] = None) -> dict[str, dict]:
     """Run the plan and write the table, charts and figures; failed runs are rows of the table,
     and then :class:`BenchFailed` (exit status 2 from ``ns2gs-bench``) names them."""
-    from rich.console import Console
 
     t0 = time.time()
     results = run_plan(plan, data, runs_root, name=name)
@@ -318,9 +317,11 @@ def run_named_bench(name: str, plan: list[RunSpec], data: Path, runs_root: Path,
     if figure_labels:
         renders_figure(ok, figure_labels, "bev_1", Path(out_dir) / f"{name}_renders_bev_1.png")
         renders_figure(ok, figure_labels, "street", Path(out_dir) / f"{name}_renders_street.png")
-    Console().print(rich_table(results, title))
+    from nerf2gs_plugin.eval.table_print import print_table
+
+    print_table(rich_table(results, title))
     print(ratios_md(results, compare))
-    print(f"results: {out_dir}/{name}.md")
+    print(f"all columns (LPIPS, road PSNR, size, train time) and charts: {out_dir}/{name}.md")
     failed = failures(results)
     if failed:
         listed = "; ".join(f"'{label}' ({reason})" for label, reason in failed.items())
