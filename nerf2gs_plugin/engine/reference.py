@@ -41,6 +41,8 @@ def load_run(path: Path, device: torch.device | str = "cpu", data: Optional[Path
     config: TrainerConfig = load_config(run_dir / "config.yml", spec.config)
     if data is not None:
         config = dataclasses.replace(config, data=Path(data))
+    else:
+        config = dataclasses.replace(config, data=find_dataset(Path(config.data), run_dir))
     if not Path(config.data).exists():
         raise ConfigError(f"the run's dataset {config.data} does not exist (pass the dataset path explicitly)", run_dir / "config.yml")
     ckpt = load_checkpoint(ckpt_file, expected_method=doc["method_name"], map_location=device)
@@ -54,6 +56,18 @@ def load_run(path: Path, device: torch.device | str = "cpu", data: Optional[Path
         raise CheckpointError(f"checkpoint does not fit the {doc['method_name']} model ({str(e).splitlines()[0][:160]})", ckpt_file) from None
     pipeline.model.eval()
     return LoadedRun(run_dir, ckpt_file, config, pipeline, int(ckpt["step"]), file_hash(ckpt_file), float(ckpt.get("train_seconds", 0.0)))
+
+
+def find_dataset(recorded: Path, run_dir: Path) -> Path:
+    """The run's dataset: the recorded path, or, for a relative one recorded by an older run (the
+    path from where it was trained), that path under the first ancestor of the run directory
+    that holds it (a run under <repo>/benchmarks/runs/ finds <repo>/benchmarks/runs/data/street)."""
+    if recorded.is_absolute() or recorded.exists():
+        return recorded
+    for parent in Path(run_dir).absolute().parents:
+        if (parent / recorded).exists():
+            return parent / recorded
+    return recorded
 
 
 def attach_augmentation(datamanager, reference: Path, augment, device: torch.device | str) -> None:

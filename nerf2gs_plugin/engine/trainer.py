@@ -90,6 +90,8 @@ class Trainer:
     def __init__(self, config: TrainerConfig) -> None:
         if config.timestamp == "{timestamp}":
             config = dataclasses.replace(config, timestamp=datetime.now().strftime("%Y-%m-%d_%H%M%S"))
+        # recorded absolute, so eval / export / the viewer find the data from any directory
+        config = dataclasses.replace(config, data=Path(config.data).expanduser().absolute())
         self.config = config
         self.device = pick_device(config.device)
         self.run_dir = config.run_dir()
