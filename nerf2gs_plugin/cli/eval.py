@@ -45,7 +45,9 @@ def print_table(result: dict) -> None:
     size = result["size"]
     print_whole(table)
     fps = f"{result['fps']:.2f}" if result.get("fps") is not None else "n/a"
-    table_console().print(f"render {fps} FPS | {size['primitives']} primitives, {size['parameters']} parameters, "
+    kind = size.get("primitive_kind", "primitives")
+    prims = f"{size['primitives']:,} {kind}, " if kind else ""  # a NeRF has parameters, not primitives
+    table_console().print(f"render {fps} FPS | {prims}{size['parameters']:,} parameters, "
                     f"{size['megabytes']:.2f} MB in memory, {size.get('checkpoint_megabytes', 0):.2f} MB on disk | "
                     f"trained {result['train_seconds']:.0f} s")
     if not result.get("lpips_available", True):

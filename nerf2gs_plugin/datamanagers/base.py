@@ -29,6 +29,8 @@ class DataManagerConfig(InstantiateConfig):
     _target: type = field(default_factory=lambda: DataManager)
     downscale: float = 1.0
     """Shrink images on load by this factor (2 = half size)."""
+    cache_dir: Optional[Path] = None
+    """Where undistorted / resized copies of the images go (default: DATA/.ns2gs_cache)."""
 
 
 class DataManager:
@@ -40,6 +42,10 @@ class DataManager:
         self.config = config
         self.data = Path(data)
         self.device = torch.device(device)
+        if config.cache_dir is not None:
+            from nerf2gs_plugin.data.undistort import set_cache_root
+
+            set_cache_root(config.cache_dir)
         self.train_data: DataparserOutputs = parse_dataset(self.data, "train", downscale=config.downscale)
         if len(self.train_data) == 0:
             raise DataError("the train split is empty", self.data)

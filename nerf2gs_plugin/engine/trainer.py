@@ -219,7 +219,9 @@ class Trainer:
                     self.save_checkpoint(step)
                 for hook in self.step_hooks:
                     hook(step)
-                progress.update(task, advance=1, stats=_format_stats(ema, self.pipeline.model.num_primitives()))
+                model = self.pipeline.model
+                prims = model.num_primitives() if getattr(model, "primitive_kind", "primitives") else 0  # not a NeRF's hash entries
+                progress.update(task, advance=1, stats=_format_stats(ema, prims))
         self.save_checkpoint(cfg.max_num_iterations - 1)
         atomic_write_text(self.run_dir / "train_log.json", json.dumps(
             {"train_seconds": self.train_seconds, "history_stride": self.history.stride, "history": self.history.records()}))

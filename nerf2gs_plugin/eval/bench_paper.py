@@ -184,10 +184,18 @@ def markdown_table(results: dict[str, dict], groups: dict[str, list[str]], title
                 rank = ranks.get((r["label"], metric, s))
                 cells.append(f"**{txt}**" if rank == 1 else f"_{txt}_" if rank == 2 else txt)
         size = r["size"]
-        cells += [fmt(r.get("fps")), str(size["primitives"]), fmt(size.get("checkpoint_megabytes", size["megabytes"]), 1), fmt(r.get("train_seconds"), 0)]
+        cells += [fmt(r.get("fps")), primitives_cell(size), fmt(size.get("checkpoint_megabytes", size["megabytes"]), 1), fmt(r.get("train_seconds"), 0)]
         lines.append("| " + " | ".join(cells) + " |")
     lines += ["", "Bold: best, italic: second best within each target method (rows sharing a target)."]
     return "\n".join(lines)
+
+
+def primitives_cell(size: dict) -> str:
+    """Primitives of a splatting run; for a model without primitives (a NeRF's hash grid) its
+    parameters, so no table calls hash-table entries primitives."""
+    if "primitive_kind" in size and size["primitive_kind"] is None:
+        return f"({size['parameters'] / 1e6:.2f}M params)"
+    return str(size["primitives"])
 
 
 def rich_table(results: dict[str, dict], title: str):
@@ -209,7 +217,7 @@ def rich_table(results: dict[str, dict], title: str):
         ps = [_value(r, "psnr", s) for s in SPLITS]
         ss = [_value(r, "ssim", s) for s in SPLITS]
         table.add_row(r["label"], *[f"{v:.2f}" if v is not None else "n/a" for v in ps],
-                      *[f"{v:.3f}" if v is not None else "n/a" for v in ss], fmt(r.get("fps")), str(r["size"]["primitives"]))
+                      *[f"{v:.3f}" if v is not None else "n/a" for v in ss], fmt(r.get("fps")), primitives_cell(r["size"]))
     return table
 
 

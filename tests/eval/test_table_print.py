@@ -35,3 +35,20 @@ def test_rich_default_would_cut_it():  # what the test above guards against
     out = io.StringIO()
     Console(file=out).print(_wide_table())
     assert "…" in out.getvalue() or "train s" not in out.getvalue()
+
+
+def test_eval_summary_reports_a_nerf_in_parameters_not_primitives(capsys):
+    from nerf2gs_plugin.cli.eval import print_table as eval_table
+    from nerf2gs_plugin.methods.splatfacto.model import SplatfactoModel
+    from nerf2gs_plugin.methods.streetnerf.model import StreetNeRFModel
+
+    assert StreetNeRFModel.primitive_kind is None and SplatfactoModel.primitive_kind == "Gaussians"
+    res = {"method_name": "streetnerf", "step": 9, "fps": 0.5, "train_seconds": 3.0,
+           "results": {"street": {"psnr": 25.0, "ssim": 0.8, "lpips": 0.1, "fps": 0.5, "num_images": 7}},
+           "size": {"primitives": 786432, "primitive_kind": None, "parameters": 1_600_000, "megabytes": 6.1}}
+    eval_table(res)
+    out = capsys.readouterr().out
+    assert "primitives" not in out and "1,600,000 parameters" in out and "6.10 MB" in out
+    res["size"].update(primitive_kind="Gaussians", primitives=12251)
+    eval_table(res)
+    assert "12,251 Gaussians" in capsys.readouterr().out

@@ -91,6 +91,7 @@ class ScaffoldGSModelConfig(ModelConfig):
 
 class ScaffoldGSModel(Model):
     config: ScaffoldGSModelConfig
+    primitive_kind = "anchors"
 
     def populate_modules(self, train_data: DataparserOutputs) -> None:
         c = self.config

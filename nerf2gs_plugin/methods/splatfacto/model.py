@@ -74,6 +74,7 @@ class SplatfactoModelConfig(ModelConfig):
 
 class SplatfactoModel(Model):
     config: SplatfactoModelConfig
+    primitive_kind = "Gaussians"
 
     # ------------------------------------------------------------------ setup
     def populate_modules(self, train_data: DataparserOutputs) -> None:

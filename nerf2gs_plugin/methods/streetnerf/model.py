@@ -164,6 +164,7 @@ class StreetNeRFModelConfig(ModelConfig):
 
 class StreetNeRFModel(Model):
     config: StreetNeRFModelConfig
+    primitive_kind = None  # a field: its size is parameters and MB (num_primitives: hash-table entries)
 
     def populate_modules(self, train_data: DataparserOutputs) -> None:
         c = self.config

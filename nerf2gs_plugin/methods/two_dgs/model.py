@@ -50,6 +50,7 @@ class TwoDGSModelConfig(SplatfactoModelConfig):
 
 class TwoDGSModel(SplatfactoModel):
     config: TwoDGSModelConfig
+    primitive_kind = "surfels"
 
     def populate_modules(self, train_data: DataparserOutputs) -> None:
         super().populate_modules(train_data)
