@@ -24,9 +24,11 @@ class EvalArgs:
     render_dir: Optional[Path] = None
     """Where the GT | render | error grids go (default: RUN/eval_renders)."""
     max_images: Optional[int] = None
+    """Evaluate at most this many images per split (default: all)."""
     data: Optional[Path] = None
     """Dataset folder, if it moved since training."""
     device: str = "auto"
+    """auto (CUDA when present, else CPU), cpu, cuda or cuda:N."""
 
 
 def print_table(result: dict) -> None:
