@@ -39,8 +39,10 @@ browser:
 	    || echo "note: apt-get could not install chromium; the viewer's browser test will skip"; \
 	else echo "note: no chromium and no root apt-get; the viewer's browser test will skip"; fi
 
+# everything under outputs/demo/ (runs, readable links, table, charts); the committed
+# benchmarks/results/quick.* are regenerated only by `ns2gs-bench quick`
 demo: setup
-	$(VENV)/bin/ns2gs-bench quick
+	$(VENV)/bin/ns2gs-bench demo
 
 test: setup
 	$(PY) -m pytest -q tests

@@ -91,9 +91,10 @@ class PlainProgress(Progress):
 
 @contextmanager
 def make_progress(enabled: bool = True, console: Console | None = None, log_every: float = LOG_EVERY_S,
-                  get_time: Optional[Callable[[], float]] = None) -> Iterator[Progress]:
+                  get_time: Optional[Callable[[], float]] = None, live: bool = True) -> Iterator[Progress]:
     """A progress display on stderr; ``add_task(..., stats="")`` and ``update(stats=...)`` show live
-    numbers. A live bar on a terminal, throttled plain lines otherwise; nothing when not ``enabled``."""
+    numbers. A live bar on a terminal (unless not ``live``), throttled plain lines otherwise; nothing
+    when not ``enabled``."""
     console = console or Console(file=sys.stderr)
     columns = (
         TextColumn("[bold]{task.description}"),
@@ -106,7 +107,7 @@ def make_progress(enabled: bool = True, console: Console | None = None, log_ever
         TimeElapsedColumn(),
         TextColumn("{task.fields[stats]}"),
     )
-    live = console.is_terminal or console.is_jupyter
+    live = live and (console.is_terminal or console.is_jupyter)
     if enabled and not live:
         progress: Progress = PlainProgress(*columns, console=console, get_time=get_time, log_every=log_every)
     else:

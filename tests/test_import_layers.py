@@ -14,9 +14,9 @@ PACKAGE = "nerf2gs_plugin"
 ROOT = Path(__file__).resolve().parents[1] / PACKAGE
 
 # bottom up; a module's layer is that of its first name under the package (the package's own
-# __init__ is the ground floor). errors and progress import nothing of the package.
+# __init__ is the ground floor). errors, progress and warn import nothing of the package.
 LAYERS: list[tuple[str, ...]] = [
-    ("", "utils", "errors", "progress"),
+    ("", "utils", "errors", "progress", "warn"),
     ("cameras", "data"),
     ("rendering", "fields", "enhancers"),  # enhancers: image in, image out (ONNX, identity)
     ("datamanagers",),

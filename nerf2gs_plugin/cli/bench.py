@@ -1,7 +1,8 @@
-"""ns2gs-bench quick | paper-table | ablation | speed-quality | stability | model-size | raster | field | faults
+"""ns2gs-bench demo | quick | paper-table | ablation | speed-quality | stability | model-size | raster | field | faults
 
 Results (JSON + Markdown + PNG, with the machine) go to benchmarks/results/; trained runs are kept
-under benchmarks/runs/ and reused when nothing that matters changed.
+under benchmarks/runs/ and reused when nothing that matters changed. ``demo`` (what make demo runs)
+writes everything under outputs/demo/ instead and leaves the committed results alone.
 """
 
 from __future__ import annotations
@@ -54,6 +55,35 @@ class Quick:
         run_named_bench("quick", plan, data, self.runs, self.out, "Quick paper table (synthetic street, CPU scale)",
                         compare=[("splatfacto + NeRF views", "splatfacto"), ("splatfacto + NeRF views", "StreetNeRF")],
                         figure_labels=["StreetNeRF", "splatfacto", "splatfacto + NeRF views"], rerun=self.rerun)
+
+
+@dataclass
+class Demo:
+    """make demo: the quick table's runs (StreetNeRF, Splatfacto, Splatfacto + NeRF views), all under
+    outputs/demo/ with readable names, then where they are and the next commands. Committed results
+    are left alone (ns2gs-bench quick regenerates benchmarks/results/quick.*)."""
+
+    data: Optional[Path] = None
+    """Dataset; default data/street (the synthetic street, made once)."""
+    out: Path = Path("outputs/demo")
+    """Where the runs (runs/), their readable links, the table and the charts go."""
+
+    def main(self) -> None:
+        from nerf2gs_plugin.eval.bench_paper import paper_table_plan, run_named_bench
+        from nerf2gs_plugin.eval.demo import link_runs, next_steps
+
+        data = self.data
+        if data is None:
+            from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_street
+
+            data = Path("data/street")
+            if not (data / "transforms.json").is_file():
+                generate_street(SynthStreetConfig(out=data))
+        plan = paper_table_plan("quick", targets=("splatfacto",))
+        results = run_named_bench("quick", plan, data, self.out / "runs", self.out, "Quick paper table (synthetic street, CPU scale)",
+                                  compare=[("splatfacto + NeRF views", "splatfacto"), ("splatfacto + NeRF views", "StreetNeRF")],
+                                  figure_labels=["StreetNeRF", "splatfacto", "splatfacto + NeRF views"])
+        print(next_steps(link_runs(results, self.out), self.out / "quick.md", data))
 
 
 @dataclass
@@ -241,9 +271,8 @@ class Faults:
 
 def main() -> None:
     cmd = tyro.extras.subcommand_cli_from_dict(
-        {"quick": Quick, "paper-table": PaperTable, "ablation": Ablation, "speed-quality": SpeedQuality,
-         "stability": Stability, "model-size": ModelSize, "raster": Raster, "field": Field,
-         "faults": Faults},
+        {"demo": Demo, "quick": Quick, "paper-table": PaperTable, "ablation": Ablation, "speed-quality": SpeedQuality,
+         "stability": Stability, "model-size": ModelSize, "raster": Raster, "field": Field, "faults": Faults},
         description=__doc__,
     )
     cmd.main()

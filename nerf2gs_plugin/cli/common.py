@@ -11,7 +11,11 @@ T = TypeVar("T")
 
 
 def run_cli(main: Callable[[], T]) -> T:
-    """Run ``main``; bad input becomes ``error: <one line>`` on stderr and exit status 2."""
+    """Run ``main``; bad input becomes ``error: <one line>`` on stderr and exit status 2;
+    warnings are one plain line each, once (:mod:`nerf2gs_plugin.warn`)."""
+    from nerf2gs_plugin.warn import install_plain_warnings
+
+    install_plain_warnings()
     try:
         return main()
     except UserError as e:

@@ -24,14 +24,18 @@ class EvalArgs:
     render_dir: Optional[Path] = None
     """Where the GT | render | error grids go (default: RUN/eval_renders)."""
     max_images: Optional[int] = None
+    """Evaluate at most this many images per split (default: all)."""
     data: Optional[Path] = None
     """Dataset folder, if it moved since training."""
     device: str = "auto"
+    """auto (CUDA when present, else CPU), cpu, cuda or cuda:N."""
 
 
 def print_table(result: dict) -> None:
     from rich.console import Console
     from rich.table import Table
+
+    from nerf2gs_plugin.eval.table_print import print_table as print_whole, table_console
 
     table = Table(title=f"{result['method_name']} @ step {result['step']}")
     for col in ("split", "PSNR", "SSIM", "LPIPS", "FPS", "images"):
@@ -41,9 +45,11 @@ def print_table(result: dict) -> None:
         fps = f"{r['fps']:.2f}" if r.get("fps") is not None else "n/a"
         table.add_row(split, f"{r['psnr']:.2f}", f"{r['ssim']:.3f}", lp, fps, str(r["num_images"]))
     size = result["size"]
-    Console().print(table)
+    print_whole(table)
     fps = f"{result['fps']:.2f}" if result.get("fps") is not None else "n/a"
-    Console().print(f"render {fps} FPS | {size['primitives']} primitives, {size['parameters']} parameters, "
+    kind = size.get("primitive_kind", "primitives")
+    prims = f"{size['primitives']:,} {kind}, " if kind else ""  # a NeRF has parameters, not primitives
+    table_console().print(f"render {fps} FPS | {prims}{size['parameters']:,} parameters, "
                     f"{size['megabytes']:.2f} MB in memory, {size.get('checkpoint_megabytes', 0):.2f} MB on disk | "
                     f"trained {result['train_seconds']:.0f} s")
     if not result.get("lpips_available", True):

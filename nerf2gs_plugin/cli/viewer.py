@@ -17,11 +17,13 @@ class ViewerArgs:
     run: tyro.conf.Positional[Path]
     """Run directory or .ckpt file (any registered method, plugins too)."""
     port: int = 7007
+    """Port of the web viewer (http://HOST:PORT)."""
     host: str = "127.0.0.1"
     """Interface to listen on (0.0.0.0 to serve other machines)."""
     data: Optional[Path] = None
     """Dataset folder, if it moved since training."""
     device: str = "auto"
+    """auto (CUDA when present, else CPU), cpu, cuda or cuda:N."""
     max_side: int = 640
     """Longest side of a full-resolution frame."""
     target_fps: float = 10.0

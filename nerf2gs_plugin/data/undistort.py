@@ -17,7 +17,9 @@ Choices (documented for users):
     at ``0``. ``cx, cy`` are shifted by 0.5 on the way into and out of OpenCV.
 
 Cache: ``<dataset>/.ns2gs_cache/`` (or ``$XDG_CACHE_HOME/nerf2gs/datasets/<hash>`` when the dataset is
-read-only). A cached name depends on the source's path inside the dataset and the parameters only
+read-only), or ``<cache dir>/<dataset name>-<hash>`` when a cache dir is set
+(``--pipeline.datamanager.cache-dir`` / :func:`set_cache_root`, or ``$NS2GS_CACHE_DIR``). The first
+file a command writes there prints where the cache is. A cached name depends on the source's path inside the dataset and the parameters only
 (so a moved copy keeps names); a ``.src`` sidecar holds the source's size and mtime, and a stale
 entry is rebuilt.
 """
@@ -37,7 +39,23 @@ from nerf2gs_plugin.data import images as im
 from nerf2gs_plugin.errors import DataError
 
 CACHE_DIRNAME = ".ns2gs_cache"
+CACHE_ENV = "NS2GS_CACHE_DIR"
 _VERSION = "1"
+_CACHE_ROOT: Optional[Path] = None
+_ANNOUNCED: set[Path] = set()
+
+
+def set_cache_root(path: Optional[Path]) -> None:
+    """Put every dataset's processed files under ``path`` (None: next to the dataset, the default)."""
+    global _CACHE_ROOT
+    _CACHE_ROOT = Path(path).expanduser().absolute() if path is not None else None
+
+
+def cache_root() -> Optional[Path]:
+    if _CACHE_ROOT is not None:
+        return _CACHE_ROOT
+    env = os.environ.get(CACHE_ENV)
+    return Path(env).expanduser().absolute() if env else None
 
 
 @dataclass
@@ -94,6 +112,11 @@ class SplitCache:
     def __init__(self, root: Path) -> None:
         self.root = Path(root).resolve()
         self.dir = self.root / CACHE_DIRNAME
+        chosen = cache_root()
+        if chosen is not None:
+            self.dir = chosen / f"{self.root.name}-{hashlib.sha1(str(self.root).encode()).hexdigest()[:12]}"
+            self.dir.mkdir(parents=True, exist_ok=True)
+            return
         try:
             self.dir.mkdir(exist_ok=True)
             if not os.access(self.dir, os.W_OK):
@@ -111,6 +134,16 @@ class SplitCache:
         key = hashlib.sha1(f"{_VERSION}|{kind}|{rel}|{params}".encode()).hexdigest()[:12]
         return self.dir / kind / f"{src.stem}_{key}{suffix}"
 
+    def _announce(self) -> None:
+        """Say once per command where undistorted / resized copies go (they can be large)."""
+        if self.dir in _ANNOUNCED:
+            return
+        _ANNOUNCED.add(self.dir)
+        import sys
+
+        print(f"note: undistorted/resized copies of the dataset's images are cached in {self.dir} "
+              f"(--pipeline.datamanager.cache-dir DIR or ${CACHE_ENV} to put them elsewhere)", file=sys.stderr, flush=True)
+
     @staticmethod
     def _signature(src: Path) -> str:
         st = src.stat()
@@ -125,6 +158,7 @@ class SplitCache:
         sig = self._signature(src)
         if dst.is_file() and side.is_file() and side.read_text() == sig:
             return dst
+        self._announce()
         make(src, dst)
         tmp = side.with_name(side.name + f".{os.getpid()}.tmp")
         tmp.write_text(sig)

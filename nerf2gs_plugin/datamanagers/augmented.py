@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterator, Literal, Optional, Protocol
@@ -42,6 +41,7 @@ from nerf2gs_plugin.datamanagers.augment_cache import (
 )
 from nerf2gs_plugin.datamanagers.base import DataManager
 from nerf2gs_plugin.datamanagers.image_set import ImageSet
+from nerf2gs_plugin.warn import warn
 
 RenderFn = Callable[[Cameras], dict[str, Tensor]]
 
@@ -66,7 +66,7 @@ class Reference:
 
 @dataclass
 class AugmentConfig:
-    """``--augment.*`` flags; used only with ``--augment-from``."""
+    """The --augment.* flags; used only with --augment-from."""
 
     composites: bool = True
     """Replace transient-mask pixels of input views by the reference render."""
@@ -94,6 +94,7 @@ class AugmentConfig:
     enhancer: str = "none"
     """none | builtin | builtin:PATH | onnx:PATH: image enhancement of the additional views."""
     use_cache: bool = True
+    """Reuse the reference's cached renders when their manifest matches (False: render again)."""
 
 
 def bev_cameras(train: Cameras, up: Tensor, delta_h_world: float, theta_pitch: float, every_n: int = 1,
@@ -220,9 +221,9 @@ def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, re
     manifest = read_manifest(cache_dir)
     dropped = manifest.dropped_outside_box + manifest.dropped_empty
     if dropped:
-        warnings.warn(f"{dropped} of {dropped + manifest.num_extra} bird's-eye views dropped, never trained on: "
-                      f"{manifest.dropped_outside_box} outside the scene box (lower --augment.delta-h), "
-                      f"{manifest.dropped_empty} mostly empty renders (coverage < {config.min_coverage})", stacklevel=2)
+        warn(f"{dropped} of {dropped + manifest.num_extra} bird's-eye views dropped",
+             f"never trained on: {manifest.dropped_outside_box} outside the scene box (lower --augment.delta-h), "
+             f"{manifest.dropped_empty} mostly empty renders (coverage < {config.min_coverage})")
     if bev is not None:
         bev = bev[torch.tensor(manifest.extra_indices, dtype=torch.long)]
     composites = None
@@ -260,7 +261,7 @@ class AugmentedDataManager(DataManager):
         self.every_n = max(augment.every_n, 1)
         self.original_train_images: ImageSet = inner.train_images
         if augment.composites and "transient" not in inner.train_images.masks:
-            warnings.warn("the dataset has no transient masks: input-view composites are off", stacklevel=2)
+            warn("the dataset has no transient masks", "input-view composites are off (only the bird's-eye views are added)")
         td = inner.train_data
         self.views: AugmentedViews = render_augmented_views(
             inner.train_images, td.up, td.metres_to_world(augment.delta_h), reference.render, reference.key,

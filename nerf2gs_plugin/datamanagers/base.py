@@ -40,6 +40,8 @@ class DataManagerConfig(InstantiateConfig):
 
     def data_options(self) -> dict:
         return {"holdout_every": self.holdout_every, "metres_per_unit": self.metres_per_unit, "camera_height": self.camera_height}
+    cache_dir: Optional[Path] = None
+    """Where undistorted / resized copies of the images go (default: DATA/.ns2gs_cache)."""
 
 
 class DataManager(ABC):
@@ -52,6 +54,10 @@ class DataManager(ABC):
         self.config = config
         self.data = Path(data)
         self.device = torch.device(device)
+        if config.cache_dir is not None:
+            from nerf2gs_plugin.data.undistort import set_cache_root
+
+            set_cache_root(config.cache_dir)
         self.train_data: DataparserOutputs = parse_dataset(self.data, "train", downscale=config.downscale, **config.data_options())
         if len(self.train_data) == 0:
             raise DataError("the train split is empty", self.data)

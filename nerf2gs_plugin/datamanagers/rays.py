@@ -16,6 +16,7 @@ from nerf2gs_plugin.datamanagers.image_set import ImageSet
 class RayDataManagerConfig(DataManagerConfig):
     _target: type = field(default_factory=lambda: RayDataManager)
     rays_per_batch: int = 1024
+    """Rays per training step."""
 
 
 class RayDataManager(DataManager):

@@ -36,6 +36,9 @@ class Model(nn.Module, metaclass=ABCMeta):
     """
 
     config: ModelConfig
+    primitive_kind: Union[str, None] = "primitives"
+    """What :meth:`num_primitives` counts, as shown to people ("Gaussians", "anchors"); None for
+    a model without primitives (a NeRF: its size is parameters and MB, not hash-table entries)."""
 
     def __init__(self, config: ModelConfig, train_data: DataparserOutputs, **kwargs: Any) -> None:
         super().__init__()
@@ -88,7 +91,8 @@ class Model(nn.Module, metaclass=ABCMeta):
         """Primitives, parameters and megabytes of state: printed beside every quality figure."""
         n_params = sum(p.numel() for p in self.parameters())
         n_bytes = sum(t.numel() * t.element_size() for t in self.state_dict().values())
-        return {"primitives": int(self.num_primitives()), "parameters": int(n_params), "megabytes": n_bytes / 2**20}
+        return {"primitives": int(self.num_primitives()), "primitive_kind": self.primitive_kind,
+                "parameters": int(n_params), "megabytes": n_bytes / 2**20}
 
     def load_model_state(self, state: dict[str, Tensor]) -> None:
         """Load a state dict; methods whose parameter shapes change (densification) override this."""

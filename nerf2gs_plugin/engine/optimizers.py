@@ -14,15 +14,21 @@ from nerf2gs_plugin.utils.schedule import scheduled
 
 @dataclass
 class OptimizerConfig:
-    """Adam for one parameter group; the learning rate decays exponentially from ``lr`` to
-    ``lr_final`` over ``max_steps`` (after a linear warm-up), or stays constant."""
+    """Adam for one parameter group; the learning rate decays exponentially from lr to lr-final
+    over max-steps (after a linear warm-up), or stays constant."""
 
     lr: float = 1e-3
+    """Initial learning rate."""
     eps: float = 1e-15
+    """Adam epsilon."""
     weight_decay: float = 0.0
+    """Adam weight decay."""
     lr_final: Optional[float] = None
+    """Learning rate reached at max-steps (exponential decay); None: constant."""
     warmup_steps: int = 0
+    """Steps of linear learning-rate warm-up."""
     max_steps: int = scheduled(30000, "horizon", only_if="lr_final")
+    """Step at which the decay reaches lr-final."""
 
     def lr_at(self, step: int) -> float:
         if step < self.warmup_steps:

@@ -48,13 +48,15 @@ class Pipeline(nn.Module):
 
     @torch.no_grad()
     def get_eval_image_metrics(self, step: int) -> dict[str, float]:
+        """PSNR of ONE eval view (the ``step``-th in turn): a cheap signal while training, named
+        ``eval_psnr_1view`` so it is not taken for the eval PSNR of ``ns2gs-eval`` (all views)."""
         camera, batch = self.datamanager.next_eval(step)
         was_training = self.model.training
         self.model.eval()
         out = self.model.render_camera(camera)
         self.model.train(was_training)
         mse = ((out["rgb"] - batch["image"]) ** 2).mean()
-        return {"eval_psnr": float(psnr_from_mse(mse))}
+        return {"eval_psnr_1view": float(psnr_from_mse(mse))}
 
     @torch.no_grad()
     def render_split(self, name: str, max_images: Optional[int] = None) -> list[tuple[dict[str, Tensor], dict[str, Any], float]]:

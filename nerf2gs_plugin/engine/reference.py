@@ -46,10 +46,15 @@ def load_run(path: Path, device: torch.device | str = "cpu", data: Optional[Path
     config: TrainerConfig = load_config(run_dir / "config.yml", spec.config)
     if data is not None:
         config = dataclasses.replace(config, data=Path(data))
+    else:
+        config = dataclasses.replace(config, data=find_dataset(Path(config.data), run_dir))
     if not Path(config.data).exists():
         raise ConfigError(f"the run's dataset {config.data} does not exist (pass the dataset path explicitly)", run_dir / "config.yml")
     ckpt = load_checkpoint(ckpt_file, expected_method=doc["method_name"], map_location=device)
-    pipeline = Pipeline(config.pipeline, config.data, device)
+    from nerf2gs_plugin.warn import quiet
+
+    with quiet():  # what the data lacks was said when the run was trained
+        pipeline = Pipeline(config.pipeline, config.data, device)
     try:
         pipeline.model.load_model_state(ckpt["model"])
     except (RuntimeError, KeyError) as e:
@@ -71,6 +76,18 @@ def _same_data_other_downscale(run_dir: Path, datamanager, fingerprint: Optional
         return False
     options = datamanager.config.data_options() if hasattr(datamanager.config, "data_options") else {}
     return dataset_fingerprint(parse_dataset(datamanager.data, "train", downscale=ref_ds, **options).image_filenames) == fingerprint
+
+
+def find_dataset(recorded: Path, run_dir: Path) -> Path:
+    """The run's dataset: the recorded path, or, for a relative one recorded by an older run (the
+    path from where it was trained), that path under the first ancestor of the run directory
+    that holds it (a run under <repo>/benchmarks/runs/ finds <repo>/benchmarks/runs/data/street)."""
+    if recorded.is_absolute() or recorded.exists():
+        return recorded
+    for parent in Path(run_dir).absolute().parents:
+        if (parent / recorded).exists():
+            return parent / recorded
+    return recorded
 
 
 def load_reference(reference: Path, datamanager, device: torch.device | str) -> Reference:

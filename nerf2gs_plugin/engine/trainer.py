@@ -51,18 +51,28 @@ class TrainerConfig:
     """Everything one training run needs; ``ns2gs-train <method>`` exposes every field as a flag."""
 
     method_name: str = "unnamed"
+    """Name of the method; set by the subcommand, names the run folder."""
     data: Path = Path("data/street")
     """Dataset folder (nerfstudio transforms.json or a COLMAP model)."""
     output_dir: Path = Path("outputs")
+    """Root folder of the runs."""
     experiment_name: Optional[str] = None
     """Defaults to the dataset folder's name: runs go to output_dir/experiment/method/timestamp."""
     timestamp: str = "{timestamp}"
+    """Name of the run folder; the default is the start time (YYYY-MM-DD_HHMMSS)."""
     max_num_iterations: int = scheduled(2000, "total")
+    """Number of training steps."""
     steps_per_eval_image: int = 250
+    """Every this many steps, render one eval view (the next in turn) and log its PSNR as
+    eval_psnr_1view: a cheap signal, not ns2gs-eval's PSNR over all views (0 = never)."""
     steps_per_save: int = scheduled(1000, "cap")
+    """Write a checkpoint every this many steps (and always at the end)."""
     keep_all_checkpoints: bool = False
+    """Keep every checkpoint instead of only the latest."""
     seed: int = 42
+    """Random seed (torch, numpy, python)."""
     device: str = "auto"
+    """auto (CUDA when present, else CPU), cpu, cuda or cuda:N."""
     load_checkpoint: Optional[Path] = None
     """Resume from this run directory or .ckpt file (same method)."""
     augment_from: Optional[Path] = None
@@ -71,7 +81,8 @@ class TrainerConfig:
     pipeline: PipelineConfig = field(default_factory=PipelineConfig)
     optimizers: dict[str, OptimizerConfig] = field(default_factory=dict)
     progress: bool = True
-    """Show a rich progress bar."""
+    """A live progress bar on a terminal; False (and whenever the output is not a terminal): one
+    plain line every 10 s with step, rate, ETA and loss."""
     viewer: bool = False
     """Serve the live viewer (viser) while training."""
 
@@ -86,6 +97,8 @@ class Trainer:
         self._unique_dir = config.timestamp == "{timestamp}"  # default stamp: a clash gets a new folder
         if self._unique_dir:
             config = dataclasses.replace(config, timestamp=datetime.now().strftime("%Y-%m-%d_%H%M%S"))
+        # recorded absolute, so eval / export / the viewer find the data from any directory
+        config = dataclasses.replace(config, data=Path(config.data).expanduser().absolute())
         self.config = config
         self._lock = RunDirLock(config.run_dir())
         self.device = pick_device(config.device)
@@ -151,6 +164,9 @@ class Trainer:
         from nerf2gs_plugin.data import save_dataparser_transform
 
         save_dataparser_transform(self.run_dir / "dataparser_transforms.json", self.pipeline.datamanager.train_data)
+        from nerf2gs_plugin.engine.run_cameras import save_train_cameras
+
+        save_train_cameras(self.run_dir, self.pipeline.datamanager.train_data.cameras)  # export without the dataset
 
     def check_finite_state(self, step: int) -> None:
         """Parameters, optimizer state and one rendered view must be finite before a save."""
@@ -247,7 +263,9 @@ class Trainer:
         cfg = self.config
         start = self.step
         ema: dict[str, float] = {}
-        with make_progress(enabled=cfg.progress) as progress:
+        # progress False: no live bar, a plain line every 10 s (step, rate, ETA, loss), unless a step
+        # hook follows the steps (a bench's own bar): then nothing, so lines do not cut through it
+        with make_progress(enabled=cfg.progress or not self.step_hooks, live=cfg.progress) as progress:
             task = progress.add_task(f"train {cfg.method_name}", total=cfg.max_num_iterations, completed=start, stats="")
             for step in range(start, cfg.max_num_iterations):
                 t0 = time.perf_counter()
@@ -259,13 +277,15 @@ class Trainer:
                 record = {"step": step, **stats}
                 if cfg.steps_per_eval_image and (step + 1) % cfg.steps_per_eval_image == 0:
                     record.update(self.pipeline.get_eval_image_metrics(step))
-                    ema["eval_psnr"] = record["eval_psnr"]
+                    ema["eval_psnr_1view"] = record["eval_psnr_1view"]
                 self.history.append(record)
                 if (step + 1) % cfg.steps_per_save == 0 and step + 1 < cfg.max_num_iterations:
                     self.save_checkpoint(step)
                 for hook in self.step_hooks:
                     hook(step)
-                progress.update(task, advance=1, stats=_format_stats(ema, self.pipeline.model.num_primitives()))
+                model = self.pipeline.model
+                prims = model.num_primitives() if getattr(model, "primitive_kind", "primitives") else 0  # not a NeRF's hash entries
+                progress.update(task, advance=1, stats=_format_stats(ema, prims))
         self.save_checkpoint(cfg.max_num_iterations - 1)
         return self.run_dir
 
@@ -310,9 +330,9 @@ class StepHistory:
 def _format_stats(ema: dict[str, float], primitives: int) -> str:
     parts = [f"loss {ema['loss']:.4f}"] if "loss" in ema else []
     if "psnr" in ema:
-        parts.append(f"psnr {ema['psnr']:.2f}")
-    if "eval_psnr" in ema:
-        parts.append(f"eval {ema['eval_psnr']:.2f}")
+        parts.append(f"train psnr {ema['psnr']:.2f}")
+    if "eval_psnr_1view" in ema:
+        parts.append(f"eval psnr (1 view) {ema['eval_psnr_1view']:.2f}")
     if primitives:
         parts.append(f"prims {primitives}")
     return " ".join(parts)

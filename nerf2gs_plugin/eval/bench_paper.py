@@ -179,10 +179,18 @@ def markdown_table(results: dict[str, dict], groups: dict[str, list[str]], title
                 rank = ranks.get((r["label"], metric, s))
                 cells.append(f"**{txt}**" if rank == 1 else f"_{txt}_" if rank == 2 else txt)
         size = r["size"]
-        cells += [fmt(r.get("fps")), str(size["primitives"]), fmt(size.get("checkpoint_megabytes", size["megabytes"]), 1), fmt(r.get("train_seconds"), 0)]
+        cells += [fmt(r.get("fps")), primitives_cell(size), fmt(size.get("checkpoint_megabytes", size["megabytes"]), 1), fmt(r.get("train_seconds"), 0)]
         lines.append("| " + " | ".join(cells) + " |")
     lines += ["", "Bold: best, italic: second best within each target method (rows sharing a target)."]
     return "\n".join(lines)
+
+
+def primitives_cell(size: dict) -> str:
+    """Primitives of a splatting run; for a model without primitives (a NeRF's hash grid) its
+    parameters, so no table calls hash-table entries primitives."""
+    if "primitive_kind" in size and size["primitive_kind"] is None:
+        return f"({size['parameters'] / 1e6:.2f}M params)"
+    return str(size["primitives"])
 
 
 def rich_table(results: dict[str, dict], title: str):
@@ -204,7 +212,7 @@ def rich_table(results: dict[str, dict], title: str):
         ps = [_value(r, "psnr", s) for s in SPLITS]
         ss = [_value(r, "ssim", s) for s in SPLITS]
         table.add_row(r["label"], *[f"{v:.2f}" if v is not None else "n/a" for v in ps],
-                      *[f"{v:.3f}" if v is not None else "n/a" for v in ss], fmt(r.get("fps")), str(r["size"]["primitives"]))
+                      *[f"{v:.3f}" if v is not None else "n/a" for v in ss], fmt(r.get("fps")), primitives_cell(r["size"]))
     return table
 
 
@@ -299,7 +307,6 @@ def run_named_bench(name: str, plan: list[RunSpec], data: Path, runs_root: Path,
                     compare: list[tuple[str, str]], figure_labels: Optional[list[str]] = None, rerun: bool = False) -> dict[str, dict]:
     """Run the plan and write the table, charts and figures; failed runs are rows of the table,
     and then :class:`BenchFailed` (exit status 2 from ``ns2gs-bench``) names them."""
-    from rich.console import Console
 
     t0 = time.time()
     results = run_plan(plan, data, runs_root, name=name, rerun=rerun)
@@ -310,9 +317,11 @@ def run_named_bench(name: str, plan: list[RunSpec], data: Path, runs_root: Path,
     if figure_labels:
         renders_figure(ok, figure_labels, "bev_1", Path(out_dir) / f"{name}_renders_bev_1.png")
         renders_figure(ok, figure_labels, "street", Path(out_dir) / f"{name}_renders_street.png")
-    Console().print(rich_table(results, title))
+    from nerf2gs_plugin.eval.table_print import print_table
+
+    print_table(rich_table(results, title))
     print(ratios_md(results, compare))
-    print(f"results: {out_dir}/{name}.md")
+    print(f"all columns (LPIPS, road PSNR, size, train time) and charts: {out_dir}/{name}.md")
     failed = failures(results)
     if failed:
         listed = "; ".join(f"'{label}' ({reason})" for label, reason in failed.items())

@@ -64,7 +64,7 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
     warm = False
     for name in names:
         rows: dict[str, list[float]] = {**{metric: [] for metric in IMAGE_METRICS}, "lpips": [], "psnr_ground": []}
-        shown, times, resolution = [], [], None
+        shown, times, resolutions = [], [], []
         for i, (camera, batch) in enumerate(dm.eval_images(name)):
             if max_images is not None and i >= max_images:
                 break
@@ -72,7 +72,7 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
             if warm:  # the very first render of the run (allocations, JIT, caches) is not timed
                 times.append(seconds)
             warm = True
-            resolution = [int(camera.height[0]), int(camera.width[0])]
+            resolutions.append([int(camera.height[0]), int(camera.width[0])])
             pred, gt = out["rgb"].clamp(0, 1), batch["image"]
             for metric, fn in IMAGE_METRICS.items():
                 rows[metric].append(float(fn(pred, gt)))
@@ -88,14 +88,20 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
             camera, _ = next(iter(dm.eval_images(name)))
             fps = measure_fps(model, camera, repeats=fps_repeats)
             fps_resolution = [int(camera.height[0]), int(camera.width[0])]
-        entry: dict = {"num_images": len(rows["psnr"]), "resolution": resolution,
-                       "fps": 1.0 / statistics.median(times) if times else None}
+        n_img = len(rows["psnr"])
+        same = all(r == resolutions[0] for r in resolutions)
+        # one [H, W] when every camera of the split has it, else None and see resolutions (per image)
+        entry: dict = {"num_images": n_img, "resolution": resolutions[0] if resolutions and same else None,
+                       "resolutions": resolutions, "fps": 1.0 / statistics.median(times) if times else None}
         for metric, values in rows.items():
             mean, std = _mean_std(values)
             entry[metric], entry[f"{metric}_std"] = mean, std
         results[name] = entry
         if render_dir is not None and shown:
-            save_eval_grid(Path(render_dir) / f"{name}.png", shown, title=f"{run.config.method_name} / {name}")
+            which = "all views" if len(shown) == n_img else f"views 1-{len(shown)} of {n_img}"
+            save_eval_grid(Path(render_dir) / f"{name}.png", shown, title=f"{run.config.method_name} / {name}: {which}",
+                           row_labels=[f"view {i + 1}/{n_img}" for i in range(len(shown))])
+            entry["grid"] = {"path": str(Path(render_dir) / f"{name}.png"), "views": list(range(len(shown)))}
     return {
         "experiment_name": run.config.experiment_name or Path(run.config.data).name,
         "method_name": run.config.method_name,

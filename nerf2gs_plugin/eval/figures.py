@@ -11,8 +11,10 @@ from torch import Tensor
 from nerf2gs_plugin.utils.plotting import pyplot, save_figure
 
 
-def save_eval_grid(path: Path, pairs: Sequence[tuple[Tensor, Tensor]], title: str = "") -> None:
-    """Rows of GT | render | error (|GT-render| x4, clipped), written atomically."""
+def save_eval_grid(path: Path, pairs: Sequence[tuple[Tensor, Tensor]], title: str = "",
+                   row_labels: Sequence[str] = ()) -> None:
+    """Rows of GT | render | error (|GT-render| x4, clipped), written atomically; ``row_labels``
+    name each row's view (left of the GT)."""
     plt = pyplot()
     n = len(pairs)
     fig, axes = plt.subplots(n, 3, figsize=(9, 1.9 * n + 0.4), squeeze=False)
@@ -23,6 +25,8 @@ def save_eval_grid(path: Path, pairs: Sequence[tuple[Tensor, Tensor]], title: st
             ax.imshow(img.numpy(), cmap="inferno" if img.ndim == 2 else None, vmin=0, vmax=1)
             ax.set_xticks([])
             ax.set_yticks([])
+            if c == 0 and r < len(row_labels):
+                ax.set_ylabel(row_labels[r], fontsize=8)
             if r == 0:
                 ax.set_title(label, fontsize=9)
     if title:

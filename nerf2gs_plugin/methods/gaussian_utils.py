@@ -56,12 +56,14 @@ def write_gaussian_ply(
     opacity_logits: Tensor,
     features_dc: Tensor,
     features_rest: Optional[Tensor] = None,
+    comments: tuple[str, ...] = (),
 ) -> None:
     """The standard 3DGS PLY (what the original code, SuperSplat and most viewers read).
 
     Args: means ``[N,3]``, log_scales ``[N,3]`` (2DGS passes a very small value, a "zero" scale,
     for its third axis), quats ``[N,4]`` wxyz, opacity_logits ``[N]``, features_dc ``[N,3]``
-    SH DC, features_rest ``[N,K-1,3]`` (written channel-major as ``f_rest_*``, as 3DGS does).
+    SH DC, features_rest ``[N,K-1,3]`` (written channel-major as ``f_rest_*``, as 3DGS does);
+    ``comments``: one-line ``comment`` header entries (e.g. the coordinate frame).
     """
     n = means.shape[0]
     cols: list[tuple[str, Tensor]] = [("x", means[:, 0]), ("y", means[:, 1]), ("z", means[:, 2])]
@@ -77,7 +79,7 @@ def write_gaussian_ply(
     data = np.empty(n, dtype=[(name, "<f4") for name, _ in cols])
     for name, col in cols:
         data[name] = col.detach().float().cpu().numpy()
-    header = "ply\nformat binary_little_endian 1.0\n"
+    header = "ply\nformat binary_little_endian 1.0\n" + "".join(f"comment {c}\n" for c in comments)
     header += f"element vertex {n}\n" + "".join(f"property float {name}\n" for name, _ in cols) + "end_header\n"
     atomic_write_bytes(Path(path), header.encode("ascii") + data.tobytes())
 

@@ -20,6 +20,15 @@ T = TypeVar("T")
 class InstantiateConfig:
     """A config that knows the class it builds (``_target``), like nerfstudio's."""
 
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        """Hide ``_target`` from the command line: it is the class a config builds, not a setting
+        (tyro would list it as an unsettable ``{fixed}`` option)."""
+        super().__init_subclass__(**kwargs)
+        if "_target" in cls.__dict__.get("__annotations__", {}):
+            import tyro
+
+            cls.__annotations__["_target"] = tyro.conf.Suppress[type]
+
     def setup(self, **kwargs: Any) -> Any:
         target = getattr(self, "_target")
         return target(self, **kwargs)

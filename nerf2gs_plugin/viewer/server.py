@@ -127,8 +127,9 @@ class Viewer:
         size = self.model.size_report() if hasattr(self.model, "size_report") else {}
         lines = [f"**method** {self.method_name}  ", f"**step** {self.step}  "]
         if size:
-            lines += [f"**primitives** {int(size.get('primitives', 0)):,}  ", f"**parameters** {int(size.get('parameters', 0)):,}  ",
-                      f"**size** {size.get('megabytes', 0.0):.2f} MB  "]
+            kind = size.get("primitive_kind", "primitives")  # None: a NeRF, no primitives to count
+            lines += [f"**{kind}** {int(size.get('primitives', 0)):,}  "] if kind else []
+            lines += [f"**parameters** {int(size.get('parameters', 0)):,}  ", f"**size** {size.get('megabytes', 0.0):.2f} MB  "]
         lines.append(f"**device** {self.model_device}")
         return "\n".join(lines)
 

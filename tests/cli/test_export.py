@@ -40,7 +40,7 @@ def run_dir(tmp_path_factory) -> Path:
 
 
 def test_export_ply_round_trip(run_dir, tmp_path):
-    out = export(ExportArgs(run=run_dir, output=tmp_path / "s.ply"))
+    out = export(ExportArgs(run=run_dir, output=tmp_path / "s.ply", background=False))
     back = read_gaussian_ply(out)
     model = load_run(run_dir).model
     ref = model.export_gaussians()

@@ -95,7 +95,7 @@ def test_reference_pairs_from_a_partially_trained_run(tiny_scene, tmp_path):
     import numpy as np
 
     from nerf2gs_plugin.engine.reference import load_run
-    from nerf2gs_plugin.enhance import make_enhancer
+    from nerf2gs_plugin.enhancers import make_enhancer
 
     enh = make_enhancer(f"onnx:{tmp_path / 'e.onnx'}")
     loaded = load_run(run, data=tiny_scene)

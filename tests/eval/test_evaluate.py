@@ -39,7 +39,7 @@ def _check_schema(res: dict, splits: list[str], lpips: bool) -> None:
     assert list(res["results"]) == splits
     for split in splits:
         r = res["results"][split]
-        assert r["num_images"] == 2 and r["resolution"] == [24, 32]
+        assert r["num_images"] == 2 and r["resolution"] == [24, 32] and r["resolutions"] == [[24, 32], [24, 32]]
         assert 5 < r["psnr"] < 60 and 0 <= r["psnr_std"] < 20
         assert -1 <= r["ssim"] <= 1 and r["ssim_std"] >= 0
         if lpips:
@@ -75,6 +75,7 @@ def test_evaluate_run_schema_grids_and_lpips(tiny_run, tmp_path):
     for split in ("street", "bev_1"):
         png = tmp_path / "grids" / f"{split}.png"
         assert png.is_file() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert res["results"][split]["grid"] == {"path": str(png), "views": [0, 1]}  # the grid says what it shows
     json.dumps(res, allow_nan=False)  # strict JSON: no NaN/inf anywhere
     # the render is not the ground truth: worse than a perfect score, and PSNR agrees with a direct computation
     assert res["results"]["street"]["psnr"] < 60 and res["results"]["street"]["ssim"] < 0.999

@@ -37,7 +37,9 @@ class ScaffoldGSModelConfig(SplatModelConfig):
 
     _target: type = field(default_factory=lambda: ScaffoldGSModel)
     feat_dim: int = 32
+    """Length of each anchor's feature vector."""
     n_offsets: int = 10
+    """Neural Gaussians spawned per anchor."""
     voxel_size: float = 0.0
     """Anchor voxel size in normalised units; 0 = the median nearest-neighbour distance of the points."""
     appearance_dim: int = 0
@@ -52,17 +54,24 @@ class ScaffoldGSModelConfig(SplatModelConfig):
     update_interval: int = scheduled(100, "interval")
     update_until: int = scheduled(1500)
     grow_threshold: float = 0.0002
+    """Mean screen-space gradient of a neural Gaussian above which an anchor grows there."""
     update_depth: int = 3
+    """Voxel levels at which anchors grow (each finer by update-hierarchy-factor)."""
     update_init_factor: int = 16
+    """Voxel size of the coarsest growing level, in anchor voxels."""
     update_hierarchy_factor: int = 4
+    """Ratio of voxel sizes between growing levels."""
     success_threshold: float = 0.8
+    """An anchor is grown from or pruned once seen in this fraction of update-interval steps."""
     min_opacity: float = 0.005
+    """Prune anchors whose neural Gaussians' mean opacity is below this."""
     max_anchors: int = 20000
     """Soft budget on anchors for a CPU (0 = unlimited)."""
 
 
 class ScaffoldGSModel(Model):
     config: ScaffoldGSModelConfig
+    primitive_kind = "anchors"
 
     def populate_modules(self, train_data: DataparserOutputs) -> None:
         c = self.config
@@ -70,6 +79,9 @@ class ScaffoldGSModel(Model):
         if train_data.points3D_xyz is not None and len(train_data.points3D_xyz) > 0:
             pts = train_data.points3D_xyz.float()
         else:
+            from nerf2gs_plugin.warn import warn
+
+            warn("no sparse points", f"placing anchors on {c.num_random} random points in the scene box", stacklevel=3)
             lo, hi = self.scene_box[0], self.scene_box[1]
             pts = lo + (hi - lo) * torch.rand(c.num_random, 3, generator=gen)
         voxel = c.voxel_size if c.voxel_size > 0 else float(knn_mean_distance(pts, k=1).median().clamp_min(1e-4))

@@ -44,18 +44,19 @@ class SplatfactoModelConfig(SplatModelConfig):
     """Raise the SH degree every this many steps (nerfstudio: 1000 of 30000)."""
     init_opacity: float = 0.1
     strategy_type: Literal["default", "mcmc"] = "default"
-    """Densification: ``default`` (clone / split / prune, settings in ``strategy``) or ``mcmc`` (in ``mcmc``)."""
+    """Densification: default (clone / split / prune, settings under strategy) or mcmc (settings under mcmc)."""
     strategy: DefaultStrategyConfig = field(default_factory=lambda: DefaultStrategyConfig(
         warmup_length=300, reset_alpha_every=1000, stop_split_at=1500, stop_screen_size_at=400,
         max_pause_after_reset=300, max_gaussians=60000))
     """The default strategy at CPU scale (paper values in config.py): 60k-Gaussian soft budget."""
     mcmc: MCMCStrategyConfig = field(default_factory=lambda: MCMCStrategyConfig(
         cap_max=30000, refine_start_iter=300, refine_stop_iter=2500))
-    """The MCMC strategy at CPU scale (``--pipeline.model.strategy-type mcmc``): 30k-Gaussian hard budget."""
+    """The MCMC strategy at CPU scale (with --pipeline.model.strategy-type mcmc): 30k-Gaussian hard budget."""
 
 
 class SplatfactoModel(Model):
     config: SplatfactoModelConfig
+    primitive_kind = "Gaussians"
 
     # ------------------------------------------------------------------ setup
     def populate_modules(self, train_data: DataparserOutputs) -> None:
@@ -91,6 +92,9 @@ class SplatfactoModel(Model):
             xyz = data.points3D_xyz.float().clone()
             rgb = data.points3D_rgb.float() / 255.0 if data.points3D_rgb is not None else torch.full_like(xyz, 0.5)
             return xyz, rgb
+        from nerf2gs_plugin.warn import warn
+
+        warn("no sparse points", f"starting from {self.config.num_random} random Gaussians in the scene box", stacklevel=3)
         lo, hi = self.scene_box[0], self.scene_box[1]
         xyz = lo + (hi - lo) * torch.rand(self.config.num_random, 3, generator=gen)
         return xyz, torch.rand(self.config.num_random, 3, generator=gen)

@@ -86,11 +86,17 @@ class DefaultStrategyConfig:
     reset_alpha_every: int = scheduled(3000)
     stop_split_at: int = scheduled(15000)
     densify_grad_thresh: float = 0.0008
+    """Screen-space gradient above which a Gaussian is cloned or split."""
     densify_size_thresh: float = 0.01
+    """Gaussians larger than this (scene units) are split, smaller are cloned."""
     n_split_samples: int = 2
+    """Gaussians a split Gaussian becomes."""
     cull_alpha_thresh: float = 0.1
+    """Prune Gaussians with opacity below this."""
     cull_scale_thresh: float = 0.5
+    """Prune Gaussians larger than this (scene units)."""
     cull_screen_size: float = 0.15
+    """Prune Gaussians whose screen radius exceeds this fraction of the image size."""
     split_screen_size: float = 0.05
     stop_screen_size_at: int = scheduled(4000)
     continue_cull_post_densification: bool = True
@@ -257,7 +263,9 @@ class MCMCStrategyConfig:
     refine_stop_iter: int = scheduled(25_000)
     refine_every: int = scheduled(100, "interval")
     min_opacity: float = 0.005
+    """Gaussians below this opacity are relocated."""
     grow_factor: float = 0.05
+    """Grow the count by this fraction per refinement, up to cap-max."""
     init_opacity: float = 0.5
     """Initial opacity (the model's; MCMC starts from opaque but small Gaussians)."""
     init_scale: float = 0.1

@@ -45,7 +45,6 @@ Any mask kind the data lacks turns its term off with one warning.
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, field
 from typing import Any, Optional
 
@@ -62,6 +61,7 @@ from nerf2gs_plugin.fields.appearance import AppearanceTransforms
 from nerf2gs_plugin.fields.hash_encoding import HashGridSpec
 from nerf2gs_plugin.fields.sky import SkyModel
 from nerf2gs_plugin.fields.street_field import ProposalField, StreetField
+from nerf2gs_plugin.warn import warn
 from nerf2gs_plugin.methods.streetnerf.point_depth import line_of_sight_loss, visible_point_rays
 from nerf2gs_plugin.methods.streetnerf.sampling import (
     distortion_loss,
@@ -92,13 +92,21 @@ class StreetNeRFModelConfig(ModelConfig):
     with a warning when the data has no points."""
     # field
     num_levels: int = 12
+    """Hash grid: resolution levels."""
     features_per_level: int = 2
+    """Hash grid: features per level."""
     log2_hashmap_size: int = 15
+    """Hash grid: log2 of the table entries per level."""
     base_res: int = 16
+    """Hash grid: coarsest resolution."""
     max_res: int = 1024
+    """Hash grid: finest resolution."""
     hidden_dim: int = 64
+    """Width of the density MLP."""
     color_hidden_dim: int = 64
+    """Width of the colour MLP."""
     geo_feat_dim: int = 15
+    """Features passed from the density MLP to the colour MLP."""
     sh_degree: int = 0
     """Degree of the view-direction encoding of colour. 0 (view-independent colour) by default: the
     bird's-eye directions were never seen in training, and a view-dependent head extrapolates them to
@@ -111,34 +119,56 @@ class StreetNeRFModelConfig(ModelConfig):
     """Zip-NeRF level downweighting by the sample footprint."""
     # proposals
     num_proposal_samples: tuple[int, ...] = (48, 24)
+    """Samples per ray of each proposal round."""
     num_nerf_samples: int = 24
+    """Samples per ray of the final (field) round."""
     proposal_levels: int = 5
+    """Hash-grid levels of each proposal network."""
     proposal_log2_hashmap_size: int = 14
+    """log2 of the hash table entries of the proposal networks."""
     proposal_max_res: tuple[int, ...] = (128, 256)
+    """Finest resolution of each proposal network."""
     proposal_hidden_dim: int = 16
+    """Width of the proposal networks' MLPs."""
     proposal_anneal_steps: int = 800
+    """Steps over which the proposal weights are annealed (mip-NeRF 360)."""
     near_plane: float = 0.01
+    """Ray start distance (scene units)."""
     far_plane: float = 1000.0
+    """Ray end distance (scene units; contracted space beyond the box)."""
     # loss weights
     interlevel_weight: float = 1.0
+    """Weight of the proposal (interlevel) loss."""
     distortion_weight: float = 0.002
+    """Weight of the distortion loss (mip-NeRF 360)."""
     sky_weight: float = 0.1
+    """Weight of the sky-mask accumulation loss."""
     opaque_weight: float = 0.01
+    """Weight of the loss pushing non-sky rays to full accumulation."""
     ground_weight: float = 0.05
+    """Weight of the ground-plane line-of-sight loss."""
     ground_start_step: int = 200
+    """Step from which the ground-plane loss is on."""
     ground_ema: float = 0.95
+    """Moving-average factor of the fitted ground plane."""
     appearance_reg_weight: float = 1e-3
+    """Weight pulling the per-image colour transforms to the identity."""
     point_depth_weight: float = 0.05
+    """Weight of the sparse-point depth loss."""
     point_rays_per_batch: int = 256
+    """Rays through sparse points per step for the point-depth loss."""
     # rendering
     eval_chunk: int = 4096
+    """Rays rendered at once when rendering a whole image."""
     background: tuple[float, float, float] = (0.5, 0.5, 0.5)
-    """Learned constant background, used only when ``sky`` is off."""
+    """Learned constant background, used only when sky is off."""
     encoding_backend: str = "auto"
+    """Hash-grid encoding: auto (our C++ kernel on CPU, else torch), cpu or torch."""
 
 
 class StreetNeRFModel(Model):
     config: StreetNeRFModelConfig
+    primitive_kind = None  # a field: its size is parameters and MB (num_primitives: hash-table entries)
 
     def populate_modules(self, train_data: DataparserOutputs) -> None:
         c = self.config
@@ -181,11 +211,11 @@ class StreetNeRFModel(Model):
         if not self.config.point_depth:
             return
         if train_data.points3D_xyz is None or len(train_data.points3D_xyz) == 0:
-            warnings.warn("StreetNeRF: the dataset has no sparse points; training without the point depth loss", stacklevel=3)
+            warn("the dataset has no sparse points", "StreetNeRF trains without its point-depth loss", stacklevel=3)
             return
         pr = visible_point_rays(train_data.cameras, train_data.points3D_xyz)
         if len(pr) == 0:
-            warnings.warn("StreetNeRF: no sparse point is visible in a training view; training without the point depth loss", stacklevel=3)
+            warn("no sparse point is visible in any training view", "StreetNeRF trains without its point-depth loss", stacklevel=3)
             return
         rays = pr.rays
         for name, value in (("pt_origins", rays.origins), ("pt_directions", rays.directions), ("pt_radius", rays.pixel_radius),
@@ -196,7 +226,7 @@ class StreetNeRFModel(Model):
     @staticmethod
     def _mask_available(kind: str, kinds: set[str], term: str) -> bool:
         if kind not in kinds:
-            warnings.warn(f"StreetNeRF: the dataset has no {kind} masks; training without the {term}", stacklevel=3)
+            warn(f"the dataset has no {kind} masks", f"StreetNeRF trains without the {term}", stacklevel=3)
             return False
         return True
 
