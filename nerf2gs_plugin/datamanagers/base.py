@@ -36,7 +36,7 @@ class DataManagerConfig(InstantiateConfig):
     """Metres per data unit (overrides the dataset's metres_per_unit / scene.json)."""
     camera_height: Optional[float] = None
     """Metric scale and up from the ground plane fitted to the sparse points, the train cameras being this
-    many metres above it (e.g. 1.5 for a car); for captures in arbitrary units. --augment.delta-h is then metres."""
+    many metres above it (e.g. 1.5 for a car); for captures in arbitrary units (the bird's-eye height is then in metres)."""
 
     def data_options(self) -> dict:
         return {"holdout_every": self.holdout_every, "metres_per_unit": self.metres_per_unit, "camera_height": self.camera_height}

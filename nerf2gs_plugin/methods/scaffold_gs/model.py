@@ -45,14 +45,20 @@ class ScaffoldGSModelConfig(SplatModelConfig):
     appearance_dim: int = 0
     """Per-training-image appearance code fed to the colour MLP (0 = off)."""
     hidden_dim: int = 32
+    """Width of the opacity, covariance and colour MLPs."""
     volume_reg: float = 0.01
+    """Weight of the volume (scale product) regulariser of the neural Gaussians."""
     frustum_margin: float = 0.15
     """Anchors projecting this fraction of the image outside the frame still spawn Gaussians."""
     # ---- anchor growing / pruning (Scaffold-GS names; CPU-scale values, paper values in config.py)
     start_stat: int = scheduled(50)
+    """Step from which the growing statistics are gathered."""
     update_from: int = scheduled(150)
+    """First anchor growing / pruning step."""
     update_interval: int = scheduled(100, "interval")
+    """Grow and prune anchors every this many steps."""
     update_until: int = scheduled(1500)
+    """Last anchor growing / pruning step."""
     grow_threshold: float = 0.0002
     """Mean screen-space gradient of a neural Gaussian above which an anchor grows there."""
     update_depth: int = 3

@@ -36,13 +36,15 @@ from nerf2gs_plugin.utils.schedule import scheduled
 
 @dataclass
 class SplatfactoModelConfig(SplatModelConfig):
-    """Defaults are the CPU scale (see ``config.py`` for the step counts and the paper-scale flags)."""
+    """Defaults are the CPU scale (the step counts and the paper-scale values are in methods/splatfacto/config.py)."""
 
     _target: type = field(default_factory=lambda: SplatfactoModel)
     sh_degree: int = 3
+    """Maximum degree of the spherical harmonics of the colour."""
     sh_degree_interval: int = scheduled(300)
     """Raise the SH degree every this many steps (nerfstudio: 1000 of 30000)."""
     init_opacity: float = 0.1
+    """Opacity of the initial Gaussians."""
     strategy_type: Literal["default", "mcmc"] = "default"
     """Densification: default (clone / split / prune, settings under strategy) or mcmc (settings under mcmc)."""
     strategy: DefaultStrategyConfig = field(default_factory=lambda: DefaultStrategyConfig(

@@ -21,22 +21,28 @@ BackgroundMode = Literal["sky", "random", "learned", "black", "white"]
 @dataclass
 class SplatModelConfig(ModelConfig):
     """The settings every splatting model here has (Splatfacto, 2DGS, Scaffold-GS): initial points,
-    image loss, background, rasterizer. Same flags for each (``--pipeline.model.<name>``)."""
+    image loss, background, rasterizer. Same flags for each (--pipeline.model.NAME)."""
 
     num_random: int = 5000
     """Random primitives in the scene box when the dataset has no sparse points (nerfstudio: 50000)."""
     ssim_lambda: float = 0.2
+    """Weight of the (1 - SSIM) term of the image loss (the rest is L1)."""
     background: BackgroundMode = "sky"
     """sky: learned view-direction background; random: random colour per step; learned; black; white."""
     sky_sh_degree: int = 3
+    """SH degree of the sky background's view-direction colour."""
     sky_alpha_weight: float = 0.05
     """Push accumulation to 0 on sky-mask pixels (when the dataset has sky masks)."""
     mask_transients: bool = False
     """Ignore transient-mask pixels in the loss (the baseline-with-masks variant)."""
     rasterize_mode: Literal["classic", "antialiased"] = "classic"
+    """classic (3DGS) or antialiased (Mip-Splatting's opacity compensation)."""
     backend: str = "auto"
+    """Rasterizer: auto (gsplat on CUDA, else our C++ kernel, else torch), cpu, torch or gsplat."""
     near_plane: float = 0.01
+    """Gaussians nearer to the camera than this are not drawn."""
     far_plane: float = 1e10
+    """Gaussians farther than this are not drawn."""
 
 
 def camera_directions(camera: Cameras) -> Tensor:

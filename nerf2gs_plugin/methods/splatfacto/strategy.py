@@ -82,9 +82,13 @@ class DefaultStrategyConfig:
     defaults as they are; the model config sets the CPU-scale ones."""
 
     warmup_length: int = scheduled(500)
+    """No densification before this step."""
     refine_every: int = scheduled(100, "interval")
+    """Densify and prune every this many steps."""
     reset_alpha_every: int = scheduled(3000)
+    """Reset opacities every this many steps (0 = never)."""
     stop_split_at: int = scheduled(15000)
+    """No densification after this step."""
     densify_grad_thresh: float = 0.0008
     """Screen-space gradient above which a Gaussian is cloned or split."""
     densify_size_thresh: float = 0.01
@@ -98,8 +102,11 @@ class DefaultStrategyConfig:
     cull_screen_size: float = 0.15
     """Prune Gaussians whose screen radius exceeds this fraction of the image size."""
     split_screen_size: float = 0.05
+    """Split Gaussians whose screen radius exceeds this fraction of the image size."""
     stop_screen_size_at: int = scheduled(4000)
+    """No screen-size culling or splitting after this step."""
     continue_cull_post_densification: bool = True
+    """Keep pruning after the last densification step."""
     max_pause_after_reset: int = scheduled(1000)
     """Cap on nerfstudio's pause after an opacity reset (num_images + refine_every steps)."""
     max_gaussians: int = 0
@@ -259,9 +266,13 @@ class MCMCStrategyConfig:
     cap_max: int = 100_000
     """Hard budget of Gaussians."""
     noise_lr: float = 5e5
+    """Scale of the position noise, times the means' learning rate."""
     refine_start_iter: int = scheduled(500)
+    """First relocation / growth step."""
     refine_stop_iter: int = scheduled(25_000)
+    """Last relocation / growth step."""
     refine_every: int = scheduled(100, "interval")
+    """Densify and prune every this many steps."""
     min_opacity: float = 0.005
     """Gaussians below this opacity are relocated."""
     grow_factor: float = 0.05

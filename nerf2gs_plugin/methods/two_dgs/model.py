@@ -41,9 +41,11 @@ class TwoDGSModelConfig(SplatfactoModelConfig):
     surfel's size and kept 2.8x more surfels at the quick scale (43.6k vs 15.4k) for 0.7 dB less
     from above and 0.4 dB more on the street."""
     normal_lambda: float = 0.05
+    """Weight of the normal consistency loss (rendered normals vs depth normals)."""
     normal_start: int = scheduled(700)
     """Step from which the normal consistency loss is on (2DGS: 7000 of 30000)."""
     dist_lambda: float = 0.01
+    """Weight of the depth distortion loss."""
     dist_start: int = scheduled(300)
     """Step from which the depth distortion loss is on (2DGS: 3000 of 30000)."""
     normals_frame: Literal["camera", "world"] = "camera"
