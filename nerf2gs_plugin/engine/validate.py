@@ -29,8 +29,8 @@ def check_trainer_config(cfg: Any) -> None:
             lr = getattr(opt, field)
             if lr is None:
                 continue
-            if not (isinstance(lr, (int, float)) and math.isfinite(lr) and 0 < lr <= MAX_LR):
-                raise ConfigError(f"learning rate must be in (0, {MAX_LR:g}], got {lr!r}", f"--optimizers.{name}.{field.replace('_', '-')}")
+            if not (isinstance(lr, (int, float)) and math.isfinite(lr) and 0 <= lr <= MAX_LR):  # 0: a frozen group
+                raise ConfigError(f"learning rate must be in [0, {MAX_LR:g}], got {lr!r}", f"--optimizers.{name}.{field.replace('_', '-')}")
     aug = cfg.augment
     for field in ("delta_h", "dilate_px", "feather_px", "extra_weight"):
         v = getattr(aug, field)

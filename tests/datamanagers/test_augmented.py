@@ -128,7 +128,7 @@ def _train_voxel(data, out, steps=20, **kw):
 def test_plugin_trains_with_augment_from_cli(tiny_scene, tmp_path):
     ref = _train_voxel(tiny_scene, tmp_path / "ref")
     p = subprocess.run([str(BIN / "ns2gs-train"), "voxel-grid", "--data", str(tiny_scene), "--augment-from", str(ref),
-                        "--augment.delta-h", "2", "--max-num-iterations", "10", "--progress", "False",
+                        "--augment.delta-h", "2", "--augment.min-coverage", "0", "--max-num-iterations", "10", "--progress", "False",
                         "--output-dir", str(tmp_path / "tgt")], capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr[-2000:]
     manifests = list((ref / "augment_cache").glob("*/manifest.json"))

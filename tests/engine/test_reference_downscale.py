@@ -27,7 +27,7 @@ def test_reference_at_other_downscale(tiny_scene, tmp_path):
     aug = AugmentConfig(delta_h=1.0, composites=False, min_coverage=0.0)  # a 2-step reference sees little
     t, _ = _train(tiny_scene, tmp_path / "tgt", downscale=1.0, augment_from=ref, augment=aug)
     dm = t.pipeline.datamanager
-    extra = dm.augmented_views.extra
+    extra = dm.views.extra
     assert extra is not None
     w = int(dm.train_images.cameras.width[0])
     assert int(extra.cameras.width[0]) == w and extra.image(0).shape[1] == w  # the target's resolution

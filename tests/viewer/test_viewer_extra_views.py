@@ -33,14 +33,14 @@ def test_extra_views_from_manifest_then_recomputed(tiny_scene, tmp_path):
     assert found.source == str(views.cache_dir / "manifest.json")
     assert len(found.cameras) == 4 and torch.allclose(found.cameras.camera_to_worlds, expected.camera_to_worlds, atol=1e-5)
     # independently of bev_cameras: every 2nd training camera, raised by delta_h along up, same heading,
-    # pitched 40 deg further down
+    # pitched 40 deg below the horizon (--augment.pitch-mode absolute, the default)
     train_c2w = dm.train_images.cameras.camera_to_worlds[::2]
     got = found.cameras.camera_to_worlds
     up = td.up / td.up.norm()
     assert torch.allclose(got[:, :, 3], train_c2w[:, :, 3] + td.metres_to_world(3.0) * up, atol=1e-5)
     fwd_t, fwd_g = -train_c2w[:, :, 2], -got[:, :, 2]
     elev = lambda f: torch.rad2deg(torch.asin((f @ up).clamp(-1, 1)))  # noqa: E731
-    assert torch.allclose(elev(fwd_g), elev(fwd_t) - 40.0, atol=1e-3)
+    assert torch.allclose(elev(fwd_g), torch.full_like(elev(fwd_g), -40.0), atol=1e-3) and not torch.allclose(elev(fwd_t), -40 + 0 * elev(fwd_t))
     heading = lambda f: torch.nn.functional.normalize(f - (f @ up)[:, None] * up, dim=-1)  # noqa: E731
     assert torch.allclose(heading(fwd_g), heading(fwd_t), atol=1e-4)
     thumb = found.thumbnails[0]

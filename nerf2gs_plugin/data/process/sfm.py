@@ -39,6 +39,8 @@ class SfmOptions:
     camera_model: str = "SIMPLE_RADIAL"
     """COLMAP camera model estimated by the SfM (one camera shared by all frames)."""
     num_threads: int = -1
+    """Threads for SIFT, matching and mapping (-1: all cores; 1 makes a run repeatable: COLMAP's
+    multi-threaded mapping is not deterministic)."""
 
 
 def choose_matching(opt: SfmOptions, num_images: int, is_video: bool) -> str:
