@@ -38,6 +38,9 @@ class SfmOptions:
     """Incremental mapping is retried from another initial pair (up to this many runs) while < 90% of frames register."""
     camera_model: str = "SIMPLE_RADIAL"
     """COLMAP camera model estimated by the SfM (one camera shared by all frames)."""
+    refine_intrinsics: bool = True
+    """Refine the focal length and distortion in bundle adjustment. Off (--no-refine-intrinsics) keeps
+    the --fov-deg / EXIF prior: a known camera, and much steadier mapping on small or low-texture frames."""
     num_threads: int = -1
     """Threads for SIFT, matching and mapping (-1: all cores; 1 makes a run repeatable: COLMAP's
     multi-threaded mapping is not deterministic)."""
@@ -165,7 +168,7 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
 
     marker = out_dir / "done.json"
     final = out_dir / "0"
-    key = {"total": total, "camera_model": opt.camera_model}
+    key = {"total": total, "camera_model": opt.camera_model, "refine_intrinsics": opt.refine_intrinsics}
     if not matches_changed and _marker(marker, key) and (final / "cameras.bin").is_file():
         rec = pycolmap.Reconstruction(str(final))
         return MapResult(final, rec.num_reg_images(), total, rec.num_points3D(), True)
@@ -191,6 +194,9 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
         options.num_threads = opt.num_threads
         options.multiple_models = True
         options.random_seed = attempt
+        if not opt.refine_intrinsics:
+            options.ba_refine_focal_length = options.ba_refine_extra_params = False
+            options.mapper.abs_pose_refine_focal_length = options.mapper.abs_pose_refine_extra_params = False
         if attempt > 0 and len(ids) > 6:  # COLMAP's own choice stalled: start from a pair at another point of the capture
             a = (attempt * len(ids)) // (max(opt.mapping_attempts, 2) + 1)
             options.init_image_id1, options.init_image_id2 = ids[a], ids[min(a + 2, len(ids) - 1)]
