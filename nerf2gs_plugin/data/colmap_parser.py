@@ -69,6 +69,10 @@ class ColmapDataParserConfig:
         check_split(split, groups.get(split, []), list(groups), model_dir)
         if not groups["train"]:
             raise DataError("split 'train' is empty", model_dir)
+        for frame in (f for fs in groups.values() for f in fs):
+            if not bool(torch.isfinite(frame.c2w.float()).all()):  # beyond float32 counts too
+                posed_in = model_dir / ("frames.bin" if (model_dir / "frames.bin").is_file() else "images.bin")
+                raise DataError(f"image {frame.image.name}: non-finite camera pose", posed_in)
         pts = rec.points3D
         with np.errstate(over="ignore"):  # a float64 beyond float32 becomes inf: reported below
             xyz = np.array([p.xyz for p in pts.values()], dtype=np.float32).reshape(-1, 3) if len(pts) else None

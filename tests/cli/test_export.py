@@ -61,7 +61,7 @@ def _parse_ply(path: Path) -> np.ndarray:
 def test_export_ply_holds_the_checkpoint_parameters_in_3dgs_layout(run_dir, tmp_path):
     """Expected values from the checkpoint's raw parameters and the 3DGS file layout (log scales,
     logit opacity, unit wxyz quaternions, SH rest channel-major), not from the exporter's own code."""
-    out = export(ExportArgs(run=run_dir, output=tmp_path / "s.ply"))
+    out = export(ExportArgs(run=run_dir, output=tmp_path / "s.ply", background=False))  # the model's own Gaussians only
     ply = _parse_ply(out)
     ckpt = sorted((run_dir / "checkpoints").glob("*.ckpt"))[-1]
     state = {k.split("gauss.", 1)[1]: v.numpy() for k, v in torch.load(ckpt, map_location="cpu", weights_only=False)["model"].items()
