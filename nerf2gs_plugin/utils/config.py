@@ -66,7 +66,9 @@ def apply_plain(default: T, values: dict, where: str = "config") -> T:
         if key not in names:
             raise ConfigError(f"{where}: unknown field '{key}'")
         current = getattr(default, key)
-        if dataclasses.is_dataclass(current) and isinstance(value, dict):
+        if dataclasses.is_dataclass(current):
+            if not isinstance(value, dict):  # e.g. a truncated config.yml: "datamanager:" with nothing under it
+                raise ConfigError(f"{where}.{key}: expected a mapping, got {value!r}")
             changes[key] = apply_plain(current, value, f"{where}.{key}")
         elif isinstance(current, dict) and isinstance(value, dict) and current and all(
             dataclasses.is_dataclass(v) for v in current.values()

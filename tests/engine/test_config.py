@@ -82,3 +82,15 @@ def test_atomic_write_follows_umask(tmp_path, umask, mode):
     finally:
         os.umask(old)
     assert stat.S_IMODE((tmp_path / "f.txt").stat().st_mode) == mode
+
+
+def test_a_section_cut_off_to_nothing_is_a_config_error(tmp_path):
+    """A config.yml truncated after ``datamanager:`` reads that section as null: it used to become
+    ``None`` in the config and end in an AttributeError traceback when the run was built."""
+    cfg = _default()
+    save_config(tmp_path / "config.yml", cfg.method_name, cfg)
+    doc = yaml.safe_load((tmp_path / "config.yml").read_text())
+    doc["config"]["pipeline"]["datamanager"] = None
+    atomic_write_text(tmp_path / "config.yml", yaml.safe_dump(doc))
+    with pytest.raises(ConfigError, match="datamanager: expected a mapping"):
+        load_config(tmp_path / "config.yml", _default())
