@@ -2,6 +2,7 @@
 
   ns2gs-data synth-street data/street [--seed 0 --width 200 --height 112 --num-train 60 ...]
   ns2gs-data preview data/street [--out preview.png]
+  ns2gs-data masks DATA [--segmenter auto | onnx:model.onnx --class-map cityscapes] [--reference RUN]
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from typing import Optional, Sequence
 import tyro
 
 from nerf2gs_plugin.cli.common import run_cli
+from nerf2gs_plugin.data.masks.run import MasksConfig
 from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig
 
 
@@ -46,8 +48,19 @@ class Preview:
         print(f"wrote {write_preview(self.data, self.out or Path(self.data) / 'preview.png', self.rows)}")
 
 
+@dataclass
+class Masks(MasksConfig):
+    """Write masks/{sky,ground,transient}/<image>.png for a capture: --segmenter auto (from a first
+    reference NeRF trained without masks, no weights) or onnx:PATH (any segmentation model)."""
+
+    def main(self) -> None:
+        from nerf2gs_plugin.data.masks.run import make_masks
+
+        make_masks(self)
+
+
 def _subcommands() -> dict[str, type]:
-    subs: dict[str, type] = {"synth-street": SynthStreet, "preview": Preview}
+    subs: dict[str, type] = {"synth-street": SynthStreet, "preview": Preview, "masks": Masks}
     from nerf2gs_plugin.cli.augmented_data import AUGMENTED_SUBCOMMANDS
 
     subs.update(AUGMENTED_SUBCOMMANDS)
