@@ -258,3 +258,62 @@ def test_mask_iou_and_hidden_ground_truth(small_street, tmp_path):
     shutil.copytree(small_street / "masks", hidden / "masks")
     ious = dataset_mask_iou(hidden, small_street)
     assert ious == {"sky": 1.0, "ground": 1.0, "transient": 1.0}
+
+
+# ---------------------------------------------------------------- auto masks on the tiny scene
+def _tiny(tmp_path: Path, name: str, transients: bool = True) -> Path:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from tiny_scene import write_tiny_scene
+
+    return write_tiny_scene(tmp_path / name, transients=transients)
+
+
+def test_auto_masks_on_the_tiny_scene_with_stand_in_renders(tmp_path):
+    """A perfect reference's renders (the analytic plane depth, the scene without its car) stand in
+    for a trained one: each kind must match the scene's exact masks far better than chance."""
+    from nerf2gs_plugin.data import parse_dataset
+    from nerf2gs_plugin.data.images import load_image
+    from nerf2gs_plugin.data.masks.auto import AutoOptions, Renders, masks_from_renders
+
+    real, clean = _tiny(tmp_path, "real"), _tiny(tmp_path, "clean", transients=False)
+    outs, clean_outs = parse_dataset(real, "train"), parse_dataset(clean, "train")
+    up = outs.up.float()
+    height = float((outs.points3D_xyz @ up).median())
+    views = []
+    for i in range(len(outs)):
+        cam = outs.cameras[i : i + 1]
+        h, w = int(cam.height[0]), int(cam.width[0])
+        rays = cam.generate_rays(0)
+        d, o = rays.directions.reshape(h, w, 3), rays.origins[0]
+        cos = d @ up
+        t = (height - o @ up) / cos.clamp(max=-1e-6)
+        hit = (cos < -1e-3) & (t < outs.metres_to_world(60.0))
+        views.append({"rgb": load_image(clean_outs.image_filenames[i]), "image": load_image(outs.image_filenames[i]),
+                      "depth": torch.where(hit, t, torch.full_like(t, 1e3)), "acc": hit.float(), "dirs": d, "origin": o})
+    res = masks_from_renders(Renders({"train": views}, up, height, outs.metres_to_world(1.0), 0.0), AutoOptions(), log=lambda s: None)
+    for kind, floor in (("sky", 0.95), ("ground", 0.9), ("transient", 0.6)):
+        inter = union = 0
+        for i, m in enumerate(res["train"]):
+            a, b = __import__("nerf2gs_plugin.eval.mask_eval", fromlist=["iou_counts"]).iou_counts(
+                getattr(m, kind), load_mask(real / "masks" / kind / f"train_{i:03d}.png"))
+            inter, union = inter + a, union + b
+        assert inter / union > floor, (kind, inter / union)
+
+
+def test_make_masks_auto_with_a_very_short_reference(tmp_path):
+    """The whole ``--segmenter auto`` path: a 5-step reference trained on the mask-less view, masks
+    written for every split in the parsers' layout, the reference reused on a second run."""
+    from nerf2gs_plugin.data import parse_dataset
+
+    data = _tiny(tmp_path, "scene")
+    shutil.rmtree(data / "masks")
+    ref = tmp_path / "ref"
+    logs: list[str] = []
+    summary = make_masks(MasksConfig(data=data, reference=ref, reference_steps=5, progress=False), log=logs.append)
+    assert (ref / "config.yml").is_file() and summary["reference"] == str(ref)
+    outs = parse_dataset(data, "train")
+    assert set(outs.mask_filenames) == {"sky", "ground", "transient"}
+    assert all(p is not None for p in outs.mask_filenames["sky"])
+    assert (data / "masks" / "sky" / "bev_1_000.png").is_file()  # every split
+    make_masks(MasksConfig(data=data, reference=ref, overwrite=True, progress=False), log=logs.append)
+    assert any("reusing reference" in line for line in logs)

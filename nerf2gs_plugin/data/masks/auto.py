@@ -133,7 +133,7 @@ def masks_from_renders(r: Renders, opts: AutoOptions, log: Callable[[str], None]
     for s, rs in r.views.items():
         for i, v in enumerate(rs):
             sky = fr.sky_from_render(v["acc"], v["dirs"], up, opts.sky_acc, opts.horizon_margin_deg)
-            fitted = fr.fit_colour(v["rgb"], v["image"], keep=~sky)
+            fitted = fr.fit_colour(v["rgb"], v["image"])
             sky_res[s, i] = (sky, fr.residual_map(v["image"], fitted))
     base = "train" if "train" in r.views else next(iter(r.views))
     pool = torch.cat([sky_res[base, i][1][~sky_res[base, i][0]] for i in range(len(r.views[base]))])

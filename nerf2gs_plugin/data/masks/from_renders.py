@@ -66,25 +66,27 @@ def ground_from_render(origin: Tensor, directions: Tensor, depth: Tensor, acc: T
     return g
 
 
-def fit_colour(render: Tensor, image: Tensor, keep: Optional[Tensor] = None, iters: int = 3, trim: float = 0.7) -> Tensor:
+def fit_colour(render: Tensor, image: Tensor, keep: Optional[Tensor] = None, iters: int = 3, trim: float = 0.7,
+               ridge: float = 1e-2) -> Tensor:
     """``render`` mapped by the affine colour transform (3x4) that best takes it to ``image``,
-    refitted on the ``trim`` fraction of best-fitting pixels (outliers such as cars excluded)."""
+    refitted on the ``trim`` fraction of best-fitting pixels (outliers such as cars excluded).
+    Ridge-regularised towards the identity: a view of few colours cannot tilt the map elsewhere."""
     x = torch.cat([render.reshape(-1, 3), torch.ones(render.shape[0] * render.shape[1], 1)], dim=1).double()
     y = image.reshape(-1, 3).double()
-    sel = keep.reshape(-1) if keep is not None else torch.ones(len(x), dtype=torch.bool)
-    if int(sel.sum()) < 16:
+    base = keep.reshape(-1) if keep is not None else torch.ones(len(x), dtype=torch.bool)
+    if int(base.sum()) < 16:
         return render
-    A = None
+    eye = torch.cat([torch.eye(3), torch.zeros(1, 3)]).double()  # [4, 3]: the identity map
+    sel, A = base, eye
     for _ in range(iters):
-        sol = torch.linalg.lstsq(x[sel], y[sel]).solution
-        A = sol
-        r = (x @ sol - y).abs().sum(-1)
-        base = keep.reshape(-1) if keep is not None else torch.ones_like(sel)
-        lim = torch.quantile(r[base][torch.randperm(int(base.sum()))[:200000]], trim)
+        xs, ys = x[sel], y[sel]
+        lam = ridge * len(xs)
+        A = torch.linalg.solve(xs.T @ xs + lam * torch.eye(4, dtype=x.dtype), xs.T @ ys + lam * eye)
+        r = (x @ A - y).abs().sum(-1)
+        lim = torch.quantile(r[base][torch.randperm(int(base.sum()), generator=torch.Generator().manual_seed(0))[:200000]], trim)
         sel = base & (r <= lim)
         if int(sel.sum()) < 16:
             break
-    assert A is not None
     return (x @ A).float().reshape(render.shape).clamp(0, 1)
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import warnings
 from pathlib import Path
 from typing import Callable, Optional
 
@@ -91,7 +92,9 @@ def ensure_reference(data: Path, run: Optional[Path], steps: int = DEFAULT_STEPS
     log(f"masks: training a {steps}-step StreetNeRF reference without masks -> {run}")
     trainer = Trainer(cfg)
     trainer.run_dir = run
-    trainer.setup()
+    with warnings.catch_warnings():  # "the dataset has no sky masks": intended here, not news
+        warnings.filterwarnings("ignore", message="StreetNeRF: the dataset has no .* masks")
+        trainer.setup()
     if not progress:  # a line every tenth of the run instead of the bar
         every = max(1, steps // 10)
         trainer.step_hooks.append(lambda step, *_: log(f"masks: reference step {step + 1}/{steps}") if (step + 1) % every == 0 else None)
