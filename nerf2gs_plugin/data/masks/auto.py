@@ -28,6 +28,9 @@ class AutoOptions:
 
     sky_acc: float = 0.5
     """Sky: accumulation of the reference below this."""
+    sky_far: float = 10.0
+    """Sky also where the rendered depth is beyond this many scene-box half-sizes (what the reference
+    pushed to the contraction boundary: a point there contracts to > 1.9 of 2)."""
     horizon_margin_deg: float = 2.0
     """Sky may reach this far below the ground plane's horizon."""
     ground_tol_m: float = 0.3
@@ -36,6 +39,8 @@ class AutoOptions:
     """Also require the rendered normal (from depth differences) within 30 deg of up."""
     transient_k: float = 4.0
     """Transient: residual above median + k * 1.4826 * MAD (all training views pooled)."""
+    transient_k_low: float = 2.0
+    """... and regions above median + k_low * 1.4826 * MAD joined to them (hysteresis; >= k: off)."""
     transient_floor: float = 0.04
     """... and above this absolute mean colour difference."""
     min_region_frac: float = 0.002
@@ -84,6 +89,7 @@ class Renders:
     height: float
     metres_to_world: float
     seconds: float
+    box_extent: float = float("inf")  # half the scene box's largest side (world units)
 
 
 def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[str], None] = print, progress: bool = True) -> Renders:
@@ -123,7 +129,9 @@ def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[
     log(f"masks: rendered {total} views in {seconds:.1f} s")
     pts = ((fr.surface_points(r["origin"], r["dirs"], r["depth"]), r["acc"]) for r in views.get("train", []))
     height = _ground_height(model, train, pts)
-    return Renders(views, train.up.float(), height, train.metres_to_world(1.0), seconds)
+    box = train.scene_box.float()
+    extent = float((box[1] - box[0]).max()) / 2
+    return Renders(views, train.up.float(), height, train.metres_to_world(1.0), seconds, extent)
 
 
 def masks_from_renders(r: Renders, opts: AutoOptions, log: Callable[[str], None] = print) -> dict[str, list[FrameMasks]]:
@@ -132,20 +140,22 @@ def masks_from_renders(r: Renders, opts: AutoOptions, log: Callable[[str], None]
     sky_res = {}
     for s, rs in r.views.items():
         for i, v in enumerate(rs):
-            sky = fr.sky_from_render(v["acc"], v["dirs"], up, opts.sky_acc, opts.horizon_margin_deg)
+            sky = fr.sky_from_render(v["acc"], v["dirs"], up, opts.sky_acc, opts.horizon_margin_deg,
+                                     depth=v["depth"], far=opts.sky_far * r.box_extent)
             fitted = fr.fit_colour(v["rgb"], v["image"])
             sky_res[s, i] = (sky, fr.residual_map(v["image"], fitted))
     base = "train" if "train" in r.views else next(iter(r.views))
     pool = torch.cat([sky_res[base, i][1][~sky_res[base, i][0]] for i in range(len(r.views[base]))])
     thr = fr.robust_threshold(pool, opts.transient_k, opts.transient_floor)
-    log(f"masks: ground plane at height {r.height:.4f} (world units), tolerance {tol:.4f}; transient residual threshold {thr:.3f}")
+    low = fr.robust_threshold(pool, opts.transient_k_low, opts.transient_floor / 2)
+    log(f"masks: ground plane at height {r.height:.4f} (world units), tolerance {tol:.4f}; transient residual threshold {thr:.3f} (regions grown to {low:.3f})")
     result: dict[str, list[FrameMasks]] = {}
     for s, rs in r.views.items():
         result[s] = []
         for i, v in enumerate(rs):
             sky, res = sky_res[s, i]
             h, w = v["acc"].shape
-            trans = fr.transient_from_residual(res, thr, max(4, int(opts.min_region_frac * h * w)))
+            trans = fr.transient_from_residual(res, thr, max(4, int(opts.min_region_frac * h * w)), low=low)
             normals = fr.normals_from_points(fr.surface_points(v["origin"], v["dirs"], v["depth"])) if opts.ground_normals else None
             ground = fr.ground_from_render(v["origin"], v["dirs"], v["depth"], v["acc"], up, r.height, tol, normals=normals)
             result[s].append(FrameMasks(sky & ~trans, ground & ~trans & ~sky, trans))

@@ -5,11 +5,12 @@ Inputs per view (all in the reference's normalised world, one image of ``[H, W]`
 distance along the ray, ``acc [H, W]`` accumulation, ``render`` / ``image`` ``[H, W, 3]``; the
 ground plane is ``{x : x . up = height}``.
 
-  * sky: what the reference sees nothing at (accumulation below ``acc_max``) and that lies above the
+  * sky: what the reference sees nothing at (accumulation below ``acc_max``, or mass only at the
+    contraction boundary: a reference trained without sky masks parks some sky there) and that lies above the
     horizon of the ground plane (a downward ray meets the road before it can see the sky; a small
     margin below the horizon is allowed for a street that ends in open ground);
-  * ground: the rendered surface lies on the plane: its height above the plane is within
-    ``tol`` (a kerb of 15 cm stays ground), the ray points down, and, where normals are given, the
+  * ground: the rendered surface lies on the plane: its height above the plane is below
+    ``tol`` (a kerb of 15 cm stays ground; below the plane counts as on it: a too-long depth), the ray points down, and, where normals are given, the
     normal is within ``max_normal_deg`` of up;
   * transient: the photometric residual against the multi-view consistent reference (after a
     per-image affine colour fit, as the reference renders the mean appearance), thresholded at a
@@ -35,9 +36,14 @@ def horizon_mask(directions: Tensor, up: Tensor, margin_deg: float = 2.0) -> Ten
     return (directions @ up) > -math.sin(math.radians(margin_deg))
 
 
-def sky_from_render(acc: Tensor, directions: Tensor, up: Tensor, acc_max: float = 0.5, margin_deg: float = 2.0) -> Tensor:
-    """Low accumulation above the horizon (see the module docstring)."""
-    return (acc < acc_max) & horizon_mask(directions, up, margin_deg)
+def sky_from_render(acc: Tensor, directions: Tensor, up: Tensor, acc_max: float = 0.5, margin_deg: float = 2.0,
+                    depth: Optional[Tensor] = None, far: float = float("inf")) -> Tensor:
+    """Low accumulation, or a depth beyond ``far`` (mass pushed to the contraction boundary), above
+    the horizon (see the module docstring)."""
+    empty = acc < acc_max
+    if depth is not None:
+        empty = empty | (depth > far)
+    return empty & horizon_mask(directions, up, margin_deg)
 
 
 def surface_points(origin: Tensor, directions: Tensor, depth: Tensor) -> Tensor:
@@ -60,7 +66,8 @@ def ground_from_render(origin: Tensor, directions: Tensor, depth: Tensor, acc: T
     """Rendered surface within ``tol`` of the plane (heights in world units), seen by a downward
     ray with a solid render (see the module docstring)."""
     h = surface_points(origin, directions, depth) @ up - height
-    g = (h.abs() < tol) & ((directions @ up) < 0) & (acc >= acc_min)
+    g = (h < tol) & ((directions @ up) < 0) & (acc >= acc_min)  # one-sided: nothing is below the road, a surface
+    # rendered below the plane is a depth error on the road
     if normals is not None:
         g &= (normals @ up).abs() > math.cos(math.radians(max_normal_deg))
     return g
@@ -141,6 +148,19 @@ def clean_regions(mask: Tensor, min_area: int, close_px: int = 2) -> Tensor:
     return torch.from_numpy(m.astype(bool)).to(mask.device)
 
 
-def transient_from_residual(residual: Tensor, threshold: float, min_area: int, vote: int = 3, close_px: int = 2) -> Tensor:
-    """Residual above ``threshold`` -> RobustNeRF box vote -> connected regions (see above)."""
-    return clean_regions(box_vote(residual > threshold, vote), min_area, close_px)
+def transient_from_residual(residual: Tensor, threshold: float, min_area: int, vote: int = 3, close_px: int = 2,
+                            low: Optional[float] = None) -> Tensor:
+    """Residual above ``threshold`` -> RobustNeRF box vote -> connected regions (see above). With
+    ``low`` (hysteresis): regions of the box-voted ``residual > low`` that hold a box-voted
+    ``residual > threshold`` pixel, so a car's weaker parts join its strong core."""
+    strong = box_vote(residual > threshold, vote)
+    if low is not None and low < threshold:
+        import cv2
+
+        weak = box_vote(residual > low, vote).cpu().numpy().astype(np.uint8)
+        n, labels = cv2.connectedComponents(weak, connectivity=8)
+        hit = np.zeros(n, dtype=bool)
+        hit[np.unique(labels[strong.cpu().numpy() & (labels > 0)])] = True
+        hit[0] = False
+        strong = torch.from_numpy(hit[labels]).to(residual.device) | strong
+    return clean_regions(strong, min_area, close_px)
