@@ -39,8 +39,10 @@ class AutoOptions:
     """Also require the rendered normal (from depth differences) within 30 deg of up."""
     transient_k: float = 4.0
     """Transient: residual above median + k * 1.4826 * MAD (all training views pooled)."""
-    transient_k_low: float = 2.0
-    """... and regions above median + k_low * 1.4826 * MAD joined to them (hysteresis; >= k: off)."""
+    transient_k_low: float = 0.0
+    """Hysteresis: regions above median + k_low * 1.4826 * MAD joined to the strong ones (0 or >= k:
+    off). Off by default: with a 1000-step reference it cost 0.04 transient IoU and 0.04 ground IoU
+    on both synthetic streets (false regions eat sky and ground)."""
     transient_floor: float = 0.04
     """... and above this absolute mean colour difference."""
     min_region_frac: float = 0.002
@@ -147,8 +149,8 @@ def masks_from_renders(r: Renders, opts: AutoOptions, log: Callable[[str], None]
     base = "train" if "train" in r.views else next(iter(r.views))
     pool = torch.cat([sky_res[base, i][1][~sky_res[base, i][0]] for i in range(len(r.views[base]))])
     thr = fr.robust_threshold(pool, opts.transient_k, opts.transient_floor)
-    low = fr.robust_threshold(pool, opts.transient_k_low, opts.transient_floor / 2)
-    log(f"masks: ground plane at height {r.height:.4f} (world units), tolerance {tol:.4f}; transient residual threshold {thr:.3f} (regions grown to {low:.3f})")
+    low = fr.robust_threshold(pool, opts.transient_k_low, opts.transient_floor / 2) if 0 < opts.transient_k_low < opts.transient_k else None
+    log(f"masks: ground plane at height {r.height:.4f} (world units), tolerance {tol:.4f}; transient residual threshold {thr:.3f}" + (f" (regions grown to {low:.3f})" if low else ""))
     result: dict[str, list[FrameMasks]] = {}
     for s, rs in r.views.items():
         result[s] = []
