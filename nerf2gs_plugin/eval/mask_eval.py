@@ -41,28 +41,62 @@ def mask_iou(pred: ArrayLike, gt: ArrayLike) -> float:
     return 1.0 if union == 0 else inter / union
 
 
-def dataset_mask_iou(pred_root: Path, gt_root: Path, names: Optional[list[str]] = None,
-                     kinds: tuple[str, ...] = MASK_KINDS) -> dict[str, Optional[float]]:
-    """Pooled IoU per kind over images: ``pred_root/masks/<kind>/<name>.png`` vs the same under
-    ``gt_root`` (pixel counts summed over all images, so small images do not dominate). ``names``
-    (stems) defaults to every GT mask of the kind; a kind with no GT masks is None."""
+Pinhole = tuple[float, float, float, float]  # fx, fy, cx, cy (pixels)
+
+
+def resample_mask(mask: Tensor, src: Pinhole, dst: Pinhole, dst_hw: tuple[int, int]) -> Tensor:
+    """A mask seen by pinhole ``src`` resampled (nearest) onto the pixel grid of pinhole ``dst`` of
+    size ``dst_hw``, the same camera pose: an undistorted frame has its own focal and size, and a
+    plain resize would shift pixels by the difference of the principal points and the focal ratio.
+    Pixels of ``dst`` outside ``src``'s image are False."""
+    import torch.nn.functional as F
+
+    h, w = dst_hw
+    sh, sw = mask.shape
+    v, u = torch.meshgrid(torch.arange(h, dtype=torch.float64) + 0.5, torch.arange(w, dtype=torch.float64) + 0.5, indexing="ij")
+    us = (u - dst[2]) / dst[0] * src[0] + src[2]  # src pixel coordinates of each dst pixel centre
+    vs = (v - dst[3]) / dst[1] * src[1] + src[3]
+    grid = torch.stack([2 * us / sw - 1, 2 * vs / sh - 1], dim=-1).float()[None]
+    out = F.grid_sample(mask.float()[None, None], grid, mode="nearest", padding_mode="zeros", align_corners=False)
+    return out[0, 0] > 0.5
+
+
+def paired_mask_iou(pairs: list[tuple]) -> Optional[float]:
+    """Pooled IoU over ``(estimated file, ground-truth file)`` pairs (pixel counts summed, so small
+    images do not dominate). A pair may carry ``(est pinhole, gt pinhole)`` as a third item: the
+    estimate is then resampled onto the GT's pixel grid (:func:`resample_mask`); without it an
+    estimate of another size is resized (nearest). None without pairs."""
+    import torch.nn.functional as F
+
     from nerf2gs_plugin.data.images import load_mask
 
+    if not pairs:
+        return None
+    inter = union = 0
+    for pair in pairs:
+        pred_file, gt_file = pair[0], pair[1]
+        if not Path(pred_file).is_file():
+            raise DataError("no estimated mask", pred_file)
+        pred, gt = load_mask(pred_file), load_mask(gt_file)
+        if len(pair) > 2 and pair[2] is not None:
+            pred = resample_mask(pred, pair[2][0], pair[2][1], tuple(gt.shape))
+        elif pred.shape != gt.shape:
+            pred = F.interpolate(pred.float()[None, None], size=tuple(gt.shape), mode="nearest")[0, 0] > 0.5
+        i, u = iou_counts(pred, gt)
+        inter, union = inter + i, union + u
+    return 1.0 if union == 0 else inter / union
+
+
+def dataset_mask_iou(pred_root: Path, gt_root: Path, names: Optional[list[str]] = None,
+                     kinds: tuple[str, ...] = MASK_KINDS) -> dict[str, Optional[float]]:
+    """Pooled IoU per kind (:func:`paired_mask_iou`): ``pred_root/masks/<kind>/<name>.png`` vs the
+    same under ``gt_root``. ``names`` (stems) defaults to every GT mask of the kind; a kind with no
+    GT masks is None."""
     out: dict[str, Optional[float]] = {}
     for kind in kinds:
         gt_dir = Path(gt_root) / "masks" / kind
         stems = names if names is not None else sorted(p.stem for p in gt_dir.glob("*.png"))
-        if not stems:
-            out[kind] = None
-            continue
-        inter = union = 0
-        for s in stems:
-            pred_file = Path(pred_root) / "masks" / kind / f"{s}.png"
-            if not pred_file.is_file():
-                raise DataError(f"no estimated {kind} mask for {s}", pred_file)
-            i, u = iou_counts(load_mask(pred_file), load_mask(gt_dir / f"{s}.png"))
-            inter, union = inter + i, union + u
-        out[kind] = 1.0 if union == 0 else inter / union
+        out[kind] = paired_mask_iou([(Path(pred_root) / "masks" / kind / f"{s}.png", gt_dir / f"{s}.png") for s in stems])
     return out
 
 
