@@ -1,4 +1,4 @@
-"""ns2gs-bench demo | quick | paper-table | ablation | speed-quality | stability | model-size | raster | field | faults
+"""ns2gs-bench demo | quick | paper-table | ablation | speed-quality | stability | model-size | raster | field | faults | real
 
 Results (JSON + Markdown + PNG, with the machine) go to benchmarks/results/; trained runs are kept
 under benchmarks/runs/ and reused when nothing that matters changed. ``demo`` (what make demo runs)
@@ -269,10 +269,35 @@ class Faults:
               f"{s['hangs']} hangs, {s['wrong_results']} wrong results -> {js}, {md}")
 
 
+@dataclass
+class Real:
+    """The synthetic street as a real capture: a video without poses or masks, through process video ->
+    metric scale -> masks (auto) -> StreetNeRF -> Splatfacto +- NeRF views, beside the same frames with
+    true poses, scale and masks (``real.*``)."""
+
+    out: Path = RESULTS
+    runs: Path = RUNS
+    rerun: bool = False
+    frames: int = 30
+    reference_steps: int = 1000
+    streetnerf_steps: int = 400
+    splatfacto_steps: int = 800
+
+    def main(self) -> None:
+        from nerf2gs_plugin.eval.bench_real import RealBenchOptions, results_md, run_real_bench
+
+        opts = RealBenchOptions(frames=self.frames, reference_steps=self.reference_steps,
+                                streetnerf_steps=self.streetnerf_steps, splatfacto_steps=self.splatfacto_steps)
+        doc = run_real_bench(self.runs, self.out, opts, rerun=self.rerun)
+        print(results_md(doc))
+        print(f"results: {self.out}/real.md")
+
+
 def main() -> None:
     cmd = tyro.extras.subcommand_cli_from_dict(
         {"demo": Demo, "quick": Quick, "paper-table": PaperTable, "ablation": Ablation, "speed-quality": SpeedQuality,
-         "stability": Stability, "model-size": ModelSize, "raster": Raster, "field": Field, "faults": Faults},
+         "stability": Stability, "model-size": ModelSize, "raster": Raster, "field": Field, "faults": Faults,
+         "real": Real},
         description=__doc__,
     )
     cmd.main()

@@ -1,9 +1,10 @@
-"""ns2gs-data synth-street | preview | process images | process video | export-augmented | preview-augmented
+"""ns2gs-data synth-street | preview | process images | process video | masks | export-augmented | preview-augmented
 
   ns2gs-data synth-street data/street [--seed 0 --width 200 --height 112 --num-train 60 ...]
   ns2gs-data preview data/street [--out preview.png]
   ns2gs-data process video drive.mp4 --out data/drive [--num-frames 150 | --fps 2] [--camera-height 1.5]
   ns2gs-data process images photos/ --out data/photos [--matching exhaustive]
+  ns2gs-data masks DATA [--segmenter auto | onnx:model.onnx --class-map cityscapes] [--reference RUN]
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from typing import Optional, Sequence
 
 import tyro
 
+from nerf2gs_plugin.capture.make_masks import MasksConfig
 from nerf2gs_plugin.cli.common import run_cli
 from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig
 
@@ -57,8 +59,19 @@ class Process:
         raise SystemExit("usage: ns2gs-data process {images,video} ...")
 
 
+@dataclass
+class Masks(MasksConfig):
+    """Write masks/{sky,ground,transient}/<image>.png for a capture: --segmenter auto (from a first
+    reference NeRF trained without masks, no weights) or onnx:PATH (any segmentation model)."""
+
+    def main(self) -> None:
+        from nerf2gs_plugin.capture.make_masks import make_masks
+
+        make_masks(self)
+
+
 def _subcommands() -> dict[str, type]:
-    subs: dict[str, type] = {"synth-street": SynthStreet, "preview": Preview, "process": Process}
+    subs: dict[str, type] = {"synth-street": SynthStreet, "preview": Preview, "process": Process, "masks": Masks}
     from nerf2gs_plugin.cli.augmented_data import AUGMENTED_SUBCOMMANDS
 
     subs.update(AUGMENTED_SUBCOMMANDS)

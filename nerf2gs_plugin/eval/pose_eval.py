@@ -24,6 +24,11 @@ class Sim3:
         """Points ``[N, 3]``."""
         return self.s * np.asarray(x, dtype=np.float64) @ self.R.T + self.t
 
+    def inverse(self) -> "Sim3":
+        """``y -> R^T (y - t) / s``."""
+        Rt = self.R.T
+        return Sim3(1.0 / self.s, Rt, -(Rt @ self.t) / self.s)
+
     def apply_poses(self, c2w: np.ndarray) -> np.ndarray:
         """Camera-to-world ``[N, 3, 4]``: rotations turned by R, centres mapped."""
         c2w = np.asarray(c2w, dtype=np.float64)

@@ -1,0 +1,353 @@
+"""``ns2gs-bench real``: the synthetic street as a real capture would arrive, through the whole path.
+
+The street's forward drive (one direction: the two passes of the training set share no view, so
+only one would register) is written as a video; its poses and masks are thrown away. Then:
+``process video`` (pycolmap SfM, ground-plane metric scale from the camera height) -> ``masks``
+(``--segmenter auto``) -> StreetNeRF -> Splatfacto with and without NeRF views. The same pipeline
+runs on the same frames with the true poses, scale and masks beside it.
+
+Eval cameras live in the true frame. An estimated dataset's frame is the SfM's, related to the
+true one by the Sim(3) that aligns its training cameras onto the true ones (``pose_eval``), so each
+true eval camera is mapped into the estimated frame by the inverse Sim(3) and written into the
+estimated ``transforms.json`` as an eval split; the parser then normalises it with the estimated
+dataset's own normalisation, exactly as the training cameras. The ground-truth dataset goes
+through the same mapping with its own (identity) alignment, so both columns are produced by one
+code path, and a mapping that is the identity reproduces the original eval cameras
+(``tests/eval/test_bench_real.py``).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Optional
+
+import numpy as np
+
+from nerf2gs_plugin.data.dataparser_outputs import MASK_KINDS
+from nerf2gs_plugin.eval.pose_eval import Sim3, align_poses, capture_report
+from nerf2gs_plugin.utils.io import atomic_write_text
+
+SPLITS = ("street", "bev_1", "bev_2")
+NERF_VIEWS = "splatfacto + NeRF views"
+
+
+@dataclass
+class RealBenchOptions:
+    """Step counts and capture settings of ``ns2gs-bench real`` (short: CPU scale)."""
+
+    frames: int = 30
+    """Frames of the forward drive written to the video (the street's first pass has 30)."""
+    reference_steps: int = 1000
+    """Steps of the masks' first reference (StreetNeRF without masks)."""
+    streetnerf_steps: int = 400
+    splatfacto_steps: int = 800
+    """The quick scale's Splatfacto steps."""
+    num_street: int = 4
+    """Street eval views of the generated street (fewer than the default street: CPU time)."""
+    num_bev: int = 6
+    """Bird's-eye eval views per height."""
+
+
+# ----------------------------------------------------------------------------- pure parts
+def read_frames(data: Path) -> dict[str, list]:
+    """Every split's raw frames (original paths, OpenGL c2w in the file's frame, intrinsics, masks);
+    without split keys every frame is "train" (no held-out frames: the drive is aligned whole)."""
+    import dataclasses
+
+    from nerf2gs_plugin.data import dataparser_config
+
+    cfg = dataclasses.replace(dataparser_config(Path(data)), holdout_every=0)
+    return cfg._frames()[1]
+
+
+def frame_index(image: Path) -> int:
+    """``frame_000012.jpg`` -> 12: the video frame a processed image came from."""
+    return int(Path(image).stem.rsplit("_", 1)[-1])
+
+
+def mapped_eval_frames(true_groups: dict[str, list], true_to_est: Sim3, splits=SPLITS) -> dict[str, list[dict]]:
+    """The true eval cameras of ``splits`` as nerfstudio frame dicts in the estimated frame:
+    poses mapped by ``true_to_est``, the true intrinsics per frame (PINHOLE), absolute image paths."""
+    out: dict[str, list[dict]] = {}
+    for split in splits:
+        frames = true_groups.get(split, [])
+        if not frames:
+            continue
+        c2w = true_to_est.apply_poses(np.stack([f.c2w.double().numpy() for f in frames]))
+        out[split] = []
+        for f, m in zip(frames, c2w):
+            i = f.intr
+            out[split].append({"file_path": str(Path(f.image).resolve()), "camera_model": "PINHOLE",
+                               "fl_x": i.fx, "fl_y": i.fy, "cx": i.cx, "cy": i.cy, "w": i.width, "h": i.height,
+                               "transform_matrix": [[float(v) for v in row] for row in m] + [[0.0, 0.0, 0.0, 1.0]]})
+    return out
+
+
+def link_eval_masks(data: Path, true_groups: dict[str, list], splits=SPLITS) -> None:
+    """The true eval views' masks as ``DATA/masks/<kind>/<stem>.png`` symlinks (road PSNR needs the
+    ground masks; the parser finds a frame's masks there by the image's stem)."""
+    for split in splits:
+        for f in true_groups.get(split, []):
+            for kind, src in f.masks.items():
+                if src is None:
+                    continue
+                dst = Path(data) / "masks" / kind / f"{Path(f.image).stem}{Path(src).suffix}"
+                if dst.exists() or dst.is_symlink():
+                    continue
+                dst.parent.mkdir(parents=True, exist_ok=True)
+                dst.symlink_to(Path(src).resolve())
+
+
+def street_camera(street: Path):
+    """The synthetic street's config as generated (its camera's FOV and height: the ``--fov-deg`` and
+    ``--camera-height`` a dashcam owner would pass)."""
+    from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig
+
+    stats = Path(street) / "synth_stats.json"
+    cfg = json.loads(stats.read_text()).get("config", {}) if stats.is_file() else {}
+    return SynthStreetConfig(**{k: cfg[k] for k in ("fov_deg", "cam_height") if k in cfg})
+
+
+def write_eval_splits(data: Path, eval_frames: dict[str, list[dict]]) -> None:
+    """``eval_splits`` of ``DATA/transforms.json`` replaced by ``eval_frames`` (atomic)."""
+    meta_file = Path(data) / "transforms.json"
+    meta = json.loads(meta_file.read_text())
+    meta["eval_splits"] = eval_frames
+    atomic_write_text(meta_file, json.dumps(meta, indent=1))
+
+
+def c2w_array(frames: list) -> np.ndarray:
+    return np.stack([f.c2w.double().numpy() for f in frames])
+
+
+def gain_ratio(est: dict, gt: dict, split: str) -> Optional[float]:
+    """(bird's-eye PSNR gain from NeRF views, everything estimated) / (the gain with ground truth)."""
+    def gain(res: dict) -> Optional[float]:
+        a, b = res.get(NERF_VIEWS, {}), res.get("splatfacto", {})
+        if a.get("failed") or b.get("failed") or not a or not b:
+            return None
+        return a["results"][split]["psnr"] - b["results"][split]["psnr"]
+
+    ge, gg = gain(est), gain(gt)
+    return None if ge is None or gg is None or gg == 0 else ge / gg
+
+
+# ----------------------------------------------------------------------------- stages
+def write_video(path: Path, images: list[Path], fps: float = 10.0) -> Path:
+    """The frames as an MJPG video (what a dashcam would hand over)."""
+    import cv2
+
+    first = cv2.imread(str(images[0]))
+    h, w = first.shape[:2]
+    tmp = Path(path).with_name(Path(path).stem + ".tmp" + Path(path).suffix)
+    wr = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"MJPG"), fps, (w, h))
+    for p in images:
+        wr.write(cv2.imread(str(p)))
+    wr.release()
+    os.replace(tmp, path)
+    return Path(path)
+
+
+def make_street(root: Path, opts: RealBenchOptions) -> Path:
+    """The synthetic street (made once; remade when its generator changed)."""
+    from nerf2gs_plugin.data.synthetic_street import GENERATOR_VERSION, SynthStreetConfig, generate_street, read_generator_version
+
+    path = Path(root) / "street"
+    cfg = SynthStreetConfig(out=path, num_street=opts.num_street, num_bev=opts.num_bev, num_val_street=0, num_val_bev=0,
+                            progress=False, overwrite=True)
+    if not (path / "transforms.json").is_file() or read_generator_version(path) != GENERATOR_VERSION:
+        generate_street(cfg)
+    return path
+
+
+def ground_truth_dataset(street: Path, out: Path, n: int) -> Path:
+    """``out``: the street's first ``n`` training frames (the forward drive) with their true poses,
+    scale and masks; every other item of the street linked."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    for item in Path(street).iterdir():
+        link = out / item.name
+        if item.name == "transforms.json" or link.exists() or link.is_symlink():
+            continue
+        link.symlink_to(item.resolve())
+    meta = json.loads((Path(street) / "transforms.json").read_text())
+    meta["frames"] = meta["frames"][:n]
+    meta.pop("eval_splits", None)
+    atomic_write_text(out / "transforms.json", json.dumps(meta, indent=1))
+    return out
+
+
+def attach_eval(data: Path, true_groups: dict[str, list], true_train: np.ndarray, est_train: np.ndarray) -> Sim3:
+    """Align ``est_train`` (the dataset's training cameras, its own frame) onto ``true_train`` and
+    write the true eval cameras, mapped by the inverse, as the dataset's eval splits. Returns the
+    estimated -> true alignment."""
+    sim = align_poses(est_train, true_train)
+    link_eval_masks(data, true_groups)
+    write_eval_splits(data, mapped_eval_frames(true_groups, sim.inverse()))
+    return sim
+
+
+def process_capture(video: Path, out: Path, n: int, fov_deg: float, camera_height: float):
+    """``ns2gs-data process video`` with every frame kept (so frame names index the drive)."""
+    from nerf2gs_plugin.data.process.frames import extract_video_frames
+    from nerf2gs_plugin.data.process.pipeline import ProcessOptions, run_process
+    from nerf2gs_plugin.data.process.sfm import SfmOptions
+
+    # the dashcam's FOV is known: keep it (no focal refinement), and one thread so the mapping is
+    # repeatable (COLMAP's multi-threaded mapper gave a wrong geometry on one of two runs of 30 frames)
+    opts = ProcessOptions(out=Path(out), camera_height=camera_height, fov_deg=fov_deg, progress=False,
+                          sfm=SfmOptions(refine_intrinsics=False, num_threads=1))
+    return run_process(lambda d, progress: extract_video_frames(video, d, None, n, 0.0, opts.max_size, progress=progress),
+                       opts, is_video=True)
+
+
+def run_plan_for(data: Path, runs_root: Path, opts: RealBenchOptions, name: str, rerun: bool) -> dict[str, dict]:
+    from nerf2gs_plugin.eval.bench_paper import run_plan, step_overrides
+    from nerf2gs_plugin.eval.bench_runs import RunSpec
+
+    def ov(method: str, steps: int) -> dict:
+        return {**step_overrides(method, steps), "steps_per_eval_image": 0}
+
+    plan = [RunSpec("StreetNeRF", "streetnerf", ov("streetnerf", opts.streetnerf_steps)),
+            RunSpec("splatfacto", "splatfacto", ov("splatfacto", opts.splatfacto_steps)),
+            RunSpec(NERF_VIEWS, "splatfacto", ov("splatfacto", opts.splatfacto_steps), augment_from="StreetNeRF")]
+    return run_plan(plan, data, runs_root, name=name, rerun=rerun)
+
+
+def run_real_bench(runs_root: Path, out_dir: Path, opts: RealBenchOptions = RealBenchOptions(), rerun: bool = False,
+                   log: Callable[[str], None] = print, train: bool = True, street: Optional[Path] = None) -> dict:
+    """The whole bench; writes ``real.{json,md,png}`` into ``out_dir`` and returns the JSON document.
+    ``train=False`` stops after the capture figures, ``street`` replaces the generated street (the
+    test's plumbing run on a smaller one)."""
+    from nerf2gs_plugin.capture.make_masks import MasksConfig, make_masks
+    from nerf2gs_plugin.eval.mask_eval import paired_mask_iou
+
+    root = Path(runs_root) / "real"
+    root.mkdir(parents=True, exist_ok=True)
+    t_all = time.perf_counter()
+    stages: dict[str, float] = {}
+
+    def timed(name: str, fn):
+        t0 = time.perf_counter()
+        out = fn()
+        stages[name] = round(time.perf_counter() - t0, 1)
+        return out
+
+    street = street or timed("synthetic street", lambda: make_street(root, opts))
+    true_meta = json.loads((street / "transforms.json").read_text())
+    street_cfg = street_camera(street)
+    gt = ground_truth_dataset(street, root / "gt", opts.frames)
+    true_groups = read_frames(gt)
+    true_train = c2w_array(true_groups["train"])
+    gt_sim = attach_eval(gt, read_frames(street), true_train, true_train)  # identity: the same mapping code path
+
+    video = timed("video", lambda: write_video(root / "drive.avi", [f.image for f in true_groups["train"]]))
+    est = root / "estimated"
+    report = timed("process", lambda: process_capture(video, est, opts.frames, street_cfg.fov_deg, street_cfg.cam_height))
+    est_groups = read_frames(est)
+    idx = [frame_index(f.image) for f in est_groups["train"]]
+    est_train = c2w_array(est_groups["train"])
+    est_meta = json.loads((est / "transforms.json").read_text())
+    capture = capture_report(est_train, true_train[idx], float(est_meta["metres_per_unit"]), np.asarray(est_meta.get("up", [0, 0, 1])),
+                             np.asarray(true_meta.get("up", [0, 0, 1])), report.registered, opts.frames)
+    sim = attach_eval(est, read_frames(street), true_train[idx], est_train)
+    reference = root / f"masks-reference-{opts.reference_steps}"
+    done = json.loads((est / "masks" / "masks.json").read_text()) if (est / "masks" / "masks.json").is_file() else {}
+    if done.get("reference") != str(reference):
+        summary = timed("masks", lambda: make_masks(MasksConfig(data=est, reference=reference, reference_steps=opts.reference_steps,
+                                                                splits=("train",), overwrite=True, progress=False), log=log))
+    else:  # the masks of this reference exist: reused (their times are in masks.json)
+        summary = done
+        log(f"[bench] reusing the masks of {est / 'masks'} (reference {reference})")
+    def pinhole(intr) -> tuple[float, float, float, float]:
+        return (intr.fx, intr.fy, intr.cx, intr.cy)
+
+    iou = {k: paired_mask_iou([(est / "masks" / k / f"{Path(f.image).stem}.png", true_groups["train"][i].masks[k],
+                                (pinhole(f.intr), pinhole(true_groups["train"][i].intr)))
+                               for f, i in zip(est_groups["train"], idx) if true_groups["train"][i].masks.get(k)]) for k in MASK_KINDS}
+    doc: dict = {
+        "options": vars(opts).copy(),
+        "registered_fraction": capture["registered_fraction"],
+        "ate_percent": capture["ate_percent"],
+        "scale_error_percent": capture["scale_error_percent"],
+        "rotation_error_deg": capture["rotation_error_deg"],
+        "up_error_deg": capture["up_error_deg"],
+        "mask_iou": iou,
+        "alignment": {"scale": sim.s, "gt_identity_scale": gt_sim.s},
+        "process": {"registered": report.registered, "frames": report.frames, "points": report.points,
+                    "metres_per_unit": report.metres_per_unit, "stage_seconds": report.stage_seconds},
+        "masks": {"reference_seconds": summary.get("reference_seconds"), "mask_seconds": summary.get("mask_seconds"),
+                  "coverage": summary.get("coverage")},
+    }
+    if train:
+        res_gt = timed("ground truth: train + eval", lambda: run_plan_for(gt, Path(runs_root), opts, "real_gt", rerun))
+        res_est = timed("estimated: train + eval", lambda: run_plan_for(est, Path(runs_root), opts, "real_est", rerun))
+        doc["results"] = {"estimated": res_est, "ground_truth": res_gt}
+        doc["gain_ratio"] = {s: gain_ratio(res_est, res_gt, s) for s in ("bev_1", "bev_2")}
+        doc["train_seconds"] = {f"{name}: {label}": r.get("train_seconds") for name, res in (("estimated", res_est), ("ground truth", res_gt))
+                                for label, r in res.items()}
+    doc["stage_seconds"] = stages
+    doc["wall_seconds"] = round(time.perf_counter() - t_all, 1)
+    write_results(out_dir, doc)
+    return doc
+
+
+# ----------------------------------------------------------------------------- output
+def _f(v: Optional[float], fmt: str = "{:.2f}") -> str:
+    return "n/a" if v is None else fmt.format(v)
+
+
+def results_md(doc: dict) -> str:
+    from nerf2gs_plugin.eval.bench_paper import markdown_table, target_groups
+    from nerf2gs_plugin.eval.machine import machine_line
+
+    o = doc["options"]
+    lines = [
+        "# Real-capture path on the synthetic street (`ns2gs-bench real`)", "",
+        f"Machine: {machine_line(doc.get('machine'))}", "",
+        f"The street's forward drive ({o['frames']} frames, 200x112) as an MJPG video, poses and masks thrown away: "
+        f"process video (`--fov-deg 80 --camera-height 3 --no-refine-intrinsics --num-threads 1`) -> masks (auto, reference {o['reference_steps']} steps) -> "
+        f"StreetNeRF ({o['streetnerf_steps']} steps) -> Splatfacto ({o['splatfacto_steps']} steps) with and without NeRF views; "
+        "beside it the same frames with their true poses, scale and masks. Eval cameras mapped into the estimated "
+        "frame by the inverse of the Sim(3) aligning the estimated training cameras to the true ones.", "",
+        "| capture figure | measured | target |", "|---|---|---|",
+        f"| registered_fraction | {_f(doc['registered_fraction'], '{:.3f}')} | >= 0.95 |",
+        f"| ate_percent | {_f(doc['ate_percent'], '{:.3f}')} | <= 1 |",
+        f"| scale_error_percent | {_f(doc['scale_error_percent'], '{:+.2f}')} | within 5 |",
+        f"| rotation_error_deg | {_f(doc['rotation_error_deg'], '{:.3f}')} | |",
+        f"| up_error_deg | {_f(doc['up_error_deg'], '{:.3f}')} | |",
+    ]
+    for k in MASK_KINDS:
+        lines.append(f"| mask_iou.{k} | {_f(doc['mask_iou'].get(k), '{:.3f}')} | {'>= 0.8' if k != 'transient' else ''} |")
+    for s in ("bev_1", "bev_2"):
+        if "gain_ratio" in doc:
+            lines.append(f"| gain_ratio.{s} | {_f(doc['gain_ratio'].get(s), '{:.3f}')} | >= 0.8 |")
+    for name, key in (("Everything estimated", "estimated"), ("Ground-truth poses, scale and masks", "ground_truth")):
+        res = doc.get("results", {}).get(key)
+        if res:
+            lines += ["", markdown_table(res, target_groups(res), name)]
+    lines += ["", "Time per stage (s): " + ", ".join(f"{k} {v}" for k, v in doc["stage_seconds"].items())
+              + "; SfM: " + ", ".join(f"{k} {v}" for k, v in doc["process"]["stage_seconds"].items())
+              + f"; masks: reference {doc['masks']['reference_seconds']}, masks {doc['masks']['mask_seconds']}"]
+    if "train_seconds" in doc:
+        lines += ["", "Training (s): " + ", ".join(f"{k} {_f(v, '{:.0f}')}" for k, v in doc["train_seconds"].items())]
+    lines += ["", f"Bench wall time: {doc['wall_seconds']:.0f} s (training reused where cached)."]
+    return "\n".join(lines) + "\n"
+
+
+def write_results(out_dir: Path, doc: dict) -> None:
+    from nerf2gs_plugin.eval.bench_paper import psnr_bar_chart, succeeded
+    from nerf2gs_plugin.eval.machine import machine_info
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    doc["machine"] = machine_info()
+    atomic_write_text(out_dir / "real.json", json.dumps(doc, indent=1, default=str))
+    atomic_write_text(out_dir / "real.md", results_md(doc))
+    merged = {f"{label} ({'est' if key == 'estimated' else 'GT'})": r for key, res in doc.get("results", {}).items()
+              for label, r in succeeded(res).items()}
+    psnr_bar_chart(merged, out_dir / "real.png", "Real-capture path: estimated vs ground-truth poses, scale, masks")
