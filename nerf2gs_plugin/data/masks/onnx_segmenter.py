@@ -41,27 +41,10 @@ from torch import Tensor
 
 from nerf2gs_plugin.data.masks import class_maps
 from nerf2gs_plugin.errors import ConfigError
+from nerf2gs_plugin.utils.onnx_convention import read_convention
 
 KEYS = ("layout", "range", "mean", "std", "input", "output", "output_layout", "size", "tile_size", "overlap", "multiple", "classes")
 _SCALE = {"0,1": (1.0, 0.0), "0,255": (255.0, 0.0), "-1,1": (2.0, -1.0)}
-
-
-def read_convention(path: Path, session) -> dict[str, str]:
-    meta = dict(session.get_modelmeta().custom_metadata_map or {})
-    conv = {k: str(v) for k, v in meta.items() if k in KEYS}
-    sidecar = path.with_name(path.name + ".json")
-    if sidecar.is_file():
-        try:
-            extra = json.loads(sidecar.read_text())
-        except (OSError, json.JSONDecodeError) as e:
-            raise ConfigError(f"sidecar JSON is not readable ({e})", sidecar) from None
-        if not isinstance(extra, dict):
-            raise ConfigError("sidecar JSON must be an object of convention keys", sidecar)
-        unknown = sorted(set(extra) - set(KEYS))
-        if unknown:
-            raise ConfigError(f"unknown convention keys {unknown} (known: {', '.join(KEYS)})", sidecar)
-        conv.update({k: (json.dumps(v) if isinstance(v, list) else str(v)) for k, v in extra.items()})
-    return conv
 
 
 def _hw(value: str, key: str, path: Path) -> tuple[int, int]:
@@ -107,7 +90,7 @@ class OnnxSegmenter:
         except Exception as e:  # onnxruntime raises its own exception types for bad files
             msg = str(e).strip().splitlines()[0][:160] if str(e).strip() else type(e).__name__
             raise ConfigError(f"not a loadable ONNX model ({msg})", self.path) from None
-        conv = read_convention(self.path, self.session)
+        conv = read_convention(self.path, self.session, KEYS)
         p = self.path
         self.layout = conv.get("layout", "NCHW").upper()
         self.out_layout = conv.get("output_layout", "NCHW").upper()
