@@ -45,7 +45,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from nerf2gs_plugin.errors import ConfigError
-from nerf2gs_plugin.utils.onnx_convention import read_convention
+from nerf2gs_plugin.utils.onnx_model import open_session, read_convention
 
 KEYS = ("layout", "range", "input", "reference_input", "output", "tile_size", "multiple", "overlap")
 
@@ -87,23 +87,10 @@ class OnnxEnhancer:
 
     def __init__(self, path: Union[str, Path], tile_size: Optional[int] = None, overlap: Optional[int] = None,
                  providers: Optional[list[str]] = None) -> None:
-        import onnxruntime as ort
-
         self.path = Path(path)
         if not self.path.is_file():
             raise ConfigError("enhancer model file does not exist", self.path)
-        available = ort.get_available_providers()
-        if providers is None:
-            providers = [p for p in ("CUDAExecutionProvider", "CPUExecutionProvider") if p in available]
-        opts = ort.SessionOptions()
-        opts.intra_op_num_threads = max(1, torch.get_num_threads())
-        opts.log_severity_level = 3
-        opts.add_session_config_entry("session.intra_op.allow_spinning", "0")  # shared CPUs: don't busy-wait
-        try:
-            self.session = ort.InferenceSession(str(self.path), sess_options=opts, providers=providers)
-        except Exception as e:  # onnxruntime raises its own exception types for bad files
-            msg = str(e).strip().splitlines()[0][:160] if str(e).strip() else type(e).__name__
-            raise ConfigError(f"not a loadable ONNX model ({msg})", self.path) from None
+        self.session = open_session(self.path, providers)
         conv = read_convention(self.path, self.session, KEYS)
         self.convention = conv
         self.layout = conv.get("layout", "NCHW").upper()

@@ -41,7 +41,7 @@ from torch import Tensor
 
 from nerf2gs_plugin.data.masks import class_maps
 from nerf2gs_plugin.errors import ConfigError
-from nerf2gs_plugin.utils.onnx_convention import read_convention
+from nerf2gs_plugin.utils.onnx_model import open_session, read_convention
 
 KEYS = ("layout", "range", "mean", "std", "input", "output", "output_layout", "size", "tile_size", "overlap", "multiple", "classes")
 _SCALE = {"0,1": (1.0, 0.0), "0,255": (255.0, 0.0), "-1,1": (2.0, -1.0)}
@@ -75,21 +75,10 @@ class OnnxSegmenter:
     """An ONNX segmentation model + a class map -> sky / ground / transient masks."""
 
     def __init__(self, path: Union[str, Path], class_map: Optional[Union[str, Path]] = None) -> None:
-        import onnxruntime as ort
-
         self.path = Path(path)
         if not self.path.is_file():
             raise ConfigError("segmenter model file does not exist", self.path)
-        opts = ort.SessionOptions()
-        opts.intra_op_num_threads = max(1, torch.get_num_threads())
-        opts.log_severity_level = 3
-        opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
-        providers = [p for p in ("CUDAExecutionProvider", "CPUExecutionProvider") if p in ort.get_available_providers()]
-        try:
-            self.session = ort.InferenceSession(str(self.path), sess_options=opts, providers=providers)
-        except Exception as e:  # onnxruntime raises its own exception types for bad files
-            msg = str(e).strip().splitlines()[0][:160] if str(e).strip() else type(e).__name__
-            raise ConfigError(f"not a loadable ONNX model ({msg})", self.path) from None
+        self.session = open_session(self.path)
         conv = read_convention(self.path, self.session, KEYS)
         p = self.path
         self.layout = conv.get("layout", "NCHW").upper()
