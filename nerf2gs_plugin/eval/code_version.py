@@ -3,8 +3,11 @@
 The rule (stated once, used by :mod:`nerf2gs_plugin.eval.bench_runs` and
 :mod:`nerf2gs_plugin.eval.bench_io`): a trained model depends on every ``.py``/``.cpp``/``.h``/``.cu``
 file of the package except those under ``eval/``, ``cli/`` and ``viewer/``, which read models but
-never change one. That is coarser than the files a method imports (an edit to another method
-retrains every bench run), but it can never miss a dependency. An evaluation depends on the model
+never change one, and the dataset makers ``capture/``, ``data/process/`` and ``data/masks/``, which
+write the files a run reads (those files key the run through the dataset fingerprint instead).
+No model code imports the excluded folders (but for ``MODEL_METRIC_CODE``, which is hashed) (``tests/eval/test_bench_keys.py`` checks it on the
+import graph). That is coarser than the files a method imports (an edit to another method retrains
+every bench run), but it can never miss a dependency. An evaluation depends on the model
 plus the metric code: ``eval/metrics.py``, ``eval/lpips.py`` and ``eval/evaluate.py``.
 """
 
@@ -19,15 +22,23 @@ import nerf2gs_plugin
 SOURCE_ROOT = Path(nerf2gs_plugin.__file__).resolve().parent
 """The package source that is hashed (tests point it at a modified copy)."""
 SOURCE_SUFFIXES = (".py", ".cpp", ".h", ".cu")
-NOT_MODEL_CODE = ("eval", "cli", "viewer")
+NOT_MODEL_CODE = ("eval", "cli", "viewer", "capture", "data/process", "data/masks")
+"""Folders (relative to the package) whose files never key a trained model."""
 METRIC_CODE = ("eval/metrics.py", "eval/lpips.py", "eval/evaluate.py")
+MODEL_METRIC_CODE = ("eval/metrics.py", "eval/lpips.py")
+"""The metric code that model code imports (``enhance/train.py``): it keys models too."""
 
 
 def model_source_files(root: Path | None = None) -> list[Path]:
     """The files whose content keys a trained model (see the module docstring), sorted."""
     root = Path(root or SOURCE_ROOT)
-    return sorted(p for p in root.rglob("*") if p.suffix in SOURCE_SUFFIXES and p.is_file()
-                  and p.relative_to(root).parts[0] not in NOT_MODEL_CODE and "__pycache__" not in p.parts)
+    def excluded(rel: Path) -> bool:
+        return any(rel.parts[:len(Path(f).parts)] == Path(f).parts for f in NOT_MODEL_CODE)
+
+    files = {p for p in root.rglob("*") if p.suffix in SOURCE_SUFFIXES and p.is_file()
+             and not excluded(p.relative_to(root)) and "__pycache__" not in p.parts}
+    # the enhancer's training selects its checkpoint by PSNR/LPIPS: the metric code shapes that model
+    return sorted(files | {root / name for name in MODEL_METRIC_CODE})
 
 
 @lru_cache(maxsize=8)
