@@ -23,7 +23,8 @@ LAYERS: list[tuple[str, ...]] = [
     ("registry",),  # MethodSpecification; built-in methods are named by string, not imported
     ("engine",),  # the contracts methods implement: Model, Pipeline, Trainer(Config), optimizers
     ("methods",),
-    ("eval", "enhance", "capture"),  # capture: tools that train or load runs for a real capture (masks auto)
+    ("eval", "enhance", "capture", "blocks"),  # capture: tools that train or load runs for a real capture
+    # (masks auto); blocks: city-block partition of a capture and merge of the block runs
     ("viewer", "cli"),
 ]
 RANK = {name: i for i, names in enumerate(LAYERS) for name in names}

@@ -3,8 +3,8 @@
 The rule (stated once, used by :mod:`nerf2gs_plugin.eval.bench_runs` and
 :mod:`nerf2gs_plugin.eval.bench_io`): a trained model depends on every ``.py``/``.cpp``/``.h``/``.cu``
 file of the package except those under ``eval/``, ``cli/`` and ``viewer/``, which read models but
-never change one, and the dataset makers ``capture/``, ``data/process/`` and ``data/masks/``, which
-write the files a run reads (those files key the run through the dataset fingerprint instead).
+never change one, and the dataset makers ``capture/``, ``data/process/``, ``data/masks/`` and
+``blocks/`` (city-block partition and merge), which write the files a run reads or merge finished runs (those files key the run through the dataset fingerprint instead).
 No model code imports the excluded folders (but for ``MODEL_METRIC_CODE``, which is hashed) (``tests/eval/test_bench_keys.py`` checks it on the
 import graph). That is coarser than the files a method imports (an edit to another method retrains
 every bench run), but it can never miss a dependency. An evaluation depends on the model
@@ -22,7 +22,7 @@ import nerf2gs_plugin
 SOURCE_ROOT = Path(nerf2gs_plugin.__file__).resolve().parent
 """The package source that is hashed (tests point it at a modified copy)."""
 SOURCE_SUFFIXES = (".py", ".cpp", ".h", ".cu")
-NOT_MODEL_CODE = ("eval", "cli", "viewer", "capture", "data/process", "data/masks")
+NOT_MODEL_CODE = ("eval", "cli", "viewer", "capture", "data/process", "data/masks", "blocks")
 """Folders (relative to the package) whose files never key a trained model."""
 METRIC_CODE = ("eval/metrics.py", "eval/lpips.py", "eval/evaluate.py")
 MODEL_METRIC_CODE = ("eval/metrics.py", "eval/lpips.py")
