@@ -4,11 +4,12 @@ The rule (stated once, used by :mod:`nerf2gs_plugin.eval.bench_runs` and
 :mod:`nerf2gs_plugin.eval.bench_io`): a trained model depends on every ``.py``/``.cpp``/``.h``/``.cu``
 file of the package except those under ``eval/``, ``cli/`` and ``viewer/``, which read models but
 never change one, and the dataset makers ``capture/``, ``data/process/``, ``data/masks/`` and
-``blocks/`` (city-block partition and merge), which write the files a run reads or merge finished runs (those files key the run through the dataset fingerprint instead).
-No model code imports the excluded folders (but for ``MODEL_METRIC_CODE``, which is hashed) (``tests/eval/test_bench_keys.py`` checks it on the
-import graph). That is coarser than the files a method imports (an edit to another method retrains
-every bench run), but it can never miss a dependency. An evaluation depends on the model
-plus the metric code: ``eval/metrics.py``, ``eval/lpips.py`` and ``eval/evaluate.py``.
+``blocks/`` (city-block partition and merge), which write the files a run reads or merge finished
+runs (those files key the run through the dataset fingerprint instead). No model code imports the
+excluded folders, but for ``MODEL_METRIC_CODE``, which is hashed (``tests/eval/test_bench_keys.py``
+checks it on the import graph). That is coarser than the files a method imports (an edit to another
+method retrains every bench run), but it can never miss a dependency. An evaluation depends on the
+model plus the metric code: ``eval/metrics.py``, ``eval/lpips.py`` and ``eval/evaluate.py``.
 """
 
 from __future__ import annotations
