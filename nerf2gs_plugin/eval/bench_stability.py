@@ -259,6 +259,13 @@ def markdown(rows: list[dict], summary: dict[str, dict]) -> str:
     return "\n".join(lines)
 
 
+def log_line(label: str, rows: list[dict]) -> str:
+    """The log line of the last row, with collapses already marked against the seed runs so far
+    (the plan trains seeds first), so the log says what the table will say."""
+    row = mark_collapses(rows)[-1]
+    return f"[stability] {label}: {row['status']}" + (f" ({row['error']})" if row.get("error") else "")
+
+
 def run(plan: list[StressCase], data: Path, runs_root: Path, out_dir: Path, scale: str, synthetic: bool,
         log: Optional[Callable[[str], None]] = None, rerun: bool = False) -> dict:
     """Run every case (one progress bar over the bench, log in <runs>/logs/stability.log), write
@@ -271,9 +278,8 @@ def run(plan: list[StressCase], data: Path, runs_root: Path, out_dir: Path, scal
         runner = BenchRunner(runs_root, log=logger, rerun=rerun)
         for i, case in enumerate(plan):
             bar.start(i, case.label)
-            row = run_case(case, data, runner, synthetic, step_hook=bar.hook)
-            logger(f"[stability] {case.label}: {row['status']}" + (f" ({row['error']})" if row.get("error") else ""))
-            rows.append(row)
+            rows.append(run_case(case, data, runner, synthetic, step_hook=bar.hook))
+            logger(log_line(case.label, rows))
             bar.finish(i)
     payload = write_outputs(rows, out_dir, scale, str(data))
     return payload

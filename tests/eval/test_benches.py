@@ -112,6 +112,9 @@ def test_a_quality_collapse_is_a_failure():
     s = summarize(marked)["m"]
     assert s["failures"] == 2 and s["collapse"] == 2
     assert rows[3]["status"] == "ok"  # the input rows are not modified
+    # the per-run log line says what the table will say (it once printed "ok" for a collapse)
+    assert bench_stability.log_line("m random init", rows[:4]).startswith("[stability] m random init: collapse (street PSNR 5.00")
+    assert bench_stability.log_line("m seed 0", rows[:1]) == "[stability] m seed 0: ok"
 
 
 def test_committed_stability_results_use_the_collapse_definition():
