@@ -27,8 +27,20 @@ def test_pareto_front():
     assert pareto_front([], []) == []
 
 
-def _result(label, target, fps, bev, street, secs, prims, run_dir):
-    return {"label": label, "target": target, "fps": fps, "train_seconds": secs, "size": {"primitives": prims}, "run_dir": run_dir,
+def test_pareto_front_on_three_axes():
+    from nerf2gs_plugin.eval.bench_speed_quality import pareto_front_nd
+
+    fps = [10.0, 20.0, 20.0, 5.0, float("nan")]
+    psnr = [20.0, 19.0, 19.0, 21.0, 30.0]
+    mb = [1.0, 2.0, 3.0, 9.0, 0.1]
+    # 2 is beaten by 1 (same FPS and PSNR, smaller); 3 is on it by PSNR alone; NaN never
+    assert pareto_front_nd([fps, psnr, mb], (True, True, False)) == [0, 1, 3]
+    assert pareto_front_nd([[1.0, 1.0], [2.0, 2.0], [3.0, 3.0]], (True, True, False)) == [0, 1]  # ties
+
+
+def _result(label, target, fps, bev, street, secs, prims, run_dir, mb=None):
+    return {"label": label, "target": target, "fps": fps, "train_seconds": secs, "run_dir": run_dir,
+            "size": {"primitives": prims, "megabytes": prims / 4000 if mb is None else mb},
             "results": {"street": {"psnr": street}, "bev_1": {"psnr": bev - 0.5}, "bev_2": {"psnr": bev + 0.5}}}
 
 
@@ -49,8 +61,12 @@ def test_speed_quality_reads_results_and_writes_outputs(tmp_path):
     payload = bench_speed_quality.run(res, tmp_path / "out")
     assert payload["front_fps"] == ["StreetNeRF", "splatfacto + NeRF views", "splatfacto"]
     assert payload["front_train_time"] == ["splatfacto", "splatfacto + NeRF views", "StreetNeRF"]
+    # sizes 0 (StreetNeRF here), 5, 7.5 and 0 MB: the zero-MB runs have no size and are not ranked by it
+    assert payload["front_megabytes"] == ["splatfacto", "splatfacto + NeRF views"]
+    assert payload["front_fps_psnr_megabytes"] == ["splatfacto + NeRF views", "splatfacto"]
     md = (tmp_path / "out" / "speed_quality.md").read_text()
     assert "Machine: x, 2 cores" in md and "| StreetNeRF w/o sky | ablation | 0.10 | 20.00 |" in md
+    assert "| splatfacto + NeRF views | 35.00 | 21.00 | 7.50 | 30000 |" in md  # listed on the three-axis front
     assert (tmp_path / "out" / "speed_quality.png").read_bytes()[:4] == b"\x89PNG"
     (res / "bad.json").write_text("{}")
     with pytest.raises(DataError, match="not a bench results file"):
