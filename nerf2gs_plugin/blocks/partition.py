@@ -2,8 +2,8 @@
 overlapping blocks, each an ordinary nerfstudio dataset folder (``DIR/block_<i>_<j>/``) that every
 ``ns2gs-*`` command reads, plus ``DIR/partition.json`` naming each block's cell.
 
-A block holds the train frames whose camera stands in its expanded cell (:mod:`.cells`), the
-held-out frames of every eval split standing there (split names kept; a split with none there is
+A block holds the train frames whose camera stands in its expanded cell (:mod:`.cells`; with
+``--visibility``, also those looking into its cell), the held-out frames of every eval split standing there (split names kept; a split with none there is
 left out), their masks and depth maps, and the sparse points inside the expanded cell. Images,
 masks and depth maps are linked (relative symlinks mirroring the source's layout), never copied;
 the points are cropped into a new PLY. Each block's ``transforms.json`` keeps the source's
@@ -52,6 +52,10 @@ class PartitionConfig:
     """Grid KxL: K blocks along the street's main axis, L across it."""
     overlap: float = 0.2
     """Each block also trains on cameras within this fraction of its cell's size beyond its edges (0 to 1)."""
+    visibility: float = 0.0
+    """Also give a block the train cameras outside its expanded cell that look into its cell: those
+    whose sparse points in view lie in the cell for at least this fraction (VastGaussian's
+    visibility-based selection; 0 = by position only)."""
     min_cameras: int = 3
     """A block needs at least this many training cameras."""
     overwrite: bool = False
@@ -69,6 +73,8 @@ def check_config(cfg: PartitionConfig) -> tuple[int, int]:
     grid = parse_grid(cfg.blocks)
     if not (math.isfinite(cfg.overlap) and 0.0 <= cfg.overlap <= 1.0):
         raise ConfigError(f"--overlap must be within [0, 1] (a fraction of the cell size), got {cfg.overlap}")
+    if not (math.isfinite(cfg.visibility) and 0.0 <= cfg.visibility <= 1.0):
+        raise ConfigError(f"--visibility must be within [0, 1] (a fraction of the points in view), got {cfg.visibility}")
     if cfg.min_cameras < 1:
         raise ConfigError(f"--min-cameras must be at least 1, got {cfg.min_cameras}")
     return grid
@@ -161,27 +167,33 @@ def partition(cfg: PartitionConfig) -> dict[str, Any]:
     axes = ground_axes(train_out.cameras.camera_to_worlds[:, :2, 3])
     uv = {name: to_uv(_positions(frames, tf), axes) for name, frames in groups.items()}
     cells = make_cells(uv["train"], k, l, cfg.overlap)
-    counts = [int(inside(uv["train"], c.expanded_u, c.expanded_v).sum()) for c in cells]
+    points = None
+    if meta.get("ply_file_path"):
+        xyz, rgb = read_ply_points(src_root / str(meta["ply_file_path"]))
+        points = (xyz, rgb, to_uv(tf.apply_points(torch.as_tensor(xyz, dtype=torch.float32)), axes))
+    train_sel = [inside(uv["train"], c.expanded_u, c.expanded_v) for c in cells]
+    if cfg.visibility > 0 and points is not None:
+        norm_xyz = train_out.points3D_xyz.float() if train_out.points3D_xyz is not None else torch.zeros(0, 3)
+        train_sel = [sel | (looking_into(train_out.cameras, norm_xyz, to_uv(norm_xyz, axes), c) >= cfg.visibility)
+                     for sel, c in zip(train_sel, cells)]
+    counts = [int(sel.sum()) for sel in train_sel]
     if min(counts) < cfg.min_cameras:
         few = ", ".join(f"{c.name} {n}" for c, n in zip(cells, counts) if n < cfg.min_cameras)
         raise ConfigError(f"--blocks {cfg.blocks}: too few training cameras in {few} (need {cfg.min_cameras}); "
                           "use fewer blocks or more --overlap")
     out = _prepare_out(cfg)
     raw = _entries_by_image(meta, src_root)
-    points = None
-    if meta.get("ply_file_path"):
-        xyz, rgb = read_ply_points(src_root / str(meta["ply_file_path"]))
-        points = (xyz, rgb, to_uv(tf.apply_points(torch.as_tensor(xyz, dtype=torch.float32)), axes))
     up_data = tf.transform[:, :3].double().T @ torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)
     blocks = []
-    for cell in cells:
-        blocks.append(_write_block(out, cell, groups, uv, raw, meta, src_root, points, up_data))
+    for cell, sel in zip(cells, train_sel):
+        blocks.append(_write_block(out, cell, sel, groups, uv, raw, meta, src_root, points, up_data))
     doc = {
         "format": FORMAT,
         "source": str(Path(cfg.data).absolute()),
         "source_fingerprint": dataset_fingerprint(train_out.image_filenames),
         "grid": [k, l],
         "overlap": cfg.overlap,
+        "visibility": cfg.visibility,
         "frame": "the source's normalised frame: x_n = scale * (R x_data + t), z up; u, v = axes @ (x_n, y_n)",
         "transform": tf.transform.tolist(),
         "scale": tf.scale,
@@ -192,14 +204,27 @@ def partition(cfg: PartitionConfig) -> dict[str, Any]:
     return doc
 
 
-def _write_block(out: Path, cell: Cell, groups: dict[str, list[RawFrame]], uv: dict[str, torch.Tensor], raw: dict,
+def looking_into(cameras, xyz: torch.Tensor, uv: torch.Tensor, cell: Cell) -> torch.Tensor:
+    """``[N]``: per camera, the fraction of the points ``xyz`` (normalised frame) in its view that
+    lie in ``cell`` (ground coordinates ``uv``); 0 for a camera that sees none."""
+    in_cell = inside(uv, cell.u, cell.v)
+    out = torch.zeros(len(cameras))
+    for i in range(len(cameras)):
+        pix, z = cameras.project(xyz, i)
+        seen = (z > 0) & (pix[:, 0] >= 0) & (pix[:, 0] < cameras.width[i]) & (pix[:, 1] >= 0) & (pix[:, 1] < cameras.height[i])
+        if bool(seen.any()):
+            out[i] = float((seen & in_cell).sum()) / float(seen.sum())
+    return out
+
+
+def _write_block(out: Path, cell: Cell, train_sel: torch.Tensor, groups: dict[str, list[RawFrame]], uv: dict[str, torch.Tensor], raw: dict,
                  meta: dict, src_root: Path, points, up_data: torch.Tensor) -> dict:
     folder = out / cell.name
     folder.mkdir(parents=True, exist_ok=True)
     link = _Linker(src_root, folder)
     chosen = {}
     for split, frames in groups.items():
-        keep = inside(uv[split], cell.expanded_u, cell.expanded_v)
+        keep = train_sel if split == "train" else inside(uv[split], cell.expanded_u, cell.expanded_v)
         chosen[split] = [_block_entry(f, raw[f.image.resolve()], link) for f, m in zip(frames, keep.tolist()) if m]
     block_meta = {k: v for k, v in meta.items() if k not in _SPLIT_KEYS}
     block_meta.setdefault("up", [float(x) for x in up_data])
