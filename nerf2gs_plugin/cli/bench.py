@@ -1,4 +1,4 @@
-"""ns2gs-bench demo | quick | paper-table | ablation | speed-quality | stability | model-size | raster | field | faults | real
+"""ns2gs-bench demo | quick | paper-table | ablation | speed-quality | stability | model-size | raster | field | faults | real | scale
 
 Results (JSON + Markdown + PNG, with the machine) go to benchmarks/results/; trained runs are kept
 under benchmarks/runs/ and reused when nothing that matters changed. ``demo`` (what make demo runs)
@@ -293,11 +293,26 @@ class Real:
         print(f"results: {self.out}/real.md")
 
 
+@dataclass
+class Scale:
+    """How cost grows: time per step, peak memory and model size against images and resolution for
+    StreetNeRF and Splatfacto, a fitted law and a 1 km projection, one run vs blocks (``scale.*``)."""
+
+    out: Path = RESULTS
+    runs: Path = RUNS
+
+    def main(self) -> None:
+        from nerf2gs_plugin.eval.bench_scale import run
+
+        doc = run(self.out, self.runs)
+        print(f"results: {self.out}/scale.md ({doc['bench_seconds']:.0f} s)")
+
+
 def main() -> None:
     cmd = tyro.extras.subcommand_cli_from_dict(
         {"demo": Demo, "quick": Quick, "paper-table": PaperTable, "ablation": Ablation, "speed-quality": SpeedQuality,
          "stability": Stability, "model-size": ModelSize, "raster": Raster, "field": Field, "faults": Faults,
-         "real": Real},
+         "real": Real, "scale": Scale},
         description=__doc__,
     )
     cmd.main()
