@@ -300,11 +300,13 @@ class Scale:
 
     out: Path = RESULTS
     runs: Path = RUNS
+    refit: bool = False
+    """Keep the measurements in OUT/scale.json; redo the fits, the projection and the chart."""
 
     def main(self) -> None:
         from nerf2gs_plugin.eval.bench_scale import run
 
-        doc = run(self.out, self.runs)
+        doc = run(self.out, self.runs, refit=self.refit)
         print(f"results: {self.out}/scale.md ({doc['bench_seconds']:.0f} s)")
 
 

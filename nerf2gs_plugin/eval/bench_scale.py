@@ -10,7 +10,7 @@ time per step, peak RSS of the process, primitives and checkpoint size. These ar
 of a run: a Splatfacto model still holds its sparse points (densification starts at step 300).
 
 Fits (least squares, residual stated): Splatfacto time per step ``a + b * pixels + c * primitives``,
-StreetNeRF ``a + b * pixels``; peak RSS ``r0 + r1 * images * pixels (+ r2 * primitives)``. The
+StreetNeRF a constant (a fixed ray batch per step); peak RSS ``r0 + r1 * images * pixels``. The
 projection for a 1 km street at 1920x1080 (625 frames at the synthetic drive's 0.625 frames per
 metre, the sparse points' density per metre) takes the steps a run needs from the registered
 recipes (Splatfacto: one image per step, steps proportional to images; StreetNeRF: a fixed ray
@@ -22,13 +22,12 @@ from __future__ import annotations
 
 import json
 import os
-import resource
 import time
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
@@ -152,9 +151,19 @@ def measure(job: Job) -> dict[str, Any]:
     ckpt = next((run_dir / "checkpoints").glob("step-*.ckpt"))
     size = trainer.pipeline.model.size_report()
     return {**dataclasses.asdict(job), "pixels": job.width * job.height, "seconds_per_step": per_step,
-            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, "primitives": size["primitives"],
+            "peak_rss_mb": peak_rss_mb(), "primitives": size["primitives"],
             "parameters": size["parameters"], "model_mb": size["megabytes"], "checkpoint_mb": ckpt.stat().st_size / 2**20,
             "wall_s": time.perf_counter() - t0, "load_average": os.getloadavg()[0]}
+
+
+def peak_rss_mb() -> float:
+    """This process's peak resident set (``VmHWM``: reset at exec, unlike ``ru_maxrss``, which a
+    spawned child inherits from the parent that forked it)."""
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 1024
+    raise OSError("no VmHWM in /proc/self/status")
 
 
 # ---------------------------------------------------------------------------- fits and projection
@@ -179,9 +188,11 @@ def laws(rows: list[dict]) -> dict[str, dict]:
         rs = [dict(r, image_pixels=r["images"] * r["pixels"]) for r in rows if r["method"] == method]
         if len(rs) < 3:
             continue
-        prim = ["primitives"] if method == "splatfacto" else []
-        out[method] = {"time": fit(rs, "seconds_per_step", ["pixels", *prim]),
-                       "rss": fit(rs, "peak_rss_mb", ["image_pixels", *prim])}
+        # Splatfacto rasterises one image per step; StreetNeRF a fixed ray batch (no term in the image)
+        # memory: the images held in memory (the initial primitives, a few MB, grow with the images too:
+        # a term of their own would only split one slope between two collinear columns)
+        time_terms = ["pixels", "primitives"] if method == "splatfacto" else []
+        out[method] = {"time": fit(rs, "seconds_per_step", time_terms), "rss": fit(rs, "peak_rss_mb", ["image_pixels"])}
     return out
 
 
@@ -247,6 +258,11 @@ def chart(rows: list[dict], path: Path) -> None:
                      color=colour, label=method)
     axes[0].set(xlabel="training images (200x112)", ylabel="s / step", xscale="log", title="time per step vs images")
     axes[1].set(xlabel="pixels per image (60 images)", ylabel="s / step", xscale="log", title="time per step vs resolution")
+    sizes = sorted({(r["pixels"], f"{r['width']}x{r['height']}") for r in rows if r["sweep"] == "resolution"})
+    for ax, ticks, labels in ((axes[0], [30, 60, 120, 240], ["30", "60", "120", "240"]),
+                              (axes[1], [p for p, _ in sizes], [label for _, label in sizes])):
+        ax.minorticks_off()
+        ax.set_xticks(ticks, labels)
     axes[2].set(xlabel="images x pixels (M)", ylabel="peak RSS (MB)", title="peak memory")
     for ax in axes:
         ax.legend(fontsize=8)
@@ -255,15 +271,12 @@ def chart(rows: list[dict], path: Path) -> None:
     save_figure(fig, path)
 
 
-def run(out: Path, runs_root: Path, only: Optional[list[str]] = None) -> dict[str, Any]:
-    """Make the datasets, measure every job in its own process, fit, project, write ``scale.*``."""
+def measure_all(root: Path) -> list[dict]:
+    """Every job of :func:`plan`, each in a fresh process, one at a time."""
     from nerf2gs_plugin.progress import make_progress
-    from nerf2gs_plugin.registry import get_method
 
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    root = Path(runs_root) / "scale"
-    t0 = time.perf_counter()
-    jobs = [j for j in plan(root) if not only or j.method in only]
+    jobs = plan(root)
     rows = []
     with make_progress(True) as prog, ProcessPoolExecutor(1, mp_context=get_context("spawn"), max_tasks_per_child=1) as pool:
         task = prog.add_task("scale bench", total=len(jobs), stats="")
@@ -271,12 +284,27 @@ def run(out: Path, runs_root: Path, only: Optional[list[str]] = None) -> dict[st
             prog.update(task, stats=f"{job.method} {job.images} images {job.width}x{job.height}")
             rows.append(pool.submit(measure, job).result())
             prog.advance(task)
+    return rows
+
+
+def run(out: Path, runs_root: Path, refit: bool = False) -> dict[str, Any]:
+    """Make the datasets, measure every job in its own process, fit, project, write ``scale.*``;
+    ``refit``: keep the measured rows (and machine) of ``out/scale.json``, redo fits, projection and chart."""
+    from nerf2gs_plugin.registry import get_method
+
+    t0 = time.perf_counter()
+    if refit:
+        old = json.loads((Path(out) / "scale.json").read_text())
+        rows, machine, seconds = old["rows"], old["machine"], old["bench_seconds"]
+    else:
+        rows, machine = measure_all(Path(runs_root) / "scale"), machine_info()
+        seconds = time.perf_counter() - t0
     fitted = laws(rows)
     recipe = {m: get_method(m).config.max_num_iterations for m in METHODS}
     proj = projection(rows, fitted, recipe)
-    payload = {"rows": rows, "laws": fitted, "projection": proj, "recipe_steps": recipe, "bench_seconds": time.perf_counter() - t0,
-               "omp_num_threads": os.environ.get("OMP_NUM_THREADS")}
+    payload = {"rows": rows, "laws": fitted, "projection": proj, "recipe_steps": recipe, "bench_seconds": seconds,
+               "omp_num_threads": os.environ.get("OMP_NUM_THREADS", "1")}
     write_bench_files(out, "scale", "How training cost grows (synthetic street made longer, CPU)", payload,
-                      markdown(rows, fitted, proj), machine_info())
+                      markdown(rows, fitted, proj), machine)
     chart(rows, Path(out) / "scale.png")
     return payload
