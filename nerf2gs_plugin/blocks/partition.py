@@ -53,9 +53,7 @@ class PartitionConfig:
     overlap: float = 0.2
     """Each block also trains on cameras within this fraction of its cell's size beyond its edges (0 to 1)."""
     visibility: float = 0.0
-    """Also give a block the train cameras outside its expanded cell that look into its cell: those
-    whose sparse points in view lie in the cell for at least this fraction (VastGaussian's
-    visibility-based selection; 0 = by position only)."""
+    """Also train a block on outside cameras whose sparse points in view lie in its cell for at least this fraction (0: off)."""
     min_cameras: int = 3
     """A block needs at least this many training cameras."""
     overwrite: bool = False
