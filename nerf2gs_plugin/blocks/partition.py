@@ -105,7 +105,7 @@ class _Linker:
     when the file lies outside the source folder); returns the path to write in transforms.json."""
 
     def __init__(self, src_root: Path, block: Path) -> None:
-        self.src_root, self.block = src_root.resolve(), block
+        self.src_root, self.block = src_root.absolute(), block
 
     def __call__(self, path: Optional[Path]) -> Optional[str]:
         if path is None:

@@ -169,3 +169,24 @@ def test_bad_merge_inputs_are_one_line(street, parts, runs, tmp_path, monkeypatc
     assert "no run for block(s) block_1_0" in err
     err = _error(export_cli, monkeypatch, capsys, "merge", str(runs["block_0_0"]), str(runs["block_0_0"]), "--out", out)
     assert "two runs of block block_0_0" in err
+
+
+def test_holdout_split_is_preserved(street, tmp_path, monkeypatch, capsys):
+    """A dataset without split keys holds out every 8th frame as "test": each block keeps exactly those
+    of its frames in "test", never in "train"."""
+    src = tmp_path / "flat"
+    src.mkdir()
+    for sub in ("images", "masks", "depth"):
+        (src / sub).symlink_to(street / sub)
+    meta = json.loads((street / "transforms.json").read_text())
+    meta["frames"] += [f for fs in meta.pop("eval_splits").values() for f in fs]
+    meta.pop("ply_file_path")
+    (src / "transforms.json").write_text(json.dumps(meta))
+    held = set(parse_dataset(src, "test").image_filenames)
+    _cli(data_cli, monkeypatch, "partition", str(src), "--blocks", "2x1", "--out", str(tmp_path / "p"))
+    for name in ("block_0_0", "block_1_0"):
+        block = tmp_path / "p" / name
+        assert list_splits(block) == ["train", "test"]
+        test_imgs = {p.resolve() for p in parse_dataset(block, "test").image_filenames}
+        train_imgs = {p.resolve() for p in parse_dataset(block, "train").image_filenames}
+        assert test_imgs and test_imgs <= {p.resolve() for p in held} and not train_imgs & {p.resolve() for p in held}
