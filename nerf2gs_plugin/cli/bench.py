@@ -1,4 +1,4 @@
-"""ns2gs-bench demo | quick | paper-table | ablation | speed-quality | stability | model-size | raster | field | faults | real
+"""ns2gs-bench demo | quick | paper-table | ablation | speed-quality | stability | model-size | raster | field | faults | real | scale | blocks
 
 Results (JSON + Markdown + PNG, with the machine) go to benchmarks/results/; trained runs are kept
 under benchmarks/runs/ and reused when nothing that matters changed. ``demo`` (what make demo runs)
@@ -293,11 +293,43 @@ class Real:
         print(f"results: {self.out}/real.md")
 
 
+@dataclass
+class Scale:
+    """How cost grows: time per step, peak memory and model size against images and resolution for
+    StreetNeRF and Splatfacto, a fitted law and a 1 km projection, one run vs blocks (``scale.*``)."""
+
+    out: Path = RESULTS
+    runs: Path = RUNS
+    refit: bool = False
+    """Keep the measurements in OUT/scale.json; redo the fits, the projection and the chart."""
+
+    def main(self) -> None:
+        from nerf2gs_plugin.eval.bench_scale import run
+
+        doc = run(self.out, self.runs, refit=self.refit)
+        print(f"results: {self.out}/scale.md ({doc['bench_seconds']:.0f} s)")
+
+
+@dataclass
+class Blocks:
+    """City blocks: a street partitioned in 2 blocks, trained, merged, against one whole-scene run, on two streets (``blocks.*``)."""
+
+    out: Path = RESULTS
+    runs: Path = RUNS
+    steps: int = 200
+
+    def main(self) -> None:
+        from nerf2gs_plugin.eval.bench_blocks import run
+
+        doc = run(self.out, self.runs, self.steps)
+        print(f"results: {self.out}/blocks.md; whole minus merged (dB): {doc['gaps']}")
+
+
 def main() -> None:
     cmd = tyro.extras.subcommand_cli_from_dict(
         {"demo": Demo, "quick": Quick, "paper-table": PaperTable, "ablation": Ablation, "speed-quality": SpeedQuality,
          "stability": Stability, "model-size": ModelSize, "raster": Raster, "field": Field, "faults": Faults,
-         "real": Real},
+         "real": Real, "scale": Scale, "blocks": Blocks},
         description=__doc__,
     )
     cmd.main()

@@ -5,6 +5,7 @@
   ns2gs-data process video drive.mp4 --out data/drive [--num-frames 150 | --fps 2] [--camera-height 1.5]
   ns2gs-data process images photos/ --out data/photos [--matching exhaustive]
   ns2gs-data masks DATA [--segmenter auto | onnx:model.onnx --class-map cityscapes] [--reference RUN]
+  ns2gs-data partition DATA --blocks 2x1 --overlap 0.2 --out DIR
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from typing import Optional, Sequence
 
 import tyro
 
+from nerf2gs_plugin.blocks.partition import PartitionConfig
 from nerf2gs_plugin.capture.make_masks import MasksConfig
 from nerf2gs_plugin.cli.common import run_cli
 from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig
@@ -70,8 +72,24 @@ class Masks(MasksConfig):
         make_masks(self)
 
 
+@dataclass
+class Partition(PartitionConfig):
+    """Split a large capture into overlapping blocks by camera position (VastGaussian style): each
+    block a dataset folder to train as its own run, merged back with `ns2gs-export merge`."""
+
+    def main(self) -> None:
+        from nerf2gs_plugin.blocks.partition import partition
+
+        doc = partition(self)
+        for b in doc["blocks"]:
+            evals = ", ".join(f"{s} {n}" for s, n in b["eval_images"].items()) or "no eval views"
+            print(f"{b['folder']}: {b['train_images']} train images ({evals}), {b['points']} points")
+        print(f"wrote {len(doc['blocks'])} blocks and {Path(self.out) / 'partition.json'}")
+
+
 def _subcommands() -> dict[str, type]:
-    subs: dict[str, type] = {"synth-street": SynthStreet, "preview": Preview, "process": Process, "masks": Masks}
+    subs: dict[str, type] = {"synth-street": SynthStreet, "preview": Preview, "process": Process, "masks": Masks,
+                             "partition": Partition}
     from nerf2gs_plugin.cli.augmented_data import AUGMENTED_SUBCOMMANDS
 
     subs.update(AUGMENTED_SUBCOMMANDS)

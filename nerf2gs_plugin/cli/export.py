@@ -1,4 +1,5 @@
 """ns2gs-export RUN --format ply [--output out.ply]: a trained splatting run as a standard 3DGS PLY.
+ns2gs-export merge RUN... --out RUN_DIR: the block runs of a partition as one run (see blocks/merge.py).
 
 The PLY holds x,y,z, nx,ny,nz, f_dc_*, f_rest_*, opacity, scale_*, rot_* (the original 3DGS
 layout that SuperSplat, the 3DGS viewers and nerfstudio read). It needs the run directory only,
@@ -85,8 +86,18 @@ def export(args: ExportArgs) -> Path:
     return out
 
 
-def main() -> None:
-    export(tyro.cli(ExportArgs, description=__doc__.splitlines()[0]))
+def main(args: Optional[list[str]] = None) -> None:
+    import sys
+
+    argv = list(sys.argv[1:] if args is None else args)
+    if argv and argv[0] == "merge":
+        from nerf2gs_plugin.blocks.merge import MergeConfig, merge
+
+        cfg = tyro.cli(MergeConfig, prog="ns2gs-export merge", args=argv[1:], description=MergeConfig.__doc__)
+        out = merge(cfg)
+        print(f"wrote {out} (merged {len(cfg.runs)} block runs; see {out / 'merge.json'})")
+        return
+    export(tyro.cli(ExportArgs, args=argv, description=__doc__.splitlines()[0]))
 
 
 def entrypoint() -> None:
