@@ -19,6 +19,9 @@ COLUMNS = {
     "PSNR street": ("street", "psnr"), "bev_1": ("bev_1", "psnr"), "bev_2": ("bev_2", "psnr"),
     "LPIPS bev_1": ("bev_1", "lpips"), "road PSNR bev_1": ("bev_1", "psnr_ground"), "road bev_1": ("bev_1", "psnr_ground"),
     "road bev_2": ("bev_2", "psnr_ground"), "FPS": (None, "fps"), "primitives": (None, "primitives"), "train s": (None, "train_seconds"),
+    # a real photo set's held-out photos (ns2gs-bench real-photos: the "test" split)
+    "held-out photos": ("test", "num_images"), "PSNR held-out": ("test", "psnr"), "SSIM held-out": ("test", "ssim"),
+    "LPIPS held-out": ("test", "lpips"),
 }
 
 

@@ -237,7 +237,7 @@ def _fmt(v: Optional[float], f: str) -> str:
 
 def held_out_table(results: dict[str, dict]) -> str:
     """``| method |`` table of the held-out photos: PSNR / SSIM / LPIPS (mean over the views)."""
-    lines = ["| method | held-out photos | PSNR | SSIM | LPIPS | train s |", "|---|---|---|---|---|---|"]
+    lines = ["| method | held-out photos | PSNR held-out | SSIM held-out | LPIPS held-out | train s |", "|---|---|---|---|---|---|"]
     for label, r in results.items():
         if r.get("failed"):
             lines.append(f"| {label} | failed: {str(r.get('error')).replace('|', '/')[:120]} | - | - | - | - |")

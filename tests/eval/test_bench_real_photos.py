@@ -20,7 +20,7 @@ def _doc():
 
 def test_table_rows_and_markdown():
     t = held_out_table(_doc()["results"]).splitlines()
-    assert t[0].startswith("| method | held-out photos | PSNR | SSIM | LPIPS |")
+    assert t[0].startswith("| method | held-out photos | PSNR held-out | SSIM held-out | LPIPS held-out |")
     assert t[2] == "| StreetNeRF | 4 | 19.80 | 0.500 | 0.400 | 100 |"
     assert t[4].startswith("| splatfacto + NeRF views | failed: a/b |")
     md = results_md(_doc())
