@@ -24,6 +24,7 @@ def test_table_rows_and_markdown():
     assert t[2] == "| StreetNeRF | 4 | 19.80 | 0.500 | 0.400 | 100 |"
     assert t[4].startswith("| splatfacto + NeRF views | failed: a/b |")
     md = results_md(_doc())
+    assert "- StreetNeRF within 0.5 dB of Splatfacto: -2.70 dB (not met)." in md
     assert "from somewhere" in md and "2.70 dB BELOW" in md and "--fov-deg 58.2" in md and "every 8th photo" in md
 
 
