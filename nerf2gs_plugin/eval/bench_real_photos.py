@@ -290,7 +290,9 @@ def results_md(doc: dict) -> str:
     if doc.get("figure"):
         lines += [f"Renders from above: `{Path(doc['figure']).name}`.", ""]
     lines += ["Time per stage (s): " + ", ".join(f"{k} {v}" for k, v in doc["stage_seconds"].items()),
-              "", "SfM stages (s): " + ", ".join(f"{k} {v}" for k, v in p["stage_seconds"].items()),
+              "", "SfM stages (s): " + ", ".join(f"{k} {v}" for k, v in p["stage_seconds"].items())
+              + (" (stages near 0 s were reused from an earlier run in the same folder: the COLMAP database is resumable)"
+                 if min(p["stage_seconds"].get(k, 1.0) for k in ("features", "matching")) < 1.0 else ""),
               "", f"Masks: reference {doc['masks'].get('reference_seconds')} s, masks {doc['masks'].get('mask_seconds')} s; coverage "
               + ", ".join(f"{k} {100 * v:.1f}%" for k, v in (doc["masks"].get("coverage") or {}).items()),
               "", f"Bench wall time: {doc['wall_seconds']:.0f} s (runs reused where cached)."]
