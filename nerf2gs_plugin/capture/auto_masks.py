@@ -30,20 +30,23 @@ def ground_plane(train_data, rendered: Iterable[tuple[Tensor, Tensor]]) -> tuple
     the RANSAC plane of the sparse points below the cameras, else of the rendered surface points
     (``(points [H, W, 3], acc [H, W])`` per training view, accumulation > 0.5)."""
     from nerf2gs_plugin.data.ground import fit_ground_plane
+    from nerf2gs_plugin.data.process.ground_check import credible
 
     centres = train_data.cameras.centers.double().numpy()
     cam_up = train_data.up.double().numpy()
     plane = None
     if train_data.points3D_xyz is not None and len(train_data.points3D_xyz):
         plane = fit_ground_plane(train_data.points3D_xyz.double().numpy(), centres, cam_up)
+        if credible(plane, cam_up) is not None:  # e.g. a plane through roof lines: try the rendered surfaces
+            plane = None
     if plane is None:
         pts = [p.reshape(-1, 3)[a.reshape(-1) > 0.5] for p, a in rendered]
         pts = torch.cat(pts) if pts else torch.zeros(0, 3)
         if len(pts) > MAX_PLANE_POINTS:
             pts = pts[torch.randperm(len(pts), generator=torch.Generator().manual_seed(0))[:MAX_PLANE_POINTS]]
         plane = fit_ground_plane(pts.double().numpy(), centres, cam_up)
-    if plane is None:
-        raise ConfigError("no ground plane found below the cameras (neither sparse points nor rendered surfaces)")
+    if credible(plane, cam_up) is not None:
+        raise ConfigError(f"{credible(plane, cam_up)} (neither the sparse points nor the rendered surfaces give one)")
     return torch.from_numpy(np.asarray(plane.normal)).float(), -float(plane.offset)
 
 

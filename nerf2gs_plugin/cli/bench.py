@@ -1,4 +1,5 @@
-"""ns2gs-bench demo | quick | paper-table | ablation | speed-quality | stability | model-size | raster | field | faults | real | scale | blocks
+"""ns2gs-bench demo | quick | paper-table | ablation | speed-quality | stability | model-size | raster | field | faults | real |
+real-photos | scale | blocks
 
 Results (JSON + Markdown + PNG, with the machine) go to benchmarks/results/; trained runs are kept
 under benchmarks/runs/ and reused when nothing that matters changed. ``demo`` (what make demo runs)
@@ -294,6 +295,47 @@ class Real:
 
 
 @dataclass
+class RealPhotos:
+    """A real outdoor photo folder through process images -> masks (auto) -> StreetNeRF -> Splatfacto +- NeRF
+    views, scored on held-out photos, with renders from above (``real_photos.*``). The photos stay where they are."""
+
+    images: Path
+    """Folder of photos (natural name order = capture order)."""
+    provenance: str = ""
+    """Where the photos come from (repository, commit, path, licence): written into the results."""
+    out: Path = RESULTS
+    runs: Path = RUNS
+    rerun: bool = False
+    camera_height: float = 1.6
+    fov_deg: Optional[float] = None
+    metres_per_unit: Optional[float] = None
+    matching: Literal["auto", "sequential", "exhaustive"] = "auto"
+    overlap: int = 10
+    num_threads: int = -1
+    downscale: float = 4.0
+    holdout_every: int = 8
+    reference_steps: int = 500
+    streetnerf_steps: int = 1000
+    splatfacto_steps: int = 1500
+    delta_h: float = 3.0
+    theta_pitch: float = 30.0
+    every_n: int = 1
+
+    def main(self) -> None:
+        from nerf2gs_plugin.eval.bench_real_photos import RealPhotosOptions, results_md, run_real_photos
+
+        opts = RealPhotosOptions(images=self.images, provenance=self.provenance, camera_height=self.camera_height, fov_deg=self.fov_deg,
+                                 matching=self.matching, overlap=self.overlap, num_threads=self.num_threads, downscale=self.downscale,
+                                 holdout_every=self.holdout_every, reference_steps=self.reference_steps,
+                                 streetnerf_steps=self.streetnerf_steps, splatfacto_steps=self.splatfacto_steps,
+                                 delta_h=self.delta_h, theta_pitch=self.theta_pitch, every_n=self.every_n,
+                                 metres_per_unit=self.metres_per_unit)
+        doc = run_real_photos(opts, self.runs, self.out, rerun=self.rerun)
+        print(results_md(doc))
+        print(f"results: {self.out}/real_photos.md")
+
+
+@dataclass
 class Scale:
     """How cost grows: time per step, peak memory and model size against images and resolution for
     StreetNeRF and Splatfacto, a fitted law and a 1 km projection, one run vs blocks (``scale.*``)."""
@@ -329,7 +371,7 @@ def main() -> None:
     cmd = tyro.extras.subcommand_cli_from_dict(
         {"demo": Demo, "quick": Quick, "paper-table": PaperTable, "ablation": Ablation, "speed-quality": SpeedQuality,
          "stability": Stability, "model-size": ModelSize, "raster": Raster, "field": Field, "faults": Faults,
-         "real": Real, "scale": Scale, "blocks": Blocks},
+         "real": Real, "real-photos": RealPhotos, "scale": Scale, "blocks": Blocks},
         description=__doc__,
     )
     cmd.main()

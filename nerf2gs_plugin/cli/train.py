@@ -1,9 +1,11 @@
-"""ns2gs-train <method> --data DATA [--augment-from REF] [--pipeline.model.x ...]"""
+"""ns2gs-train <method> --data DATA [--augment-from REF [--baseline RUN]] [--pipeline.model.x ...]"""
 
 from __future__ import annotations
 
 import signal
 import sys
+from pathlib import Path
+from typing import Optional
 
 import tyro
 
@@ -12,11 +14,50 @@ from nerf2gs_plugin.engine.trainer import Trainer, TrainerConfig
 from nerf2gs_plugin.registry import discover_methods, report_failures
 
 
-def train(config: TrainerConfig) -> None:
+BASELINE_FLAG = "--baseline"
+BASELINE_HELP = ("With --augment-from REF, --baseline RUN names the target trained without NeRF views: before "
+                 "training, the log says (with both runs' measured held-out PSNR) whether the reference is weaker.")
+
+
+def pop_baseline(argv: list[str]) -> tuple[list[str], Optional[Path]]:
+    """``--baseline RUN`` taken out of ``argv`` (the trainer's config is the method's own and has no
+    such field): (the rest, RUN or None)."""
+    rest, baseline, i = [], None, 0
+    while i < len(argv):
+        a = argv[i]
+        if a == BASELINE_FLAG:
+            if i + 1 >= len(argv) or argv[i + 1].startswith("--"):
+                from nerf2gs_plugin.errors import ConfigError
+
+                raise ConfigError(f"{BASELINE_FLAG} needs a run folder")
+            baseline, i = Path(argv[i + 1]), i + 2
+            continue
+        if a.startswith(BASELINE_FLAG + "="):
+            baseline = Path(a.split("=", 1)[1])
+        else:
+            rest.append(a)
+        i += 1
+    return rest, baseline
+
+
+def train(config: TrainerConfig, baseline: Optional[Path] = None) -> None:
     # a scheduler's preemption signal saves like Ctrl-C (SIGINT raises KeyboardInterrupt)
     signal.signal(signal.SIGTERM, signal.default_int_handler)
+    report = None
+    if config.augment_from is not None:  # point 5 of issue 18: say so before training on a weaker reference
+        from nerf2gs_plugin.eval.reference_check import reference_report
+
+        line, doc = reference_report(config.augment_from, baseline)
+        print(line, flush=True)
+        report = doc
+    elif baseline is not None:
+        print(f"{BASELINE_FLAG} is only used with --augment-from (ignored)", file=sys.stderr)
     trainer = Trainer(config)
     trainer.setup()
+    if report is not None:
+        from nerf2gs_plugin.eval.reference_check import write_reference_report
+
+        write_reference_report(trainer.run_dir, report)
     if config.viewer:
         from nerf2gs_plugin.viewer.server import attach_training_viewer
 
@@ -41,9 +82,14 @@ def main() -> None:
         from nerf2gs_plugin.errors import ConfigError
 
         raise ConfigError(f"unknown method '{sys.argv[1]}'; known methods: {', '.join(sorted(configs))}")
+    argv, baseline = pop_baseline(sys.argv[1:])
+    if baseline is not None and not baseline.exists():
+        from nerf2gs_plugin.errors import DataError
+
+        raise DataError("baseline run folder does not exist", f"{BASELINE_FLAG} {baseline}")
     union = tyro.extras.subcommand_type_from_defaults(defaults=configs, descriptions=descriptions)
-    config = tyro.cli(tyro.conf.FlagConversionOff[union], description="Train a method (nerf2gs).")
-    train(config)
+    config = tyro.cli(tyro.conf.FlagConversionOff[union], args=argv, description=f"Train a method (nerf2gs). {BASELINE_HELP}")
+    train(config, baseline)
 
 
 def entrypoint() -> None:

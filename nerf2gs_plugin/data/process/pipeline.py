@@ -69,7 +69,6 @@ def _silence_colmap() -> None:
 
 def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=None) -> ProcessReport:
     """``frames_fn(frame_dir, progress) -> FrameReport`` makes the frames; the rest is shared."""
-    from nerf2gs_plugin.data.ground import estimate_metric_scale
     from nerf2gs_plugin.data.process import export, sfm
     from nerf2gs_plugin.progress import make_progress
 
@@ -122,8 +121,7 @@ def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=Non
         rec = pycolmap.Reconstruction(str(root / "sparse" / "0"))
         reg_names, c2w, _ = export.camera_arrays(rec)
         xyz, _ = export.points_arrays(rec)
-        scale = estimate_metric_scale(xyz, c2w[:, :, 3], c2w[:, :, 1].mean(0), opts.camera_height, opts.metres_per_unit,
-                                      where="--camera-height")
+        scale = metric_scale(xyz, c2w, opts)
         export.write_downscaled(root, reg_names, progress)
         times["export"] = time.perf_counter() - t
         extra = {"process": {"source": "video" if is_video else "images", "frames": len(names), "registered": mapped.registered,
@@ -134,6 +132,26 @@ def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=Non
         export.write_transforms(root, rec, scale.metres_per_unit, scale.up, extra)
     return ProcessReport(root, len(names), mapped.registered, mapped.points, method, scale.metres_per_unit, scale.source, times,
                          fr.dropped_blurry)
+
+
+def metric_scale(xyz: np.ndarray, c2w: np.ndarray, opts: ProcessOptions):
+    """The ground-plane scale and up (:func:`~nerf2gs_plugin.data.ground.estimate_metric_scale`), with
+    a plane tilted far from the cameras' up rejected (:mod:`.ground_check`): then ``--metres-per-unit``
+    is needed, and up is the cameras' mean up."""
+    from nerf2gs_plugin.data.ground import MetricScale, estimate_metric_scale
+    from nerf2gs_plugin.data.process.ground_check import credible
+
+    cam_up = c2w[:, :, 1].mean(0)
+    scale = estimate_metric_scale(xyz, c2w[:, :, 3], cam_up, opts.camera_height, opts.metres_per_unit, where="--camera-height")
+    why = credible(scale.plane, cam_up)
+    if scale.plane is None or why is None:
+        return scale
+    if opts.metres_per_unit is None:
+        raise DataError(f"{why}: the camera-height scale would be wrong; pass --metres-per-unit (metres per SfM unit)", opts.out)
+    import warnings
+
+    warnings.warn(f"{why}: up is the cameras' mean up instead", stacklevel=2)
+    return MetricScale(float(opts.metres_per_unit), cam_up / np.linalg.norm(cam_up), "override", None)
 
 
 def exif_focal_for(sources: list[Path], frame_dir: Path, names: list[str]) -> Optional[float]:

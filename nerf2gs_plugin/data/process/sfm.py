@@ -30,6 +30,11 @@ class SfmOptions:
     """Sequential matching: each frame is matched with this many following frames (plus quadratic hops)."""
     vocab_tree: Optional[Path] = None
     """Sequential matching: a COLMAP vocabulary tree file turns on loop detection (none is shipped)."""
+    loop_pairs: int = 0
+    """Sequential matching without --vocab-tree: each frame is also matched with its N most similar
+    frames outside the window (a bag of words learned on the capture's own SIFT features: closes loops
+    with no vocabulary file; 0: off, the default: a drive that never comes back gains nothing, and on
+    castle-P30 3 pairs cost 17% more SfM time for ATE 0.109 vs 0.117%)."""
     max_image_size: int = 1600
     """SIFT runs on images shrunk to this longest side (speed; the full image is still undistorted)."""
     max_features: int = 4096
@@ -128,7 +133,7 @@ def match(db: Path, method: str, opt: SfmOptions, marker: Path, progress=None) -
     with pycolmap.Database.open(str(db)) as d:
         names = sorted(im.name for im in d.read_all_images())
     key = {"images": hashlib.sha1("|".join(names).encode()).hexdigest(), "method": method, "overlap": opt.overlap, "vocab_tree": str(opt.vocab_tree or ""), "max_features": opt.max_features,
-           "max_image_size": opt.max_image_size}
+           "max_image_size": opt.max_image_size, "loop_pairs": opt.loop_pairs if method == "sequential" and opt.vocab_tree is None else 0}
     if _marker(marker, key):
         return False
     task = progress.add_task(f"matching ({method})", total=1, stats="") if progress else None
@@ -143,6 +148,8 @@ def match(db: Path, method: str, opt: SfmOptions, marker: Path, progress=None) -
             pair.loop_detection = True
             pair.vocab_tree_path = str(opt.vocab_tree)
         pycolmap.match_sequential(db, matching_options=m, pairing_options=pair, device=pycolmap.Device.cpu)
+        if opt.vocab_tree is None and opt.loop_pairs > 0:
+            _match_loop_pairs(db, names, opt, m, marker.with_name("loop_pairs.txt"))
     elif method == "exhaustive":
         pycolmap.match_exhaustive(db, matching_options=m, device=pycolmap.Device.cpu)
     else:
@@ -151,6 +158,23 @@ def match(db: Path, method: str, opt: SfmOptions, marker: Path, progress=None) -
     if task is not None:
         progress.update(task, advance=1)
     return True
+
+
+def _match_loop_pairs(db: Path, names: list[str], opt: SfmOptions, m, pairs_file: Path) -> int:
+    """Match the retrieval pairs (:mod:`.retrieval`) that the sequential window left out."""
+    import pycolmap
+
+    from nerf2gs_plugin.data.process.frames import _natural_key
+    from nerf2gs_plugin.data.process.retrieval import bow_vectors, loop_pairs, read_descriptors, write_pairs
+
+    desc = read_descriptors(db)
+    order = sorted((n for n in names if n in desc), key=_natural_key)  # capture order
+    pairs = loop_pairs(order, bow_vectors([desc[n] for n in order]), opt.overlap, opt.loop_pairs)
+    if pairs:
+        imported = pycolmap.ImportedPairingOptions()
+        imported.match_list_path = str(write_pairs(pairs_file, pairs))
+        pycolmap.match_image_pairs(db, matching_options=m, pairing_options=imported, device=pycolmap.Device.cpu)
+    return len(pairs)
 
 
 @dataclass
