@@ -102,6 +102,7 @@ def test_process_video_end_to_end(tmp_path, make_config):
     main(args)
     est = json.loads((out / "transforms.json").read_text())
     assert est["process"]["registered"] == len(est["frames"]) >= 28
+    assert all(f["fl_x"] == f["fl_y"] and (f["cx"], f["cy"]) == (100, 56) for f in est["frames"])  # the FOV's focal, centred
     for d in (2, 4, 8):
         assert len(list((out / f"images_{d}").iterdir())) == len(est["frames"])
     idx = [int(f["file_path"].split("_")[-1].split(".")[0]) for f in est["frames"]]
@@ -117,3 +118,21 @@ def test_process_video_end_to_end(tmp_path, make_config):
     main(args[:6] + ["28"] + args[7:] + ["--metres-per-unit", "1.0"])  # other frames: stale features and matches are not mixed in
     est = json.loads((out / "transforms.json").read_text())
     assert est["process"]["frames"] == len(list((out / "colmap" / "frames").iterdir())) <= 28
+
+
+@pytest.mark.parametrize("model,params", [("SIMPLE_PINHOLE", [119.0, 100.0, 56.0]), ("SIMPLE_RADIAL", [119.0, 100.0, 56.0, 0.0]),
+                                          ("PINHOLE", [119.0, 119.0, 100.0, 56.0]), ("OPENCV", [119.0, 119.0, 100.0, 56.0, 0, 0, 0, 0])])
+def test_export_intrinsics_of_every_undistorted_model(model, params):
+    """The undistorter keeps a zero-distortion SIMPLE_RADIAL as it is ([f, cx, cy, k]); reading its
+    params as PINHOLE wrote fy = cx, cx = cy, cy = 0 into transforms.json (the bench's capture)."""
+    import pycolmap
+
+    from nerf2gs_plugin.data.process.export import pinhole_params
+
+    cam = pycolmap.Camera.create_from_model_name(1, model, 119.0, 200, 112)
+    cam.params = params
+    assert pinhole_params(cam) == (119.0, 119.0, 100.0, 56.0)
+    if model == "OPENCV":
+        cam.params = params[:4] + [0.1, 0, 0, 0]
+        with pytest.raises(DataError, match="distortion"):
+            pinhole_params(cam)

@@ -26,6 +26,7 @@ import torch
 from nerf2gs_plugin.cameras import opencv_w2c_to_opengl_c2w
 from nerf2gs_plugin.data.images import scaled_size
 from nerf2gs_plugin.data.ply import write_ply_points
+from nerf2gs_plugin.errors import DataError
 
 DOWNSCALES = (2, 4, 8)
 
@@ -81,6 +82,16 @@ def write_downscaled(root: Path, names: list[str], progress=None) -> None:
                 progress.update(task, advance=1)
 
 
+def pinhole_params(cam) -> tuple[float, float, float, float]:
+    """``(fx, fy, cx, cy)`` of a COLMAP camera of any model, from pycolmap's own accessors: the
+    undistorter keeps a camera whose distortion is zero in its model (a SIMPLE_RADIAL with k = 0 is
+    ``[f, cx, cy, k]``), so reading ``params[:4]`` as PINHOLE gave fy = cx, cx = cy, cy = k = 0."""
+    extra = [float(cam.params[i]) for i in cam.extra_params_idxs()]
+    if any(abs(v) > 1e-9 for v in extra):
+        raise DataError(f"camera {cam.camera_id} ({cam.model.name}) still has distortion {extra} after undistortion", "sparse/0")
+    return (float(cam.focal_length_x), float(cam.focal_length_y), float(cam.principal_point_x), float(cam.principal_point_y))
+
+
 def write_transforms(root: Path, rec, metres_per_unit: float, up: Optional[np.ndarray], extra: dict) -> Path:
     """``transforms.json`` (+ ``sparse_pc.ply``) from the undistorted model, atomically."""
     names, c2w, cams = camera_arrays(rec)
@@ -88,8 +99,7 @@ def write_transforms(root: Path, rec, metres_per_unit: float, up: Optional[np.nd
     write_ply_points(root / "sparse_pc.ply", xyz, rgb)
     frames = []
     for n, m, cam in zip(names, c2w, cams):
-        p = [float(v) for v in cam.params]
-        fx, fy, cx, cy = (p[0], p[0], p[1], p[2]) if cam.model.name == "SIMPLE_PINHOLE" else p[:4]
+        fx, fy, cx, cy = pinhole_params(cam)
         frames.append({"file_path": f"images/{n}", "transform_matrix": np.vstack([m, [0, 0, 0, 1]]).tolist(),
                        "fl_x": fx, "fl_y": fy, "cx": cx, "cy": cy, "w": int(cam.width), "h": int(cam.height)})
     meta = {"camera_model": "PINHOLE", "frames": frames, "ply_file_path": "sparse_pc.ply", "metres_per_unit": float(metres_per_unit)}
