@@ -28,8 +28,10 @@ MAX_PLANE_POINTS = 50_000  # RANSAC on a random subset of the rendered surface p
 def ground_plane(train_data, rendered: Iterable[tuple[Tensor, Tensor]]) -> tuple[Tensor, float]:
     """``(up, height)`` of the ground plane ``{x : x . up = height}`` in the normalised world:
     the RANSAC plane of the sparse points below the cameras, else of the rendered surface points
-    (``(points [H, W, 3], acc [H, W])`` per training view, accumulation > 0.5)."""
+    (``(points [H, W, 3], acc [H, W])`` per training view, accumulation > 0.5), levelled with the
+    camera path (``data/masks/road_plane.py``)."""
     from nerf2gs_plugin.data.ground import fit_ground_plane
+    from nerf2gs_plugin.data.masks.road_plane import level_plane
     from nerf2gs_plugin.data.process.ground_check import credible
 
     centres = train_data.cameras.centers.double().numpy()
@@ -39,6 +41,7 @@ def ground_plane(train_data, rendered: Iterable[tuple[Tensor, Tensor]]) -> tuple
         plane = fit_ground_plane(train_data.points3D_xyz.double().numpy(), centres, cam_up)
         if credible(plane, cam_up) is not None:  # e.g. a plane through roof lines: try the rendered surfaces
             plane = None
+    used_sparse = plane is not None
     if plane is None:
         pts = [p.reshape(-1, 3)[a.reshape(-1) > 0.5] for p, a in rendered]
         pts = torch.cat(pts) if pts else torch.zeros(0, 3)
@@ -47,7 +50,9 @@ def ground_plane(train_data, rendered: Iterable[tuple[Tensor, Tensor]]) -> tuple
         plane = fit_ground_plane(pts.double().numpy(), centres, cam_up)
     if credible(plane, cam_up) is not None:
         raise ConfigError(f"{credible(plane, cam_up)} (neither the sparse points nor the rendered surfaces give one)")
-    return torch.from_numpy(np.asarray(plane.normal)).float(), -float(plane.offset)
+    fitted_on = train_data.points3D_xyz.double().numpy() if used_sparse else pts.double().numpy()
+    normal, offset = level_plane(plane.normal, plane.offset, fitted_on, centres)
+    return torch.from_numpy(normal).float(), -float(offset)
 
 
 def check_reference_dataset(checkpoint: Path, image_filenames: list[Path]) -> None:

@@ -181,6 +181,21 @@ def ground_truth_dataset(street: Path, out: Path, n: int) -> Path:
     return out
 
 
+def reference_dir(root: Path, est: Path, steps: int) -> Path:
+    """The masks' first reference, keyed by the capture it trains on (its mask-less
+    ``transforms.json``: poses, intrinsics, scale): a re-processed capture (other intrinsics, same
+    images) must not reuse a reference trained on the old one."""
+    import hashlib
+
+    from nerf2gs_plugin.data.masks.maskless import strip_frame_keys
+
+    meta = strip_frame_keys(json.loads((Path(est) / "transforms.json").read_text()))
+    for k in ("eval_splits", "process"):  # the eval cameras and the stage times are no part of the capture
+        meta.pop(k, None)
+    key = hashlib.sha1(json.dumps(meta, sort_keys=True).encode()).hexdigest()[:10]
+    return Path(root) / f"masks-reference-{steps}-{key}"
+
+
 def attach_eval(data: Path, true_groups: dict[str, list], true_train: np.ndarray, est_train: np.ndarray) -> Sim3:
     """Align ``est_train`` (the dataset's training cameras, its own frame) onto ``true_train`` and
     write the true eval cameras, mapped by the inverse, as the dataset's eval splits. Returns the
@@ -255,14 +270,10 @@ def run_real_bench(runs_root: Path, out_dir: Path, opts: RealBenchOptions = Real
     capture = capture_report(est_train, true_train[idx], float(est_meta["metres_per_unit"]), np.asarray(est_meta.get("up", [0, 0, 1])),
                              np.asarray(true_meta.get("up", [0, 0, 1])), report.registered, opts.frames)
     sim = attach_eval(est, read_frames(street), true_train[idx], est_train)
-    reference = root / f"masks-reference-{opts.reference_steps}"
-    done = json.loads((est / "masks" / "masks.json").read_text()) if (est / "masks" / "masks.json").is_file() else {}
-    if done.get("reference") != str(reference):
-        summary = timed("masks", lambda: make_masks(MasksConfig(data=est, reference=reference, reference_steps=opts.reference_steps,
-                                                                splits=("train",), overwrite=True, progress=False), log=log))
-    else:  # the masks of this reference exist: reused (their times are in masks.json)
-        summary = done
-        log(f"[bench] reusing the masks of {est / 'masks'} (reference {reference})")
+    reference = reference_dir(root, est, opts.reference_steps)
+    # the masks are always derived again (a minute of renders): the rules change more often than the capture
+    summary = timed("masks", lambda: make_masks(MasksConfig(data=est, reference=reference, reference_steps=opts.reference_steps,
+                                                            splits=("train",), overwrite=True, progress=False), log=log))
     def pinhole(intr) -> tuple[float, float, float, float]:
         return (intr.fx, intr.fy, intr.cx, intr.cy)
 

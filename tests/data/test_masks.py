@@ -317,3 +317,65 @@ def test_make_masks_auto_with_a_very_short_reference(tmp_path):
     assert (data / "masks" / "sky" / "bev_1_000.png").is_file()  # every split
     make_masks(MasksConfig(data=data, reference=ref, overwrite=True, progress=False), log=logs.append)
     assert any("reusing reference" in line for line in logs)
+
+
+def _street_scene(wall_h: float = 6.0, pitch_deg: float = 10.0):
+    """The constructed street of the test above: road up to x = 20 m, a wall there ``wall_h`` high, sky."""
+    up = torch.tensor([0.0, 0, 1])
+    origin, dirs = _camera_rays(pitch_deg=pitch_deg)
+    cos = dirs @ up
+    t_plane = (0.0 - origin[2]) / cos.clamp(max=-1e-6)
+    t_wall = 20.0 / dirs[..., 0]
+    wall_z = origin[2] + t_wall * dirs[..., 2]
+    road = (cos < 0) & (t_plane * dirs[..., 0] < 20.0)
+    wall = ~road & (wall_z < wall_h) & (wall_z > 0)
+    depth = torch.where(road, t_plane, torch.where(wall, t_wall, torch.full_like(t_plane, 1e3)))
+    return up, origin, dirs, road, wall, depth
+
+
+def test_sky_rules_drop_speckle_and_see_through_patches():
+    """A short reference leaves low-accumulation speckle and see-through patches (far depth) inside
+    facades: the box vote drops the speckle, and only regions reaching the image's top are sky."""
+    up, origin, dirs, road, wall, depth = _street_scene(wall_h=4.0, pitch_deg=-5.0)
+    sky_true = ~road & ~wall
+    assert bool(sky_true[0].any())
+    acc = (road | wall).float()
+    hole = torch.zeros_like(wall)
+    rows = wall.any(1).nonzero()[:, 0]
+    hole[int(rows[len(rows) // 2]) - 2: int(rows[len(rows) // 2]) + 2, 10:16] = True  # a see-through patch in the wall
+    hole &= wall
+    speckle = torch.zeros_like(wall)
+    speckle[::6, 3::7] = True
+    speckle &= wall & ~hole
+    d2 = torch.where(hole, torch.full_like(depth, 1e3), depth)
+    a2 = torch.where(hole | speckle, torch.zeros_like(acc), acc)
+    plain = fr.sky_from_render(a2, dirs, up, depth=d2, far=100.0)
+    assert (plain & (hole | speckle)).any()  # the old rule takes both
+    sky = fr.sky_from_render(a2, dirs, up, depth=d2, far=100.0, vote=3, from_top=True)
+    assert not (sky & (hole | speckle)).any()
+    assert mask_iou(sky, sky_true) > 0.95
+
+
+def test_ground_median_ignores_floater_speckle():
+    """Floaters in front of the road (a tenth of the pixels at half the distance) flip single pixels;
+    the height median over a window keeps the road whole and still stops at the wall."""
+    up, origin, dirs, road, wall, depth = _street_scene()
+    acc = (road | wall).float()
+    g = torch.Generator().manual_seed(0)
+    floaters = (torch.rand(depth.shape, generator=g) < 0.1) & road
+    d2 = torch.where(floaters, depth * 0.5, depth)
+    wall_z = origin[2] + depth * dirs[..., 2]
+    plain = fr.ground_from_render(origin, dirs, d2, acc, up, 0.0, tol=0.3)
+    smooth = fr.ground_from_render(origin, dirs, d2, acc, up, 0.0, tol=0.3, smooth_px=5)
+    assert mask_iou(plain, road) < 0.9
+    assert mask_iou(smooth, road) > 0.95
+    assert not (smooth & wall & (wall_z > 1.0)).any()
+
+
+def test_transient_opening_drops_thin_strokes_keeps_blobs():
+    res = torch.zeros(60, 80)
+    res[:, 10:12] = 1.0  # a pole the reference blurs: a 2-px stroke of high residual
+    res[20:35, 30:55] = 1.0  # a car
+    t = fr.transient_from_residual(res, 0.5, min_area=20, open_px=2)
+    assert not t[:, 8:14].any() and bool(t[22:33, 32:53].all())
+    assert fr.transient_from_residual(res, 0.5, min_area=20)[:, 10:12].all()  # without the opening the pole stays

@@ -23,16 +23,24 @@ class AutoOptions:
 
     sky_acc: float = 0.5
     """Sky: accumulation of the reference below this."""
-    sky_far: float = 10.0
+    sky_far: float = 20.0
     """Sky also where the rendered depth is beyond this many scene-box half-sizes (what the reference
-    pushed to the contraction boundary: a point there contracts to > 1.9 of 2)."""
+    pushed toward the contraction boundary)."""
+    sky_vote: int = 3
+    """Sky: RobustNeRF's box vote over this many pixels square (0: none)."""
+    sky_from_top: bool = True
+    """Sky: only regions that reach the image's top row (a see-through patch in a facade does not)."""
     horizon_margin_deg: float = 2.0
     """Sky may reach this far below the ground plane's horizon."""
-    ground_tol_m: float = 0.3
-    """Ground: rendered surface within this many metres of the plane."""
+    ground_tol_m: float = 0.5
+    """Ground: rendered surface within this many metres of the plane (above the depth noise of a
+    short reference at road distances; a kerb stays ground, a car is removed as transient)."""
+    ground_smooth: float = 0.08
+    """Ground: the heights are medians over a window this fraction of the image's shorter side wide
+    (0: per pixel)."""
     ground_normals: bool = False
     """Also require the rendered normal (from depth differences) within 30 deg of up."""
-    transient_k: float = 4.0
+    transient_k: float = 3.0
     """Transient: residual above median + k * 1.4826 * MAD (all training views pooled)."""
     transient_k_low: float = 0.0
     """Hysteresis: regions above median + k_low * 1.4826 * MAD joined to the strong ones (0 or >= k:
@@ -40,8 +48,11 @@ class AutoOptions:
     on both synthetic streets (false regions eat sky and ground)."""
     transient_floor: float = 0.04
     """... and above this absolute mean colour difference."""
-    min_region_frac: float = 0.002
+    min_region_frac: float = 0.005
     """Transient regions smaller than this fraction of the image are dropped."""
+    transient_open: float = 0.018
+    """Transient: opening by a disc this fraction of the image's shorter side across (thin strokes the
+    reference blurs, poles and edges, go; cars stay)."""
 
 
 @dataclass
@@ -70,7 +81,8 @@ def masks_from_renders(r: Renders, opts: AutoOptions, log: Callable[[str], None]
     for s, rs in r.views.items():
         for i, v in enumerate(rs):
             sky = fr.sky_from_render(v["acc"], v["dirs"], up, opts.sky_acc, opts.horizon_margin_deg,
-                                     depth=v["depth"], far=opts.sky_far * r.box_extent)
+                                     depth=v["depth"], far=opts.sky_far * r.box_extent,
+                                     vote=opts.sky_vote, from_top=opts.sky_from_top)
             fitted = fr.fit_colour(v["rgb"], v["image"])
             sky_res[s, i] = (sky, fr.residual_map(v["image"], fitted))
     base = "train" if "train" in r.views else next(iter(r.views))
@@ -84,8 +96,11 @@ def masks_from_renders(r: Renders, opts: AutoOptions, log: Callable[[str], None]
         for i, v in enumerate(rs):
             sky, res = sky_res[s, i]
             h, w = v["acc"].shape
-            trans = fr.transient_from_residual(res, thr, max(4, int(opts.min_region_frac * h * w)), low=low)
+            trans = fr.transient_from_residual(res, thr, max(4, int(opts.min_region_frac * h * w)), low=low,
+                                               open_px=int(round(opts.transient_open * min(h, w))))
             normals = fr.normals_from_points(fr.surface_points(v["origin"], v["dirs"], v["depth"])) if opts.ground_normals else None
-            ground = fr.ground_from_render(v["origin"], v["dirs"], v["depth"], v["acc"], up, r.height, tol, normals=normals)
-            result[s].append(FrameMasks(sky & ~trans, ground & ~trans & ~sky, trans))
+            ground = fr.ground_from_render(v["origin"], v["dirs"], v["depth"], v["acc"], up, r.height, tol, normals=normals,
+                                           smooth_px=int(round(opts.ground_smooth * min(h, w))))
+            trans = trans & ~sky  # the sky is where the reference is weakest: a high residual there is no car
+            result[s].append(FrameMasks(sky, ground & ~trans & ~sky, trans))
     return result

@@ -36,14 +36,31 @@ def horizon_mask(directions: Tensor, up: Tensor, margin_deg: float = 2.0) -> Ten
     return (directions @ up) > -math.sin(math.radians(margin_deg))
 
 
+def top_connected(mask: Tensor) -> Tensor:
+    """The connected regions (8-neighbours) of ``mask`` that touch the image's top row."""
+    import cv2
+
+    m = mask.cpu().numpy().astype(np.uint8)
+    n, labels = cv2.connectedComponents(m, connectivity=8)
+    keep = np.zeros(n, dtype=bool)
+    keep[np.unique(labels[0][m[0] > 0])] = True
+    keep[0] = False
+    return torch.from_numpy(keep[labels]).to(mask.device)
+
+
 def sky_from_render(acc: Tensor, directions: Tensor, up: Tensor, acc_max: float = 0.5, margin_deg: float = 2.0,
-                    depth: Optional[Tensor] = None, far: float = float("inf")) -> Tensor:
+                    depth: Optional[Tensor] = None, far: float = float("inf"), vote: int = 0, from_top: bool = False) -> Tensor:
     """Low accumulation, or a depth beyond ``far`` (mass pushed to the contraction boundary), above
-    the horizon (see the module docstring)."""
+    the horizon (see the module docstring); then, optionally, RobustNeRF's ``vote`` x ``vote`` box
+    vote (speckle out) and only the regions that reach the top of the image (``from_top``: what a
+    see-through patch inside a facade or a floater hole below the skyline is not)."""
     empty = acc < acc_max
     if depth is not None:
         empty = empty | (depth > far)
-    return empty & horizon_mask(directions, up, margin_deg)
+    sky = empty & horizon_mask(directions, up, margin_deg)
+    if vote > 1:
+        sky = box_vote(sky, vote)
+    return top_connected(sky) if from_top else sky
 
 
 def surface_points(origin: Tensor, directions: Tensor, depth: Tensor) -> Tensor:
@@ -61,11 +78,24 @@ def normals_from_points(points: Tensor) -> Tensor:
     return F.normalize(torch.linalg.cross(du, dv, dim=-1), dim=-1, eps=1e-12)
 
 
+def median_filter(x: Tensor, size: int) -> Tensor:
+    """``size`` x ``size`` median of an ``[H, W]`` map (replicated border); ``size`` < 2: unchanged."""
+    if size < 2:
+        return x
+    size += 1 - size % 2
+    p = F.pad(x[None, None], (size // 2,) * 4, mode="replicate")
+    return F.unfold(p, size)[0].median(0).values.reshape(x.shape)
+
+
 def ground_from_render(origin: Tensor, directions: Tensor, depth: Tensor, acc: Tensor, up: Tensor, height: float, tol: float,
-                       acc_min: float = 0.5, normals: Optional[Tensor] = None, max_normal_deg: float = 30.0) -> Tensor:
+                       acc_min: float = 0.5, normals: Optional[Tensor] = None, max_normal_deg: float = 30.0,
+                       smooth_px: int = 0) -> Tensor:
     """Rendered surface within ``tol`` of the plane (heights in world units), seen by a downward
-    ray with a solid render (see the module docstring)."""
-    h = surface_points(origin, directions, depth) @ up - height
+    ray with a solid render (see the module docstring). ``smooth_px``: the heights (and the
+    accumulation) are ``smooth_px``-wide medians first, so a floater's speckle in front of the road
+    or a see-through hole in a facade does not flip a pixel."""
+    h = median_filter(surface_points(origin, directions, depth) @ up - height, smooth_px)
+    acc = median_filter(acc, smooth_px)
     g = (h < tol) & ((directions @ up) < 0) & (acc >= acc_min)  # one-sided: nothing is below the road, a surface
     # rendered below the plane is a depth error on the road
     if normals is not None:
@@ -148,12 +178,23 @@ def clean_regions(mask: Tensor, min_area: int, close_px: int = 2) -> Tensor:
     return torch.from_numpy(m.astype(bool)).to(mask.device)
 
 
+def opening(mask: Tensor, px: int) -> Tensor:
+    """Morphological opening by a disc of radius ``px``: strokes thinner than the disc go (a pole or an
+    edge the reference blurs), blobs stay."""
+    if px < 1:
+        return mask
+    import cv2
+
+    k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * px + 1, 2 * px + 1))
+    return torch.from_numpy(cv2.morphologyEx(mask.cpu().numpy().astype(np.uint8), cv2.MORPH_OPEN, k).astype(bool)).to(mask.device)
+
+
 def transient_from_residual(residual: Tensor, threshold: float, min_area: int, vote: int = 3, close_px: int = 2,
-                            low: Optional[float] = None) -> Tensor:
-    """Residual above ``threshold`` -> RobustNeRF box vote -> connected regions (see above). With
-    ``low`` (hysteresis): regions of the box-voted ``residual > low`` that hold a box-voted
-    ``residual > threshold`` pixel, so a car's weaker parts join its strong core."""
-    strong = box_vote(residual > threshold, vote)
+                            low: Optional[float] = None, open_px: int = 0) -> Tensor:
+    """Residual above ``threshold`` -> RobustNeRF box vote -> opening by ``open_px`` -> connected
+    regions (see above). With ``low`` (hysteresis): regions of the box-voted ``residual > low`` that
+    hold a box-voted ``residual > threshold`` pixel, so a car's weaker parts join its strong core."""
+    strong = opening(box_vote(residual > threshold, vote), open_px)
     if low is not None and low < threshold:
         import cv2
 
