@@ -345,7 +345,7 @@ def test_sky_rules_drop_speckle_and_see_through_patches():
     hole[int(rows[len(rows) // 2]) - 2: int(rows[len(rows) // 2]) + 2, 10:16] = True  # a see-through patch in the wall
     hole &= wall
     speckle = torch.zeros_like(wall)
-    speckle[::6, 3::7] = True
+    speckle[::6, 3:-3:7] = True  # away from the border (the vote replicates it)
     speckle &= wall & ~hole
     d2 = torch.where(hole, torch.full_like(depth, 1e3), depth)
     a2 = torch.where(hole | speckle, torch.zeros_like(acc), acc)
