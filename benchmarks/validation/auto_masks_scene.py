@@ -1,0 +1,81 @@
+"""``--segmenter auto`` checked on a second synthetic street, the way ``ns2gs-bench real`` checks it
+on the first: the street's 30-frame forward drive as a video, poses and masks thrown away,
+``process video`` with the street's FOV and camera height, a 1000-step mask-less reference (every
+eighth frame held out: no eval splits here), masks from its renders (default ``AutoOptions``), IoU
+pooled over the training frames against the street's exact masks (resampled onto the GT pixel grid
+as the bench does).
+
+Usage: python benchmarks/validation/auto_masks_scene.py SEED FOV_DEG CAM_HEIGHT CARS WORK OUT_STEM
+(WORK keeps the street, the capture, the reference and the renders (renders.pt) between runs; the
+renders are reused, the plane and the masks are derived again). Produced
+benchmarks/results/auto_masks_seed7.{json,md} with 7 70 2 10.
+"""
+import json
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+torch.set_num_threads(1)
+from nerf2gs_plugin.capture.auto_masks import ground_plane, render_views  # noqa: E402
+from nerf2gs_plugin.capture.mask_reference import ensure_reference  # noqa: E402
+from nerf2gs_plugin.data import parse_dataset  # noqa: E402
+from nerf2gs_plugin.data.images import load_mask  # noqa: E402
+from nerf2gs_plugin.data.masks.auto import AutoOptions, masks_from_renders  # noqa: E402
+from nerf2gs_plugin.data.masks.maskless import maskless_view  # noqa: E402
+from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_street  # noqa: E402
+from nerf2gs_plugin.eval import bench_real as br  # noqa: E402
+from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
+from nerf2gs_plugin.eval.mask_eval import resample_mask  # noqa: E402
+from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
+
+seed, fov, cam_h, cars = int(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])
+work, out = Path(sys.argv[5]), Path(sys.argv[6])
+work.mkdir(parents=True, exist_ok=True)
+street, est = work / "street", work / "estimated"
+t0 = time.time()
+if not (street / "transforms.json").is_file():
+    generate_street(SynthStreetConfig(out=street, seed=seed, fov_deg=fov, cam_height=cam_h, num_cars=cars, num_street=1, num_bev=1,
+                                      num_val_street=0, num_val_bev=0, progress=False, overwrite=True))
+meta = json.loads((street / "transforms.json").read_text())
+if not (est / "transforms.json").is_file():
+    video = br.write_video(work / "drive.avi", [street / f["file_path"] for f in meta["frames"][:30]])
+    br.process_capture(video, est, 30, fov, cam_h)
+view = maskless_view(est)
+cache = work / "renders.pt"
+if cache.is_file():
+    r = torch.load(cache, weights_only=False)
+else:
+    ensure_reference(est, work / "reference", 1000, progress=False)
+    r = render_views(view, work / "reference", ["train"], progress=False)
+    torch.save(r, cache)
+train = parse_dataset(view, "train")
+r.up, r.height = ground_plane(train, [])  # the plane as the code now fits it
+res = masks_from_renders(r, AutoOptions(), log=lambda s: None)["train"]
+em = {Path(f["file_path"]).name: f for f in json.loads((est / "transforms.json").read_text())["frames"]}
+stats = {}
+for kind in ("sky", "ground", "transient"):
+    i = u = p = t = 0
+    for name, m in zip([q.name for q in train.image_filenames], res):
+        f, tf = em[name], meta["frames"][br.frame_index(Path(name))]
+        gt = load_mask(street / tf[f"{kind}_mask_path"])
+        pred = resample_mask(getattr(m, kind), (f["fl_x"], f["fl_y"], f["cx"], f["cy"]),
+                             (meta["fl_x"], meta["fl_y"], meta["cx"], meta["cy"]), tuple(gt.shape))
+        i, u, p, t = i + int((pred & gt).sum()), u + int((pred | gt).sum()), p + int(pred.sum()), t + int(gt.sum())
+    stats[kind] = {"iou": i / max(u, 1), "precision": i / max(p, 1), "recall": i / max(t, 1)}
+cams = torch.stack([v["origin"] for v in r.views["train"]])
+heights = ((cams @ r.up - r.height) / r.metres_to_world).tolist()
+doc = {"scene": {"seed": seed, "fov_deg": fov, "cam_height": cam_h, "num_cars": cars, "frames": 30},
+       "registered": len(em), "train_views": len(res), "mask_iou": {k: v["iou"] for k, v in stats.items()}, "stats": stats,
+       "camera_heights_m": heights, "options": vars(AutoOptions()), "machine": machine_line(), "seconds": time.time() - t0}
+atomic_write_text(out.with_suffix(".json"), json.dumps(doc, indent=1))
+md = [f"# `--segmenter auto` on a second street (seed {seed}, camera {cam_h} m, {fov:g} deg FOV, {cars} cars)", "",
+      f"Machine: {machine_line()}. The 30-frame forward drive as a video -> process video -> 1000-step mask-less reference "
+      f"-> masks (default options); {len(em)}/30 frames registered, {len(res)} training views (every 8th held out). "
+      "Produced by `benchmarks/validation/auto_masks_scene.py`.", "",
+      "| kind | IoU | precision | recall |", "|---|---|---|---|"]
+md += [f"| {k} | {v['iou']:.3f} | {v['precision']:.3f} | {v['recall']:.3f} |" for k, v in stats.items()]
+md += ["", "Camera heights above the levelled plane (m): " + ", ".join(f"{h:.2f}" for h in heights)]
+atomic_write_text(out.with_suffix(".md"), "\n".join(md) + "\n")
+print("\n".join(md))
