@@ -181,3 +181,26 @@ def test_resample_mask_between_pinholes():
     assert torch.equal(out, exp)
     # a narrower source: pixels it never saw are False
     assert not resample_mask(torch.ones(20, 30, dtype=torch.bool), same, (20.0, 20.0, 15.0, 10.0), (20, 30))[0, 0]
+
+
+def test_masks_reference_keyed_by_the_capture_not_its_stage_times(tmp_path):
+    """A capture re-processed with other intrinsics (same images: the checkpoint's image fingerprint
+    cannot tell) gets a new reference; new stage times, eval splits or mask keys do not."""
+    frame = {"file_path": "images/frame_000000.jpg", "fl_x": 119.0, "fl_y": 119.0, "cx": 100.0, "cy": 56.0, "w": 200, "h": 112,
+             "transform_matrix": np.eye(4).tolist()}
+    meta = {"frames": [frame], "metres_per_unit": 4.2, "process": {"stage_seconds": {"mapping": 1.0}}}
+
+    def ref(m: dict, name: str) -> Path:
+        (tmp_path / name).mkdir(exist_ok=True)
+        (tmp_path / name / "transforms.json").write_text(json.dumps(m))
+        return br.reference_dir(tmp_path, tmp_path / name, 1000)
+
+    a = ref(meta, "a")
+    same = json.loads(json.dumps(meta))
+    same["process"]["stage_seconds"]["mapping"] = 2.0
+    same["eval_splits"] = {"bev_1": []}
+    same["frames"][0]["sky_mask_path"] = "masks/sky/frame_000000.png"
+    assert ref(same, "b") == a
+    other = json.loads(json.dumps(meta))
+    other["frames"][0].update(fl_y=100.0, cx=56.0, cy=0.0)  # the old export's reading of a SIMPLE_RADIAL camera
+    assert ref(other, "c") != a and a.name.startswith("masks-reference-1000-")
