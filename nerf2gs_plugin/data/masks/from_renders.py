@@ -8,16 +8,20 @@ ground plane is ``{x : x . up = height}``.
   * sky: what the reference sees nothing at (accumulation below ``acc_max``, or mass only at the
     contraction boundary: a reference trained without sky masks parks some sky there) and that lies above the
     horizon of the ground plane (a downward ray meets the road before it can see the sky; a small
-    margin below the horizon is allowed for a street that ends in open ground);
-  * ground: the rendered surface lies on the plane: its height above the plane is below
-    ``tol`` (a kerb of 15 cm stays ground; below the plane counts as on it: a too-long depth), the ray points down, and, where normals are given, the
-    normal is within ``max_normal_deg`` of up;
+    margin below the horizon is allowed for a street that ends in open ground); optionally box-voted
+    and kept only where a region reaches the image's top row (a see-through patch that a short
+    reference leaves in a facade is empty too, but enclosed);
+  * ground: the rendered surface lies on the plane: its height above the plane (optionally a
+    median over a window: floater speckle) is below ``tol`` (a kerb of 15 cm stays ground; below
+    the plane counts as on it: a too-long depth), the ray points down, and, where normals are
+    given, the normal is within ``max_normal_deg`` of up (too noisy on a short reference's depth);
   * transient: the photometric residual against the multi-view consistent reference (after a
     per-image affine colour fit, as the reference renders the mean appearance), thresholded at a
     robust level (median + k * 1.4826 MAD over the dataset, RobustNeRF-style trimmed statistics),
-    then smoothed as RobustNeRF does (a 3x3 box filter of the outlier indicator, majority vote)
-    and cleaned by connected regions: small regions are dropped, holes closed. Transient pixels
-    are neither sky nor ground.
+    then smoothed as RobustNeRF does (a 3x3 box filter of the outlier indicator, majority vote),
+    opened (thin strokes: poles and edges the reference blurs) and cleaned by connected regions:
+    small regions are dropped, holes closed. Transient pixels are not ground; sky pixels are not
+    transient (the sky is where a mask-less reference is weakest).
 """
 
 from __future__ import annotations
