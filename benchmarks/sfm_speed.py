@@ -54,7 +54,7 @@ def run_variant(images: Path, work: Path, flags: list[str], fov_deg: float | Non
     meta = json.loads((work / "transforms.json").read_text())
     pairs = work / "colmap" / "loop_pairs.txt"
     return {"flags": flags, "wall_seconds": round(wall, 1), "load_average_start": round(load0, 2), "load_average_end": round(os.getloadavg()[0], 2),
-            "stage_seconds": meta["process"]["stage_seconds"], "registered": meta["process"]["registered"], "frames": meta["process"]["frames"],
+            "stage_seconds": json.loads((work / "colmap" / "stage_seconds.json").read_text()), "registered": meta["process"]["registered"], "frames": meta["process"]["frames"],
             "metres_per_unit": meta["metres_per_unit"], "scale_source": meta["process"]["scale_source"], "loop_pairs": len(pairs.read_text().splitlines()) if pairs.is_file() else 0,
             "poses": {Path(f["file_path"]).name: f["transform_matrix"] for f in meta["frames"]}}
 

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from nerf2gs_plugin.cli.data import main
+from nerf2gs_plugin.data import folder_fingerprint
 from nerf2gs_plugin.data.process.frames import extract_video_frames, relative_blur_drop
 from nerf2gs_plugin.errors import DataError
 
@@ -113,8 +114,12 @@ def test_process_video_end_to_end(tmp_path, make_config):
     train = parse_dataset(out, "train")
     assert len(train.image_filenames) > 10 and train.points3D_xyz is not None
     stamps = {p: (out / "colmap" / p).stat().st_mtime for p in ("matching.json", "distorted/done.json")}
+    print_before = folder_fingerprint(out)
     main(args)  # resumed: features, matches and model reused
     assert {p: (out / "colmap" / p).stat().st_mtime for p in stamps} == stamps
+    # the times of a re-run live beside transforms.json: the data a run reads (its fingerprint) is unchanged
+    assert set(json.loads((out / "colmap" / "stage_seconds.json").read_text())) >= {"features", "matching", "mapping"}
+    assert folder_fingerprint(out) == print_before
     main(args[:6] + ["28"] + args[7:] + ["--metres-per-unit", "1.0"])  # other frames: stale features and matches are not mixed in
     est = json.loads((out / "transforms.json").read_text())
     assert est["process"]["frames"] == len(list((out / "colmap" / "frames").iterdir())) <= 28

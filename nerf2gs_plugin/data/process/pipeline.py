@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import time
@@ -13,6 +14,10 @@ import numpy as np
 import tyro
 
 from nerf2gs_plugin.data.process.sfm import SfmOptions
+from nerf2gs_plugin.utils.io import atomic_write_text
+
+TIMES_FILE = "stage_seconds.json"
+"""In ``DATA/colmap/``: each stage's time of the last ``process`` run."""
 from nerf2gs_plugin.errors import DataError
 
 
@@ -125,11 +130,12 @@ def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=Non
         export.write_downscaled(root, reg_names, progress)
         times["export"] = time.perf_counter() - t
         extra = {"process": {"source": "video" if is_video else "images", "frames": len(names), "registered": mapped.registered,
-                             "matching": method, "camera_height_m": opts.camera_height, "scale_source": scale.source,
-                             "stage_seconds": {k: round(v, 2) for k, v in times.items()}}}
+                             "matching": method, "camera_height_m": opts.camera_height, "scale_source": scale.source}}
         if scale.plane is not None:
             extra["ground_plane"] = scale.plane.to_json()
         export.write_transforms(root, rec, scale.metres_per_unit, scale.up, extra)
+        # beside, not in, transforms.json: runs fingerprint the files they read, and times change every run
+        atomic_write_text(work / TIMES_FILE, json.dumps({k: round(v, 2) for k, v in times.items()}, indent=1))
     return ProcessReport(root, len(names), mapped.registered, mapped.points, method, scale.metres_per_unit, scale.source, times,
                          fr.dropped_blurry)
 
