@@ -10,11 +10,10 @@ from typing import Any, Callable, Optional
 
 from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.eval.bench_io import BenchFailed, fmt  # noqa: F401
-from nerf2gs_plugin.eval.bench_runs import RunSpec, train_or_reuse
+from nerf2gs_plugin.eval.bench_runs import RunSpec
 from nerf2gs_plugin.eval.figures import image_row
 from nerf2gs_plugin.eval.machine import machine_info, machine_line
 from nerf2gs_plugin.progress import make_progress
-from nerf2gs_plugin.utils.config import to_plain
 from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.utils.plotting import pyplot, save_figure
 
@@ -310,7 +309,7 @@ def run_named_bench(name: str, plan: list[RunSpec], data: Path, runs_root: Path,
 
     t0 = time.time()
     results = run_plan(plan, data, runs_root, name=name, rerun=rerun)
-    md = write_results(out_dir, name, results, title, extra_md="Differences, same bench run:\n\n" + ratios_md(results, compare)
+    write_results(out_dir, name, results, title, extra_md="Differences, same bench run:\n\n" + ratios_md(results, compare)
                        + f"\n\nBench wall time: {time.time() - t0:.0f} s (training reused where cached).\n")
     ok = succeeded(results)
     speed_quality_chart(ok, Path(out_dir) / f"{name}_speed_quality.png", title)

@@ -18,7 +18,6 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 import torch
-from torch import Tensor
 
 from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.eval.machine import machine_info, machine_line
