@@ -85,6 +85,14 @@ def test_every_table_cell_matches_its_json():
     assert checked >= 140  # 7 x 9 quick cells (less the hash-grid one) + 10 x 8 default cells
 
 
+def _size_pick(method: str) -> dict:
+    return _r("model_size.json", "picks")[method]
+
+
+def _size_row(label: str) -> dict:
+    return next(r for r in _r("model_size.json", "rows") if r["label"] == label)
+
+
 def _r(name: str, key: str = "results") -> dict:
     return json.loads((RESULTS / name).read_text())[key]
 
@@ -231,6 +239,13 @@ PROSE = [
      lambda: [_psnr(_r(GPU), lab, s) - _psnr(_r("quick.json"), lab, s) for lab in ("splatfacto", "splatfacto + NeRF views") for s in BEV]),
     ("enhancer moves val_bev by +0.19 / +0.06 / -0.12 dB", "0.19 0.06 -0.12",
      lambda: [_r("enhancer_val.json", "enhancer_minus_without")[t]["psnr_val_bev"] for t in T]),
+    ("is 5.9x smaller for Splatfacto (2.1k vs 12.3k Gaussians), 1.6x for Scaffold-GS (3.5k vs 5.6k anchors) and\n"
+     "6.5x for 2DGS (2.4k vs 15.5k surfels)", "5.9 2.1 12.3 1.6 3.5 5.6 6.5 2.4 15.5",
+     lambda: [v for m in T for v in (_size_pick(m)["reduction"], _size_pick(m)["smallest_primitives"] / 1000,
+                                     _size_pick(m)["best_primitives"] / 1000)]),
+    ("(bev 19.43 at 15.5k vs 19.67 at 2.4k)", "19.43 15.5 19.67 2.4",
+     lambda: [v for lab in ("2dgs max_gaussians=30000", "2dgs max_gaussians=2000")
+              for v in (_size_row(lab)["bev_psnr"], _size_row(lab)["primitives"] / 1000)]),
     # the real photo set (castle-P30): held-out photos, and SfM time per variant
     ("StreetNeRF is 5.40 dB\nbelow Splatfacto", "5.40", lambda: [_psnr(_r(RP), "splatfacto", "test") - _psnr(_r(RP), "StreetNeRF", "test")]),
     ("Splatfacto + NeRF views falls 1.98 dB below Splatfacto", "1.98",
