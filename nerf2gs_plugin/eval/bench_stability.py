@@ -115,7 +115,7 @@ def stability_plan(scale: str, methods=METHODS, seeds: Optional[tuple[int, ...]]
                 if bm.augmented:
                     ref = ref_full if lv.reference_steps_fraction == 1.0 else \
                         steps_overrides(scale, REFERENCE_METHOD, steps_fraction * lv.reference_steps_fraction)
-                plan.append(StressCase(m, f"{stress} {lv.label}", method_seeds[0], lv.perturbation, lv.transients_factor,
+                plan.append(StressCase(m, lv.variant(stress), method_seeds[0], lv.perturbation, lv.transients_factor,
                                        with_seed(method_seeds[0]), stress, i, lv.label, ref))
     return plan
 

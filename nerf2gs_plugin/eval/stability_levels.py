@@ -30,6 +30,11 @@ class Level:
     transients_factor: int = 1
     reference_steps_fraction: float = 1.0
     """Augmented pipeline only: the reference trains this fraction of its steps."""
+    case_name: str = ""
+    """The run's name in the tables when not "<stress> <label>" (the one-level bench's names, kept)."""
+
+    def variant(self, stress: str) -> str:
+        return self.case_name or f"{stress} {self.label}"
 
 
 def _pose(deg: float, cm: float) -> Level:
@@ -43,9 +48,9 @@ STRESS_LEVELS: dict[str, tuple[Level, ...]] = {
     "mask errors": (Level("eroded 2px", Perturbation(mask_erode_px=2)), Level("dilated 2px", Perturbation(mask_dilate_px=2)),
                     Level("eroded 6px", Perturbation(mask_erode_px=6)), Level("dilated 6px", Perturbation(mask_dilate_px=6)),
                     Level("50% dropped", Perturbation(mask_drop_fraction=0.5, seed=NOISE_SEED)),
-                    Level("all dropped", Perturbation(drop_masks=True))),
+                    Level("all dropped", Perturbation(drop_masks=True), case_name="no masks")),
     "exposure": tuple(Level(f"+-{s:g} stop", Perturbation(exposure_spread=s, seed=NOISE_SEED)) for s in (0.25, 0.5, 1.0, 2.0)),
-    "init": (Level("random", Perturbation(drop_points=True)),),
+    "init": (Level("random", Perturbation(drop_points=True), case_name="random init"),),
     "reference steps": tuple(Level(f"{round(f * 100):g}%", reference_steps_fraction=f) for f in (0.5, 0.25, 0.12, 0.06)),
 }
 AUGMENTED_ONLY = ("reference steps",)

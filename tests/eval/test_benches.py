@@ -92,8 +92,8 @@ def test_stability_plan_walks_each_stress_mild_to_harsh():
         assert [c.level for c in sf if c.stress == stress] == list(range(1, len([c for c in sf if c.stress == stress]) + 1))
     # the mild levels are the former one-level cases: same datasets, same runs (reused from the cache)
     assert next(c for c in sf if c.variant == "pose noise 0.5deg/5cm").perturbation == Perturbation(rotation_deg=0.5, translation_m=0.05, seed=7)
-    assert next(c for c in sf if c.variant == "mask errors all dropped").perturbation == Perturbation(drop_masks=True)
-    assert next(c for c in sf if c.variant == "init random").perturbation == Perturbation(drop_points=True)
+    assert next(c for c in sf if c.variant == "no masks").perturbation == Perturbation(drop_masks=True)
+    assert next(c for c in sf if c.variant == "random init").perturbation == Perturbation(drop_points=True)
     from nerf2gs_plugin.eval.bench_paper import paper_table_plan
 
     baseline = next(s for s in paper_table_plan("quick") if s.label == "splatfacto")
