@@ -227,6 +227,8 @@ def run_case(case: StressCase, data: Path, runner: BenchRunner, synthetic: bool,
             except (UserError, RuntimeError, ValueError) as e:
                 out.error = f"{type(e).__name__}: {str(e).splitlines()[0][:200]}"
     row["status"] = classify(out.result, out.error, first, final)
+    if row["status"] == "collapse" and row["error"] is None:
+        row["error"] = f"final PSNR {final:.2f} below the untrained model's {first:.2f} on the same images"
     row.update(initial_psnr=first, final_psnr=final, run_dir=out.run_dir)
     if out.result is not None:
         r = out.result

@@ -129,8 +129,13 @@ def _cell(v) -> str:
         return "not run"
     if isinstance(v, str):
         return v
-    what = f"{v['drop_db']:.1f} dB below" if v.get("drop_db") is not None and v["status"] == "collapse" else \
-        (str(v.get("error") or "").split(":")[0] or v["status"])
+    error = str(v.get("error") or "")
+    if v["status"] == "collapse" and "untrained" in error:
+        what = "below the untrained model"
+    elif v["status"] == "collapse" and v.get("drop_db") is not None:
+        what = f"{v['drop_db']:.1f} dB below"
+    else:
+        what = error.split(":")[0] or v["status"]
     return f"**{v['level']}** ({v['status']}: {what})".replace("|", "/")
 
 
@@ -148,8 +153,8 @@ def breaking_markdown(points: dict[str, dict[str, object]]) -> str:
 
 def level_chart(rows: list[dict], path: Path, title: str) -> None:
     """One panel per stress: PSNR change against the unstressed mean (the worse of street/BEV)
-    per level, a line per method, the collapse threshold dashed; failures without a PSNR drawn as
-    red crosses at the panel's floor."""
+    per level, a line per method, the collapse threshold dashed, the breaking point ringed in red;
+    failures without a PSNR drawn as crosses at the panel's floor."""
     from nerf2gs_plugin.utils.plotting import pyplot, save_figure
 
     plt = pyplot()
@@ -168,6 +173,7 @@ def level_chart(rows: list[dict], path: Path, title: str) -> None:
         labels = {0: "none"}
         ys: list[float] = []
         failed: list[tuple[int, object]] = []
+        broke: list[tuple[int, float]] = []
         for m in methods:
             pts, fails = ([(0, 0.0)] if m in base else []), []
             for r in marked:
@@ -178,6 +184,8 @@ def level_chart(rows: list[dict], path: Path, title: str) -> None:
                 d = drops(r, base)
                 if d:
                     pts.append((level, -max(d.values())))
+                    if r["status"] in FAILURES:
+                        broke.append(pts[-1])
                 elif r["status"] in FAILURES:
                     fails.append(level)
             color = colors[m]
@@ -186,6 +194,8 @@ def level_chart(rows: list[dict], path: Path, title: str) -> None:
             ys += [y for _, y in pts]
             failed += [(x, color) for x in fails]
         floor = min(ys + [-COLLAPSE_DB]) - 1.0
+        if broke:
+            ax.scatter(*zip(*broke), s=160, facecolors="none", edgecolors="red", linewidths=1.5, zorder=4)
         for x, color in failed:
             ax.scatter([x], [floor + 0.3], marker="x", color=color, s=60, linewidths=2, zorder=3)
         ax.axhline(-COLLAPSE_DB, color="red", linestyle="--", linewidth=1)
@@ -199,6 +209,7 @@ def level_chart(rows: list[dict], path: Path, title: str) -> None:
 
     handles = [Line2D([], [], color=colors[m], marker="o", label=m) for m in methods]
     handles += [Line2D([], [], color="red", linestyle="--", label=f"collapse: {COLLAPSE_DB:g} dB below unstressed"),
+                Line2D([], [], color="red", marker="o", markerfacecolor="none", linestyle="", label="breaking point"),
                 Line2D([], [], color="grey", marker="x", linestyle="", label="failed without a PSNR (nan, error)")]
     fig.legend(handles=handles, loc="lower center", ncol=min(4, len(handles)), fontsize=7)
     fig.suptitle(title, fontsize=10)

@@ -178,16 +178,19 @@ def test_breaking_points_table_json_and_chart(tmp_path):
     rows += [_level_row("a", "pose noise", 1, 19.8), _level_row("a", "pose noise", 2, 19.0, bev=12.5),
              _level_row("a + NeRF views", "pose noise", 1, 19.9), _level_row("a + NeRF views", "pose noise", 2, 19.7),
              _level_row("a", "exposure", 1, None, None, status="nan", error="nan: non-finite PSNR/SSIM"),
-             _level_row("a + NeRF views", "reference steps", 1, 18.0)]
+             _level_row("a + NeRF views", "reference steps", 1, 18.0),
+             _level_row("a + NeRF views", "exposure", 1, 19.0, status="collapse",
+                        error="final PSNR 9.00 below the untrained model's 10.00 on the same images")]
     points = breaking_points(rows)
     assert points["a"]["pose noise"]["level"] == "L2" and points["a"]["pose noise"]["drop_db"] == pytest.approx(3.5)
-    assert points["a + NeRF views"] == {"pose noise": "none up to L2", "reference steps": "none up to L1"}
+    assert {k: v for k, v in points["a + NeRF views"].items() if k != "exposure"} == \
+        {"pose noise": "none up to L2", "reference steps": "none up to L1"}
     assert points["a"]["exposure"]["status"] == "nan"
     json.dumps(points)  # JSON-ready
     md = breaking_markdown(points)
     assert "| method | pose noise | exposure | reference steps |" in md
     assert "| a | **L2** (collapse: 3.5 dB below) | **L1** (nan: nan) | not run |" in md
-    assert "| a + NeRF views | none up to L2 | not run | none up to L1 |" in md
+    assert "| a + NeRF views | none up to L2 | **L1** (collapse: below the untrained model) | none up to L1 |" in md
     level_chart(rows, tmp_path / "s.png", "t")
     assert (tmp_path / "s.png").read_bytes()[:4] == b"\x89PNG" and (tmp_path / "s.png").stat().st_size > 5000
     payload = bench_stability.write_outputs(rows, tmp_path / "out", "test", "street")
