@@ -1,15 +1,19 @@
-"""stability: every method under stress, failures counted and shown, never hidden.
+"""stability: every method under stress, swept level by level to its breaking point.
 
-Cases per method: 3 seeds (mean and std), pose noise (0.5 deg / 5 cm on every training camera),
-half the training views, twice the transients (synthetic street only: twice the cars), no masks,
-no sparse points (random initialisation). Datasets for the stress cases are perturbed copies of
-the bench's dataset (:mod:`nerf2gs_plugin.eval.perturb`).
+Cases per method: 3 seeds (mean and std: the unstressed baseline), then each stress of
+:mod:`nerf2gs_plugin.eval.stability_levels` walked mild -> harsh (pose noise, fraction of views
+kept, transient share, mask errors, per-frame exposure, random init; for "target + NeRF views"
+also the reference's training length, the reference always trained on the stressed data). A
+stress stops at its first failure, its breaking point (:mod:`nerf2gs_plugin.eval.breaking_point`).
+Datasets for the stress cases are perturbed copies of the bench's dataset
+(:mod:`nerf2gs_plugin.eval.perturb`); runs are reused from the bench's runs folder by key.
 
 Outcomes: ``ok``; ``diverged`` (training stopped on NaN/inf; the last good checkpoint is kept by
 the trainer); ``nan`` (metrics not finite); ``collapse`` (a quality collapse: street or BEV PSNR
 more than :data:`COLLAPSE_DB` = 3 dB below the mean of the same method's unstressed seed runs, or
-a final PSNR below the untrained model's on the same eval images); ``error`` (any other error);
-``unsupported`` (the data layer cannot make that stress, e.g. more transients in a user dataset).
+a final PSNR below the untrained model's on the same eval images); ``error`` (any other error,
+its kind given); ``unsupported`` (the data layer cannot make that stress, e.g. more transients in
+a user dataset).
 """
 
 from __future__ import annotations
@@ -23,64 +27,96 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from nerf2gs_plugin.utils.io import atomic_write_text
-from nerf2gs_plugin.eval.bench_io import (BenchLog, BenchProgress, BenchRunner, fmt, mean_psnr, nonfinite_metrics, planned_steps,
-                                         progress_log, write_bench_files)
+from nerf2gs_plugin.eval.bench_io import (BenchLog, BenchProgress, BenchRunner, failure_reason, fmt, mean_psnr, nonfinite_metrics,
+                                         planned_steps, progress_log, write_bench_files)
 from nerf2gs_plugin.eval.bench_runs import RunSpec
+from nerf2gs_plugin.eval.breaking_point import (COLLAPSE_DB, FAILURES, breaking_markdown, breaking_points, level_chart,
+                                               mark_collapses, sweep)
 from nerf2gs_plugin.eval.perturb import Perturbation, perturbed_copy
+from nerf2gs_plugin.eval.stability_levels import AUGMENTED_LABEL, REFERENCE_METHOD, STRESS_LEVELS, parse_method, stresses_for
 from nerf2gs_plugin.utils.image_metrics import psnr
 from nerf2gs_plugin.utils.config import apply_plain
-from nerf2gs_plugin.errors import DataError, UserError
+from nerf2gs_plugin.errors import ConfigError, DataError, UserError
 from nerf2gs_plugin.progress import make_progress
-from nerf2gs_plugin.utils.plotting import pyplot, save_figure
 
-METHODS = ("streetnerf", "splatfacto", "scaffold-gs", "2dgs")
+__all__ = ["COLLAPSE_DB", "FAILURES", "mark_collapses", "StressCase", "stability_plan", "run", "classify"]
+
+METHODS = ("streetnerf", "splatfacto", "scaffold-gs", "2dgs", "splatfacto+nerf")
 SEEDS = 3  # runs per method with different seeds
 STATUSES = ("ok", "diverged", "nan", "collapse", "error", "unsupported")
-FAILURES = ("diverged", "nan", "collapse", "error")
-COLLAPSE_DB = 3.0  # a case more than this far below the unstressed runs' mean PSNR (street or BEV) failed
 
 
 @dataclass
 class StressCase:
     """One training run of the stability bench."""
 
-    method: str
-    variant: str  # "seed 0", "pose noise", ...
+    method: str  # the registered method trained (the target, for an augmented case)
+    variant: str  # "seed 0", "pose noise 1deg/10cm", ...
     seed: int = 0
     perturbation: Optional[Perturbation] = None
     transients_factor: int = 1
     overrides: dict[str, Any] = field(default_factory=dict)
+    stress: str = ""  # "" for the seed runs (and hand-made single cases)
+    level: int = 0  # 1-based rung of the stress; 0 unstressed
+    level_label: str = ""
+    reference_overrides: Optional[dict[str, Any]] = None
+    """Set for "target + NeRF views": the reference (StreetNeRF) trained with these on the same data."""
+
+    @property
+    def label_method(self) -> str:
+        """The method as the tables name it (``splatfacto + NeRF views`` for an augmented case)."""
+        return self.method + (AUGMENTED_LABEL if self.reference_overrides is not None else "")
 
     @property
     def label(self) -> str:
-        return f"{self.method} / {self.variant}"
+        return f"{self.label_method} / {self.variant}"
 
 
-def stability_plan(scale: str, methods=METHODS, seeds: Optional[tuple[int, ...]] = None) -> list[StressCase]:
-    """The cases, in the order they are trained and reported (seeds first, then stresses).
-
-    Seeds default to the method's own seed and the next two; the run at the method's own seed on
-    the unperturbed dataset is the paper-table baseline run (same key), so it is trained once."""
-    from nerf2gs_plugin.eval.bench_paper import _overrides
+def steps_overrides(scale: str, method: str, fraction: float = 1.0) -> dict:
+    """The bench overrides of ``method`` at ``scale`` with its steps times ``fraction`` (schedules
+    rescaled); fraction 1 is exactly the paper table's run (same key: trained once)."""
+    from nerf2gs_plugin.eval.bench_paper import SCALE_STEPS, _overrides, step_overrides
     from nerf2gs_plugin.registry import get_method
 
-    stresses = [
-        ("pose noise 0.5deg/5cm", Perturbation(rotation_deg=0.5, translation_m=0.05, seed=7), 1),
-        ("half views", Perturbation(keep_every=2), 1),
-        ("2x transients", None, 2),
-        ("no masks", Perturbation(drop_masks=True), 1),
-        ("random init", Perturbation(drop_points=True), 1),
-    ]
+    if fraction == 1.0:
+        return _overrides(scale, method)
+    if not 0.0 < fraction <= 1.0:
+        raise ConfigError(f"--steps-fraction {fraction}: must be in (0, 1]")
+    steps = SCALE_STEPS.get(scale, {}).get(method) or get_method(method).config.max_num_iterations
+    return {**step_overrides(method, max(1, round(steps * fraction))), "steps_per_eval_image": 0}
+
+
+def stability_plan(scale: str, methods=METHODS, seeds: Optional[tuple[int, ...]] = None, stresses: Optional[tuple[str, ...]] = None,
+                   steps_fraction: float = 1.0, n_seeds: int = SEEDS) -> list[StressCase]:
+    """The cases, in the order they are trained and reported: per method its seed runs, then each
+    stress's levels mild -> harsh (the sweep skips a stress's levels after its first failure).
+
+    Seeds default to the method's own seed and the next ``n_seeds - 1``; the run at the method's
+    own seed on the unperturbed dataset is the paper-table baseline run (same key), so it is
+    trained once. Methods: registered names, or ``<target>+nerf`` for the augmented pipeline.
+    Bad names fail here, before any work."""
+    from nerf2gs_plugin.registry import get_method
+
     plan = []
-    for m in methods:
-        base = _overrides(scale, m)
+    for name in methods:
+        bm = parse_method(name)
+        m = bm.method
+        names = stresses_for(bm, stresses)
+        base = steps_overrides(scale, m, steps_fraction)
+        ref_full = steps_overrides(scale, REFERENCE_METHOD, steps_fraction) if bm.augmented else None
         own = get_method(m).config.seed
-        method_seeds = seeds or tuple(own + i for i in range(SEEDS))
+        method_seeds = seeds or tuple(own + i for i in range(max(1, n_seeds)))
         with_seed = lambda s: base if s == own else {**base, "seed": s}  # noqa: E731
         for s in method_seeds:
-            plan.append(StressCase(m, f"seed {s}", s, None, 1, with_seed(s)))
-        for name, pert, factor in stresses:
-            plan.append(StressCase(m, name, method_seeds[0], pert, factor, with_seed(method_seeds[0])))
+            plan.append(StressCase(m, f"seed {s}", s, None, 1, with_seed(s), reference_overrides=ref_full))
+        for stress in names:
+            for i, lv in enumerate(STRESS_LEVELS[stress], 1):
+                ref = None
+                if bm.augmented:
+                    ref = ref_full if lv.reference_steps_fraction == 1.0 else \
+                        steps_overrides(scale, REFERENCE_METHOD, steps_fraction * lv.reference_steps_fraction)
+                plan.append(StressCase(m, lv.variant(stress), method_seeds[0], lv.perturbation, lv.transients_factor,
+                                       with_seed(method_seeds[0]), stress, i, lv.label, ref))
     return plan
 
 
@@ -150,18 +186,32 @@ def case_dataset(case: StressCase, data: Path, runs_root: Path, synthetic: bool)
 
 
 def run_case(case: StressCase, data: Path, runner: BenchRunner, synthetic: bool, step_hook=None) -> dict:
-    """Train/evaluate one case (reusing earlier work) and classify it."""
+    """Train/evaluate one case (reusing earlier work) and classify it. An augmented case first
+    trains (or reuses) its reference on the same, stressed, dataset."""
     from nerf2gs_plugin.engine.reference import load_run
 
     spec = RunSpec(case.label, case.method, case.overrides)
+    tags = {"stress": case.stress or None, "level": case.level, "level_label": case.level_label or None}
     try:
         case_data = case_dataset(case, data, runner.runs_root, synthetic)
     except UserError as e:
         msg = str(e)
-        return {"method": case.method, "variant": case.variant, "status": "unsupported" if "unsupported" in msg else "error", "error": msg}
-    out = runner.run(spec, case_data, step_hook=step_hook)
+        return {"method": case.label_method, "variant": case.variant, **tags,
+                "status": "unsupported" if "unsupported" in msg else "error", "error": msg}
+    reference = None
+    if case.reference_overrides is not None:
+        ref_spec = RunSpec(f"{REFERENCE_METHOD} for {case.label}", REFERENCE_METHOD, case.reference_overrides)
+        ref = runner.run(ref_spec, case_data)
+        reason = failure_reason(ref)
+        if reason is not None:
+            error = f"reference failed: {reason}"
+            return {"method": case.label_method, "variant": case.variant, **tags, "data": str(case_data),
+                    "status": classify(None, error, None, None), "error": error}
+        reference = (Path(ref.run_dir), ref.key)
+        spec = RunSpec(case.label, case.method, case.overrides, augment_from=ref_spec.label)
+    out = runner.run(spec, case_data, reference=reference, step_hook=step_hook)
     split = "street"
-    row: dict[str, Any] = {"method": case.method, "variant": case.variant, "data": str(case_data), "error": out.error}
+    row: dict[str, Any] = {"method": case.label_method, "variant": case.variant, **tags, "data": str(case_data), "error": out.error}
     first = final = None
     if out.result is not None:
         split = next(iter(out.result["results"]), split)
@@ -177,6 +227,8 @@ def run_case(case: StressCase, data: Path, runner: BenchRunner, synthetic: bool,
             except (UserError, RuntimeError, ValueError) as e:
                 out.error = f"{type(e).__name__}: {str(e).splitlines()[0][:200]}"
     row["status"] = classify(out.result, out.error, first, final)
+    if row["status"] == "collapse" and row["error"] is None:
+        row["error"] = f"final PSNR {final:.2f} below the untrained model's {first:.2f} on the same images"
     row.update(initial_psnr=first, final_psnr=final, run_dir=out.run_dir)
     if out.result is not None:
         r = out.result
@@ -189,31 +241,6 @@ def run_case(case: StressCase, data: Path, runner: BenchRunner, synthetic: bool,
 def _mean(vals) -> Optional[float]:
     vals = [v for v in vals if isinstance(v, (int, float)) and math.isfinite(v)]
     return sum(vals) / len(vals) if vals else None
-
-
-def mark_collapses(rows: list[dict], drop_db: float = COLLAPSE_DB) -> list[dict]:
-    """Rows with every ``ok`` case whose street or BEV PSNR lies more than ``drop_db`` below its
-    method's unstressed mean (the ``ok`` seed runs) turned into ``collapse``, the drop in ``error``.
-    Pure: works on a fresh bench's rows and on the rows of a committed stability.json alike."""
-    base: dict[str, dict[str, float]] = {}
-    for m in dict.fromkeys(r["method"] for r in rows):
-        seeds = [r for r in rows if r["method"] == m and r["variant"].startswith("seed ") and r["status"] == "ok"]
-        for name in ("street_psnr", "bev_psnr"):
-            vals = [r[name] for r in seeds if isinstance(r.get(name), (int, float)) and math.isfinite(r[name])]
-            if vals:
-                base.setdefault(m, {})[name] = statistics.fmean(vals)
-    out = []
-    for r in rows:
-        r = dict(r)
-        if r["status"] == "ok":
-            drops = {name: mean - r[name] for name, mean in base.get(r["method"], {}).items()
-                     if isinstance(r.get(name), (int, float))}
-            bad = {k: d for k, d in drops.items() if d > drop_db}
-            if bad:
-                r["status"] = "collapse"
-                r["error"] = "; ".join(f"{k.split('_')[0]} PSNR {d:.2f} dB below the unstressed mean" for k, d in bad.items())
-        out.append(r)
-    return out
 
 
 def summarize(rows: list[dict]) -> dict[str, dict]:
@@ -268,32 +295,40 @@ def log_line(label: str, rows: list[dict]) -> str:
 
 def run(plan: list[StressCase], data: Path, runs_root: Path, out_dir: Path, scale: str, synthetic: bool,
         log: Optional[Callable[[str], None]] = None, rerun: bool = False) -> dict:
-    """Run every case (one progress bar over the bench, log in <runs>/logs/stability.log), write
-    stability.{json,md,png}; returns the JSON payload."""
+    """Sweep the plan (one progress bar over the bench, log in <runs>/logs/stability.log): each
+    method x stress stops at its first failure; write stability.{json,md,png}; returns the payload."""
     log_file = BenchLog(runs_root, "stability")
-    rows = []
     with make_progress() as progress:
         bar = BenchProgress(progress, "stability", [planned_steps(c.method, c.overrides) for c in plan])
         logger = log or progress_log(progress, log_file)
         runner = BenchRunner(runs_root, log=logger, rerun=rerun)
-        for i, case in enumerate(plan):
+
+        def run_one(i: int, case: StressCase) -> dict:
             bar.start(i, case.label)
-            rows.append(run_case(case, data, runner, synthetic, step_hook=bar.hook))
+            return run_case(case, data, runner, synthetic, step_hook=bar.hook)
+
+        def on_row(case: StressCase, rows: list[dict]) -> None:
             logger(log_line(case.label, rows))
-            bar.finish(i)
-    payload = write_outputs(rows, out_dir, scale, str(data))
-    return payload
+            bar.finish(plan.index(case))
+
+        rows = sweep(plan, run_one, lambda c: (c.label_method, c.stress) if c.stress else None, on_row)
+        skipped = len(plan) - len(rows)
+        if skipped:
+            logger(f"[stability] {skipped} harsher level(s) skipped after their stress's breaking point")
+    return write_outputs(rows, out_dir, scale, str(data))
 
 
 def write_outputs(rows: list[dict], out_dir: Path, scale: str, data: str, machine: Optional[dict] = None) -> dict:
-    """Collapses marked, summary, stability.{json,md,png} written; returns the JSON payload."""
+    """Collapses marked, summary, breaking points, stability.{json,md,png} written; returns the JSON payload."""
     rows = mark_collapses(rows)
     summary = summarize(rows)
+    points = breaking_points(rows)
     title = f"Stability under stress, {Path(data).name} ({scale} scale)"
-    payload = {"scale": scale, "data": data, "collapse_db": COLLAPSE_DB, "rows": rows, "summary": summary}
-    md = write_bench_files(out_dir, "stability", title, payload, markdown(rows, summary) + "\n\n![stability](stability.png)\n",
-                           machine=machine)
-    chart(rows, Path(out_dir) / "stability.png", title)
+    payload = {"scale": scale, "data": data, "collapse_db": COLLAPSE_DB, "breaking_point": points,
+               "levels": {k: [lv.label for lv in v] for k, v in STRESS_LEVELS.items()}, "rows": rows, "summary": summary}
+    body = breaking_markdown(points) + "\n\n" + markdown(rows, summary) + "\n\n![stability](stability.png)\n"
+    md = write_bench_files(out_dir, "stability", title, payload, body, machine=machine)
+    level_chart(rows, Path(out_dir) / "stability.png", title)
     print(md)
     return payload
 
@@ -305,34 +340,3 @@ def regenerate(results_json: Path, out_dir: Path) -> dict:
     rows = [{**r, "status": "ok", "error": None} if r["status"] == "collapse" and "unstressed mean" in (r.get("error") or "")
             else r for r in d["rows"]]
     return write_outputs(rows, out_dir, d["scale"], d["data"], machine=d["machine"])
-
-
-def chart(rows: list[dict], path: Path, title: str) -> None:
-    """BEV PSNR per case and method (failed cases drawn as red crosses at the axis floor)."""
-    plt = pyplot()
-    variants = list(dict.fromkeys(r["variant"] for r in rows))
-    methods = list(dict.fromkeys(r["method"] for r in rows))
-    fig, ax = plt.subplots(figsize=(max(7, 0.9 * len(variants) * max(1, len(methods)) / 2), 4.4))
-    vals = [r["bev_psnr"] for r in rows if r.get("bev_psnr") is not None and math.isfinite(r["bev_psnr"])]
-    floor = (min(vals) - 2) if vals else 0.0
-    width = 0.8 / max(1, len(methods))
-    for k, m in enumerate(methods):
-        for i, v in enumerate(variants):
-            r = next((x for x in rows if x["method"] == m and x["variant"] == v), None)
-            if r is None or r["status"] == "unsupported":
-                continue
-            x = i + (k - (len(methods) - 1) / 2) * width
-            if r["status"] == "ok":
-                if r.get("bev_psnr") is None:
-                    continue
-                ax.bar([x], [r["bev_psnr"] - floor], width, bottom=floor, color=plt.get_cmap("tab10")(k), label=m if i == 0 else None)
-            else:
-                ax.scatter([x], [floor + 0.3], marker="x", color="red", s=60, zorder=3, label="failed" if k == 0 and i == 0 else None)
-    ax.set_xticks(range(len(variants)))
-    ax.set_xticklabels(variants, rotation=20, ha="right", fontsize=8)
-    ax.set_ylabel("bird's-eye PSNR (dB)")
-    ax.legend(fontsize=7)
-    ax.grid(axis="y", alpha=0.3)
-    ax.set_title(title, fontsize=10)
-    fig.tight_layout()
-    save_figure(fig, path)

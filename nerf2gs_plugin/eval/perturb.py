@@ -1,8 +1,9 @@
 """Stressed copies of a nerfstudio dataset for the stability bench: pose noise, fewer training
-views, no masks, no sparse points.
+views, no masks, no sparse points, mask errors (eroded, dilated, dropped) and per-frame exposure.
 
-A copy is only a new ``transforms.json`` (plus ``perturbation.json``) whose image, mask, depth and
-point paths point back at the original files, so it costs no disk. Only training frames are
+A copy is a new ``transforms.json`` (plus ``perturbation.json``) whose image, mask, depth and
+point paths point back at the original files, so it costs no disk; only the masks and images a
+stress changes (eroded/dilated masks, re-exposed images) are written into the copy. Only training frames are
 changed; eval splits keep their exact poses and images. The folder name carries a hash of the
 source file and the parameters, so a changed perturbation never reuses a stale copy (or the runs
 trained on it: bench runs are filed under the dataset folder's name).
@@ -40,6 +41,15 @@ class Perturbation:
     """Remove sky/ground/transient masks (training and eval frames)."""
     drop_points: bool = False
     """Remove the sparse points (methods fall back to random initialisation)."""
+    mask_erode_px: int = 0
+    """Shrink every training mask (sky, ground, transient) by this many pixels (square kernel)."""
+    mask_dilate_px: int = 0
+    """Grow every training mask by this many pixels (after any erosion)."""
+    mask_drop_fraction: float = 0.0
+    """Remove all masks of this fraction of the training frames (which ones: by ``seed``)."""
+    exposure_spread: float = 0.0
+    """Per-frame exposure change of each training image, in stops: gain ``2**u`` and offset
+    ``EXPOSURE_OFFSET_PER_STOP * v`` with ``u, v`` uniform in ``[-spread, spread]`` (by ``seed``)."""
     seed: int = 0
 
     def tag(self) -> str:
@@ -52,7 +62,18 @@ class Perturbation:
             parts.append("nomasks")
         if self.drop_points:
             parts.append("nopoints")
+        if self.mask_erode_px:
+            parts.append(f"erode{self.mask_erode_px}")
+        if self.mask_dilate_px:
+            parts.append(f"dilate{self.mask_dilate_px}")
+        if self.mask_drop_fraction:
+            parts.append(f"maskdrop{self.mask_drop_fraction:g}")
+        if self.exposure_spread:
+            parts.append(f"exposure{self.exposure_spread:g}")
         return "-".join(parts) or "copy"
+
+
+EXPOSURE_OFFSET_PER_STOP = 0.05  # offset spread (in [0, 1] intensity) per stop of gain spread
 
 
 def random_rotation(angle_rad: float, rng: np.random.Generator) -> np.ndarray:
@@ -109,6 +130,54 @@ def _rewrite_frame(frame: dict, root: Path, drop_masks: bool) -> dict:
     return fr
 
 
+def morph_mask(mask: np.ndarray, erode_px: int = 0, dilate_px: int = 0) -> np.ndarray:
+    """Bool ``[H, W]`` mask shrunk by ``erode_px`` then grown by ``dilate_px`` pixels (square kernel)."""
+    import cv2
+
+    out = mask.astype(np.uint8)
+    if erode_px:
+        out = cv2.erode(out, np.ones((2 * erode_px + 1,) * 2, np.uint8), borderType=cv2.BORDER_REPLICATE)
+    if dilate_px:
+        out = cv2.dilate(out, np.ones((2 * dilate_px + 1,) * 2, np.uint8), borderType=cv2.BORDER_REPLICATE)
+    return out > 0
+
+
+def exposure_draws(pert: Perturbation, n: int) -> list[tuple[float, float]]:
+    """(gain, offset) of each of ``n`` training frames, deterministic by ``pert.seed``."""
+    if not pert.exposure_spread:
+        return [(1.0, 0.0)] * n
+    rng = np.random.default_rng([pert.seed, 2])  # its own stream: the pose noise of a seed is unchanged
+    u = rng.uniform(-pert.exposure_spread, pert.exposure_spread, size=(n, 2))
+    return [(float(2.0 ** a), float(EXPOSURE_OFFSET_PER_STOP * b)) for a, b in u]
+
+
+def _stress_masks(frame: dict, dst: Path, pert: Perturbation, drop: bool) -> None:
+    """Drop the frame's masks, or write its eroded/dilated masks into the copy and point at them."""
+    from nerf2gs_plugin.data.images import load_mask, write_mask_atomic
+
+    for kind in MASK_KINDS:
+        key = f"{kind}_mask_path"
+        if not frame.get(key):
+            continue
+        if drop:
+            frame.pop(key)
+        elif pert.mask_erode_px or pert.mask_dilate_px:
+            src = Path(frame[key])
+            out = dst / "masks" / kind / f"{Path(frame['file_path']).stem}.png"
+            write_mask_atomic(out, morph_mask(load_mask(src).numpy(), pert.mask_erode_px, pert.mask_dilate_px))
+            frame[key] = str(out.resolve())
+
+
+def _stress_exposure(frame: dict, dst: Path, gain: float, offset: float) -> None:
+    """Write the frame's image with ``gain * rgb + offset`` (clipped) into the copy and point at it."""
+    from nerf2gs_plugin.data.images import load_image, write_image_atomic
+
+    src = Path(frame["file_path"])
+    out = dst / "images" / f"{src.stem}.png"
+    write_image_atomic(out, (load_image(src).numpy() * gain + offset).clip(0.0, 1.0))
+    frame["file_path"] = str(out.resolve())
+
+
 def perturbed_copy(src: Path, dst_root: Path, pert: Perturbation) -> Path:
     """Write (or reuse) the stressed copy of the dataset at ``src`` under ``dst_root``; returns its folder."""
     src = Path(src)
@@ -137,7 +206,12 @@ def perturbed_copy(src: Path, dst_root: Path, pert: Perturbation) -> Path:
     is_train = [(str(f.get("file_path")) in train_names) if train_names else (str(f.get("file_path")) not in eval_names) for f in frames]
     mpu = float(meta.get("metres_per_unit", meta.get("scale_metric", 1.0)) or 1.0)
     rng = np.random.default_rng(pert.seed)
+    n_kept = len(range(0, sum(is_train), pert.keep_every))
+    drop_rng = np.random.default_rng([pert.seed, 1])  # its own stream, as the exposure's
+    mask_drops = set(drop_rng.choice(n_kept, size=int(round(pert.mask_drop_fraction * n_kept)), replace=False).tolist())
+    exposures = exposure_draws(pert, n_kept)
     new_frames, kept_names, dropped, n_train = [], [], set(), 0
+    masks_dropped, exposure_log = [], {}
     for fr, train in zip(frames, is_train):
         if not isinstance(fr, dict) or "file_path" not in fr or "transform_matrix" not in fr:
             raise DataError("a frame needs 'file_path' and 'transform_matrix'", path)
@@ -149,6 +223,14 @@ def perturbed_copy(src: Path, dst_root: Path, pert: Perturbation) -> Path:
                 continue
             if pert.rotation_deg or pert.translation_m:
                 new["transform_matrix"] = perturb_pose(fr["transform_matrix"], pert.rotation_deg, pert.translation_m / mpu, rng)
+            k = (n_train - 1) // pert.keep_every  # index among the kept training frames
+            if k in mask_drops or pert.mask_erode_px or pert.mask_dilate_px:
+                _stress_masks(new, dst, pert, drop=k in mask_drops)
+                if k in mask_drops:
+                    masks_dropped.append(str(fr["file_path"]))
+            if pert.exposure_spread:
+                _stress_exposure(new, dst, *exposures[k])
+                exposure_log[str(fr["file_path"])] = list(exposures[k])
         kept_names.append((str(fr["file_path"]), new["file_path"]))
         new_frames.append(new)
     out["frames"] = new_frames
@@ -167,7 +249,7 @@ def perturbed_copy(src: Path, dst_root: Path, pert: Perturbation) -> Path:
     dst.mkdir(parents=True, exist_ok=True)
     atomic_write_text(dst / "transforms.json", json.dumps(out, indent=1))
     info = {"source": str(root.resolve()), "perturbation": asdict(pert), "train_frames": n_train,
-            "train_frames_kept": n_train - len(dropped)}
+            "train_frames_kept": n_train - len(dropped), "masks_dropped": masks_dropped, "exposure": exposure_log}
     atomic_write_text(dst / "perturbation.json", json.dumps(info, indent=1))
     return dst
 

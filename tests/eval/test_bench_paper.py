@@ -51,8 +51,9 @@ def test_bench_cli_dispatches_subcommands(tmp_path):
     from nerf2gs_plugin.cli.bench import Stability
     from nerf2gs_plugin.errors import ConfigError
 
-    with pytest.raises(ConfigError, match="matches no stability case"):
-        Stability(methods=("splatfacto",), cases=("nothing",), runs=tmp_path / "runs").main()
+    with pytest.raises(ConfigError, match="unknown stress 'nothing'"):  # before any work: no dataset made
+        Stability(methods=("splatfacto",), stresses=("nothing",), runs=tmp_path / "runs").main()
+    assert not (tmp_path / "runs").exists()
 
 
 def test_paper_bench_records_failed_runs_and_goes_on(tiny_scene, tmp_path, monkeypatch):

@@ -73,25 +73,130 @@ def test_speed_quality_reads_results_and_writes_outputs(tmp_path):
         collect_points(res, ["bad"])
 
 
-def test_stability_plan_is_complete_and_valid():
+def test_stability_plan_walks_each_stress_mild_to_harsh():
+    from nerf2gs_plugin.eval.stability_levels import STRESS_LEVELS
+
     plan = stability_plan("quick")
-    methods = ("streetnerf", "splatfacto", "scaffold-gs", "2dgs")
-    assert len(plan) == len(methods) * 8
-    variants = [c.variant for c in plan if c.method == "splatfacto"]
     own = get_method("splatfacto").config.seed
-    assert variants == [f"seed {own}", f"seed {own + 1}", f"seed {own + 2}", "pose noise 0.5deg/5cm", "half views", "2x transients",
-                        "no masks", "random init"]
+    sf = [c for c in plan if c.label_method == "splatfacto"]
+    assert [c.variant for c in sf[:3]] == [f"seed {own}", f"seed {own + 1}", f"seed {own + 2}"]  # seeds first: the baseline
+    assert [c.stress for c in sf[3:]] == [s for s in STRESS_LEVELS if s != "reference steps" for _ in STRESS_LEVELS[s]]
+    pose = [c.perturbation for c in sf if c.stress == "pose noise"]
+    assert [(p.rotation_deg, p.translation_m) for p in pose] == [(0.25, 0.025), (0.5, 0.05), (1, 0.1), (2, 0.2), (4, 0.4)]
+    assert [c.perturbation.keep_every for c in sf if c.stress == "views kept"] == [2, 4, 8]
+    assert [c.transients_factor for c in sf if c.stress == "transients"] == [2, 4, 8]
+    assert [c.level_label for c in sf if c.stress == "mask errors"][-2:] == ["50% dropped", "all dropped"]
+    spreads = [c.perturbation.exposure_spread for c in sf if c.stress == "exposure"]
+    assert spreads == sorted(spreads) and len(spreads) >= 3
+    for stress in STRESS_LEVELS:  # levels numbered 1.. in order
+        assert [c.level for c in sf if c.stress == stress] == list(range(1, len([c for c in sf if c.stress == stress]) + 1))
+    # the mild levels are the former one-level cases: same datasets, same runs (reused from the cache)
+    assert next(c for c in sf if c.variant == "pose noise 0.5deg/5cm").perturbation == Perturbation(rotation_deg=0.5, translation_m=0.05, seed=7)
+    assert next(c for c in sf if c.variant == "no masks").perturbation == Perturbation(drop_masks=True)
+    assert next(c for c in sf if c.variant == "random init").perturbation == Perturbation(drop_points=True)
     from nerf2gs_plugin.eval.bench_paper import paper_table_plan
 
     baseline = next(s for s in paper_table_plan("quick") if s.label == "splatfacto")
-    assert plan[8].overrides == baseline.overrides  # the own-seed run is the paper-table run: trained once
-    pose = next(c for c in plan if c.variant.startswith("pose"))
-    assert pose.perturbation.rotation_deg == 0.5 and pose.perturbation.translation_m == 0.05
-    assert next(c for c in plan if c.variant == "2x transients").transients_factor == 2
-    assert next(c for c in plan if c.variant == "random init").perturbation == Perturbation(drop_points=True)
+    assert sf[0].overrides == baseline.overrides  # the own-seed run is the paper-table run: trained once
+    # the augmented pipeline: a reference per case; its training length is a stress of its own
+    aug = [c for c in plan if c.label_method == "splatfacto + NeRF views"]
+    ref_steps = [apply_plain(get_method("streetnerf").config, c.reference_overrides).max_num_iterations for c in aug]
+    assert ref_steps[0] == 1500 and all(c.method == "splatfacto" for c in aug)
+    short = [n for c, n in zip(aug, ref_steps) if c.stress == "reference steps"]
+    assert short == sorted(short, reverse=True) and short[0] == 750 and short[-1] < 100
+    assert all(c.stress != "reference steps" for c in plan if c.reference_overrides is None)
     for case in plan:  # every override is a real config field of its method
         cfg = apply_plain(get_method(case.method).config, case.overrides)
         assert cfg.seed == case.seed
+
+
+def test_stability_plan_options_and_bad_names():
+    plan = stability_plan("quick", ("2dgs",), stresses=("views kept",), steps_fraction=0.25, n_seeds=1)
+    assert [c.variant for c in plan] == [f"seed {get_method('2dgs').config.seed}", "views kept 50%", "views kept 25%", "views kept 12%"]
+    assert apply_plain(get_method("2dgs").config, plan[0].overrides).max_num_iterations == 200
+    with pytest.raises(ConfigError, match="unknown stress 'wind'"):
+        stability_plan("quick", ("splatfacto",), stresses=("wind",))
+    with pytest.raises(ConfigError, match="unknown method 'nope'"):
+        stability_plan("quick", ("nope+nerf",))
+    with pytest.raises(ConfigError, match="reference cannot be trained on its own views"):
+        stability_plan("quick", ("streetnerf+nerf",))
+    with pytest.raises(ConfigError, match="steps-fraction"):
+        stability_plan("quick", ("splatfacto",), steps_fraction=1.5)
+    assert [c.label_method for c in stability_plan("quick", ("splatfacto + NeRF views",), stresses=("init",), n_seeds=1)] == \
+        ["splatfacto + NeRF views"] * 2
+
+
+def _level_row(method, stress, level, street, bev=15.0, status="ok", error=None):
+    return {"method": method, "variant": f"{stress} L{level}", "stress": stress, "level": level, "level_label": f"L{level}",
+            "status": status, "street_psnr": street, "bev_psnr": bev, "error": error}
+
+
+def test_sweep_stops_each_stress_at_its_first_failure():
+    from nerf2gs_plugin.eval.breaking_point import sweep
+
+    seeds = [{"method": "m", "variant": f"seed {i}", "status": "ok", "street_psnr": 20.0, "bev_psnr": 15.0} for i in range(2)]
+    outcomes = {("pose", 1): 19.0, ("pose", 2): 16.5, ("pose", 3): 18.0, ("views", 1): 19.5, ("views", 2): 19.0,
+                ("exp", 1): "boom", ("exp", 2): 19.0, ("mask", 1): "unsupported", ("mask", 2): 19.0}
+    cases = [(None, i) for i in range(2)] + [(s, lv) for s, lv in outcomes]
+    ran = []
+
+    def run_one(i, case):
+        ran.append(case)
+        stress, level = case
+        if stress is None:
+            return seeds[level]
+        v = outcomes[case]
+        if v == "boom":
+            raise RuntimeError("kernel exploded\nsecond line")
+        if v == "unsupported":
+            return {"method": "m", "variant": "x", "stress": stress, "level": level, "status": "unsupported", "error": "unsupported: y"}
+        return _level_row("m", stress, level, v)
+
+    rows = sweep(cases, run_one, lambda c: ("m", c[0]) if c[0] else None)
+    # pose breaks at level 2 (3.5 dB below), so level 3 is never run; views never breaks
+    assert ("pose", 3) not in ran and ("views", 2) in ran and ("exp", 2) not in ran and ("mask", 2) not in ran
+    assert len(rows) == len(ran) == 8  # 2 seeds, pose 1-2, views 1-2, exposure 1, masks 1
+    err = next(r for r in rows if r.get("error_kind"))
+    assert err["status"] == "error" and err["error"] == "RuntimeError: kernel exploded" and err["method"] == "m"
+
+    from nerf2gs_plugin.eval.breaking_point import breaking_points
+
+    err.update(stress="exp", level=1, level_label="L1")  # plain tuples carry no tags; real cases do
+    points = breaking_points(rows)["m"]
+    assert points["pose"] == {"level": "L2", "level_index": 2, "status": "collapse", "drop_db": pytest.approx(3.5),
+                              "error": "street PSNR 3.50 dB below the unstressed mean"}
+    assert points["views"] == "none up to L2"
+    assert points["exp"]["status"] == "error" and points["exp"]["drop_db"] is None
+    assert points["mask"] == "unsupported"
+
+
+def test_breaking_points_table_json_and_chart(tmp_path):
+    from nerf2gs_plugin.eval.breaking_point import breaking_markdown, breaking_points, level_chart
+
+    rows = [{"method": m, "variant": f"seed {i}", "status": "ok", "street_psnr": 20.0 + i * 0.1, "bev_psnr": 16.0}
+            for m in ("a", "a + NeRF views") for i in range(2)]
+    rows += [_level_row("a", "pose noise", 1, 19.8), _level_row("a", "pose noise", 2, 19.0, bev=12.5),
+             _level_row("a + NeRF views", "pose noise", 1, 19.9), _level_row("a + NeRF views", "pose noise", 2, 19.7),
+             _level_row("a", "exposure", 1, None, None, status="nan", error="nan: non-finite PSNR/SSIM"),
+             _level_row("a + NeRF views", "reference steps", 1, 18.0),
+             _level_row("a + NeRF views", "exposure", 1, 19.0, status="collapse",
+                        error="final PSNR 9.00 below the untrained model's 10.00 on the same images")]
+    points = breaking_points(rows)
+    assert points["a"]["pose noise"]["level"] == "L2" and points["a"]["pose noise"]["drop_db"] == pytest.approx(3.5)
+    assert {k: v for k, v in points["a + NeRF views"].items() if k != "exposure"} == \
+        {"pose noise": "none up to L2", "reference steps": "none up to L1"}
+    assert points["a"]["exposure"]["status"] == "nan"
+    json.dumps(points)  # JSON-ready
+    md = breaking_markdown(points)
+    assert "| method | pose noise | exposure | reference steps |" in md
+    assert "| a | **L2** (collapse: 3.5 dB below) | **L1** (nan: nan) | not run |" in md
+    assert "| a + NeRF views | none up to L2 | **L1** (collapse: below the untrained model) | none up to L1 |" in md
+    level_chart(rows, tmp_path / "s.png", "t")
+    assert (tmp_path / "s.png").read_bytes()[:4] == b"\x89PNG" and (tmp_path / "s.png").stat().st_size > 5000
+    payload = bench_stability.write_outputs(rows, tmp_path / "out", "test", "street")
+    assert payload["breaking_point"] == points and payload["levels"]["pose noise"][0] == "0.25deg/2.5cm"
+    written = (tmp_path / "out" / "stability.md").read_text()
+    assert "## Breaking points" in written and "## Outcomes" in written and (tmp_path / "out" / "stability.png").is_file()
 
 
 def test_classify_and_summary_count_failures():
@@ -143,6 +248,10 @@ def test_committed_stability_results_use_the_collapse_definition():
     assert d["collapse_db"] == COLLAPSE_DB
     assert [r["status"] for r in mark_collapses(d["rows"])] == [r["status"] for r in d["rows"]]
     assert summarize(d["rows"]) == d["summary"]
+    if "breaking_point" in d:  # the sweep's format; the one-level bench's file has none
+        from nerf2gs_plugin.eval.breaking_point import breaking_points
+
+        assert breaking_points(d["rows"]) == d["breaking_point"]
 
 
 def test_size_plan_and_smallest_within():

@@ -71,3 +71,63 @@ def test_bad_sources_are_clear_errors(tmp_path):
     (d / "transforms.json").write_text(json.dumps({"frames": [{"file_path": "a.png", "transform_matrix": np.eye(4).tolist()}]}))
     with pytest.raises(DataError, match="explicit eval splits"):
         perturbed_copy(d, tmp_path / "out", Perturbation(keep_every=2))
+
+
+def _train_masks(dataset, kind):
+    from nerf2gs_plugin.data.images import load_mask
+
+    return [load_mask(p).numpy() for p in parse_dataset(dataset, "train").mask_filenames[kind]]
+
+
+def test_mask_erosion_shrinks_and_dilation_grows_training_masks(tiny_scene, tmp_path):
+    orig = _train_masks(tiny_scene, "transient")
+    eroded = _train_masks(perturbed_copy(tiny_scene, tmp_path, Perturbation(mask_erode_px=1)), "transient")
+    dilated = _train_masks(perturbed_copy(tiny_scene, tmp_path, Perturbation(mask_dilate_px=1)), "transient")
+    assert sum(o.sum() for o in orig) > 0
+    for o, e, d in zip(orig, eroded, dilated):
+        assert not (e & ~o).any() and not (o & ~d).any()  # eroded inside the original, original inside dilated
+        if o.any() and not o.all():
+            assert e.sum() < o.sum() < d.sum()
+    out = perturbed_copy(tiny_scene, tmp_path, Perturbation(mask_erode_px=1))
+    meta = json.loads((out / "transforms.json").read_text())
+    src = json.loads((tiny_scene / "transforms.json").read_text())
+    for split, entries in src["eval_splits"].items():  # eval masks untouched
+        assert all(str(tiny_scene) in e.get("sky_mask_path", str(tiny_scene)) for e in meta["eval_splits"][split])
+
+
+def test_mask_drop_removes_half_the_training_masks_deterministically(tiny_scene, tmp_path):
+    n = len(parse_dataset(tiny_scene, "train").image_filenames)
+    a = perturbed_copy(tiny_scene, tmp_path / "a", Perturbation(mask_drop_fraction=0.5, seed=3))
+    b = perturbed_copy(tiny_scene, tmp_path / "b", Perturbation(mask_drop_fraction=0.5, seed=3))
+    c = perturbed_copy(tiny_scene, tmp_path / "c", Perturbation(mask_drop_fraction=0.5, seed=4))
+    masks = parse_dataset(a, "train").mask_filenames
+    missing = [i for i in range(n) if masks["sky"][i] is None]
+    assert len(missing) == round(n / 2)
+    assert all((masks[k][i] is None) == (i in missing) for k in ("sky", "ground", "transient") for i in range(n))
+    info = json.loads((a / "perturbation.json").read_text())
+    assert info["masks_dropped"] == json.loads((b / "perturbation.json").read_text())["masks_dropped"]
+    assert len(info["masks_dropped"]) == len(missing)
+    other = json.loads((c / "perturbation.json").read_text())["masks_dropped"]
+    assert len(other) == len(missing)  # another seed: the same count (which ones may differ)
+
+
+def test_exposure_changes_each_training_image_by_its_gain_and_offset(tiny_scene, tmp_path):
+    from nerf2gs_plugin.data.images import load_image
+
+    spread = 1.0
+    dst = perturbed_copy(tiny_scene, tmp_path, Perturbation(exposure_spread=spread, seed=5))
+    orig, new = parse_dataset(tiny_scene, "train"), parse_dataset(dst, "train")
+    info = json.loads((dst / "perturbation.json").read_text())["exposure"]
+    assert len(info) == len(orig.image_filenames)
+    log_gains = []
+    for a, b in zip(orig.image_filenames, new.image_filenames):
+        gain, offset = next(v for k, v in info.items() if k.endswith(a.name))
+        assert 2 ** -spread <= gain <= 2 ** spread and abs(offset) <= 0.05 * spread
+        log_gains.append(np.log2(gain))
+        x, y = load_image(a).numpy(), load_image(b).numpy()
+        want = np.clip(x * gain + offset, 0, 1)
+        assert np.abs(y - want).max() <= 1 / 255 + 1e-6  # the stated change, up to 8-bit rounding
+    assert max(log_gains) - min(log_gains) > spread / 2  # the frames really differ from one another
+    assert len(set(np.round(log_gains, 6))) == len(log_gains)
+    ev = parse_dataset(dst, "bev_1")  # eval images are the originals
+    assert all(str(tiny_scene) in str(p) for p in ev.image_filenames)
