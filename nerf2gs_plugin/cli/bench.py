@@ -8,13 +8,14 @@ writes everything under outputs/demo/ instead and leaves the committed results a
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Literal, Optional
 
 import tyro
 
 from nerf2gs_plugin.cli.common import run_cli
+from nerf2gs_plugin.eval.bench_real_photos import RealPhotosOptions
 
 RESULTS = Path("benchmarks/results")
 RUNS = Path("benchmarks/runs")
@@ -300,41 +301,19 @@ class Real:
 
 
 @dataclass
-class RealPhotos:
+class RealPhotos(RealPhotosOptions):
     """A real outdoor photo folder through process images -> masks (auto) -> StreetNeRF -> Splatfacto +- NeRF
     views, scored on held-out photos, with renders from above (``real_photos.*``). The photos stay where they are."""
 
-    images: Path
-    """Folder of photos (natural name order = capture order)."""
-    provenance: str = ""
-    """Where the photos come from (repository, commit, path, licence): written into the results."""
     out: Path = RESULTS
     runs: Path = RUNS
     rerun: bool = False
-    camera_height: float = 1.6
-    fov_deg: Optional[float] = None
-    metres_per_unit: Optional[float] = None
-    matching: Literal["auto", "sequential", "exhaustive"] = "auto"
-    overlap: int = 10
-    num_threads: int = -1
-    downscale: float = 4.0
-    holdout_every: int = 8
-    reference_steps: int = 500
-    streetnerf_steps: int = 1000
-    splatfacto_steps: int = 1500
-    delta_h: float = 3.0
-    theta_pitch: float = 30.0
-    every_n: int = 1
+    """Retrain and re-evaluate every run of the bench even when a finished one with its key exists."""
 
     def main(self) -> None:
-        from nerf2gs_plugin.eval.bench_real_photos import RealPhotosOptions, results_md, run_real_photos
+        from nerf2gs_plugin.eval.bench_real_photos import results_md, run_real_photos
 
-        opts = RealPhotosOptions(images=self.images, provenance=self.provenance, camera_height=self.camera_height, fov_deg=self.fov_deg,
-                                 matching=self.matching, overlap=self.overlap, num_threads=self.num_threads, downscale=self.downscale,
-                                 holdout_every=self.holdout_every, reference_steps=self.reference_steps,
-                                 streetnerf_steps=self.streetnerf_steps, splatfacto_steps=self.splatfacto_steps,
-                                 delta_h=self.delta_h, theta_pitch=self.theta_pitch, every_n=self.every_n,
-                                 metres_per_unit=self.metres_per_unit)
+        opts = RealPhotosOptions(**{f.name: getattr(self, f.name) for f in fields(RealPhotosOptions)})
         doc = run_real_photos(opts, self.runs, self.out, rerun=self.rerun)
         print(results_md(doc))
         print(f"results: {self.out}/real_photos.md")

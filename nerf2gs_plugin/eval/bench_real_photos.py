@@ -17,7 +17,7 @@ import json
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Callable, Literal, Optional
 
 from nerf2gs_plugin.utils.io import atomic_write_text
 
@@ -40,10 +40,14 @@ class RealPhotosOptions:
     """Horizontal FOV when the photos carry no EXIF focal."""
     metres_per_unit: Optional[float] = None
     """Metres per SfM unit when the camera-height scale cannot be trusted (see the results' notes)."""
-    matching: str = "auto"
+    matching: Literal["auto", "sequential", "exhaustive"] = "auto"
+    """SfM matching (as process images --matching)."""
     overlap: int = 10
+    """Sequential matching: frames matched with each frame."""
     num_threads: int = -1
+    """SfM threads (-1: all cores)."""
     max_features: int = 4096
+    """SIFT features per photo."""
     downscale: float = 4.0
     """Training and eval image downscale (images_4)."""
     holdout_every: int = 8
@@ -51,7 +55,9 @@ class RealPhotosOptions:
     reference_steps: int = 500
     """Steps of the masks' first reference (StreetNeRF without masks)."""
     streetnerf_steps: int = 1000
+    """StreetNeRF's steps (schedules rescaled)."""
     splatfacto_steps: int = 1500
+    """Splatfacto's steps, with and without NeRF views."""
     delta_h: float = 3.0
     """Bird's-eye views: metres above the input cameras (the augmentation's and the figure's)."""
     theta_pitch: float = 30.0
