@@ -18,6 +18,7 @@ import torch
 
 torch.set_num_threads(1)
 from nerf2gs_plugin.engine.reference import load_run  # noqa: E402
+from nerf2gs_plugin.eval.bench_io import fmt  # noqa: E402
 from nerf2gs_plugin.eval.evaluate import evaluate_run  # noqa: E402
 from nerf2gs_plugin.eval.metrics import LPIPS  # noqa: E402
 from nerf2gs_plugin.eval.machine import machine_info, machine_line  # noqa: E402
@@ -40,9 +41,6 @@ for target in targets:
         print(label, {s: round(rows[label][s]["psnr"], 2) for s in SPLITS}, flush=True)
 
 
-def f(v, d=2):
-    return "n/a" if v is None else f"{v:.{d}f}"
-
 
 lines = ["| target | d PSNR val_street | d PSNR val_bev | d LPIPS val_bev | PSNR val_bev without / with |", "|---|---|---|---|---|"]
 deltas = {}
@@ -52,7 +50,7 @@ for target in targets:
     dl = None if a["val_bev"]["lpips"] is None else b["val_bev"]["lpips"] - a["val_bev"]["lpips"]
     deltas[target] = {"psnr_val_street": d["val_street"], "psnr_val_bev": d["val_bev"], "lpips_val_bev": dl}
     lines.append(f"| {target} | {d['val_street']:+.2f} | {d['val_bev']:+.2f} | {'n/a' if dl is None else f'{dl:+.3f}'} | "
-                 f"{f(a['val_bev']['psnr'])} / {f(b['val_bev']['psnr'])} |")
+                 f"{fmt(a['val_bev']['psnr'])} / {fmt(b['val_bev']['psnr'])} |")
 info = machine_info()
 doc = {"title": "The enhancer on the validation views", "machine": info, "source": str(results_json),
        "how": f"benchmarks/validation/enhancer.py on the runs of {results_json}; splits {SPLITS}",

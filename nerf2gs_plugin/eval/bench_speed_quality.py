@@ -112,9 +112,10 @@ def fronts(points: list[dict]) -> tuple[list[int], list[int], list[int]]:
 
 def front_3d(points: list[dict]) -> list[int]:
     """The runs no other run beats at once on render FPS, BEV PSNR and model size, best PSNR first."""
-    idx = pareto_front_nd([[_finite(p["fps"]) for p in points], _bev(points), [_finite(p.get("megabytes")) for p in points]],
+    ys = _bev(points)
+    idx = pareto_front_nd([[_finite(p["fps"]) for p in points], ys, [_finite(p.get("megabytes")) for p in points]],
                           (True, True, False))
-    return sorted(idx, key=lambda i: -_bev(points)[i])
+    return sorted(idx, key=lambda i: -ys[i])
 
 
 def chart(points: list[dict], path: Path, title: str) -> None:
@@ -128,6 +129,7 @@ def chart(points: list[dict], path: Path, title: str) -> None:
     mbs = [_finite(p.get("megabytes")) for p in points]
     top = max([v for v in mbs if math.isfinite(v)] or [1.0])
     area = [18 + 260 * math.sqrt(v / top) if math.isfinite(v) else 42 for v in mbs]
+    ys = _bev(points)
     fig, axes = plt.subplots(1, 3, figsize=(18, 5.2))
     panels = ((axes[0], "fps", "render FPS at eval resolution (log)", f_fps),
               (axes[1], "train_seconds", "training wall time, s (log)", f_time),
@@ -135,7 +137,7 @@ def chart(points: list[dict], path: Path, title: str) -> None:
     for ax, key, xlabel, front in panels:
         shown = set()
         for i, p in enumerate(points):
-            x, y = _finite(p.get(key)), _bev(points)[i]
+            x, y = _finite(p.get(key)), ys[i]
             if not (math.isfinite(x) and math.isfinite(y)):
                 continue
             m = str(p["method"])
