@@ -41,10 +41,13 @@ def pop_baseline(argv: list[str]) -> tuple[list[str], Optional[Path]]:
 
 
 def train(config: TrainerConfig, baseline: Optional[Path] = None) -> None:
+    """Train one run (in this process, or as one rank of a data-parallel run: rank 0 reports)."""
+    from nerf2gs_plugin.utils.collectives import rank
+
     # a scheduler's preemption signal saves like Ctrl-C (SIGINT raises KeyboardInterrupt)
     signal.signal(signal.SIGTERM, signal.default_int_handler)
     report = None
-    if config.augment_from is not None:  # point 5 of issue 18: say so before training on a weaker reference
+    if config.augment_from is not None and rank() == 0:  # point 5 of issue 18: say so before training on a weaker reference
         from nerf2gs_plugin.eval.reference_check import reference_report
 
         line, doc = reference_report(config.augment_from, baseline)
@@ -58,15 +61,16 @@ def train(config: TrainerConfig, baseline: Optional[Path] = None) -> None:
         from nerf2gs_plugin.eval.reference_check import write_reference_report
 
         write_reference_report(trainer.run_dir, report)
-    if config.viewer:
+    if config.viewer and rank() == 0:
         from nerf2gs_plugin.viewer.server import attach_training_viewer
 
         attach_training_viewer(trainer)
     try:
         run_dir = trainer.train()
     except KeyboardInterrupt:
-        path = trainer.save_checkpoint(trainer.step)
-        print(f"interrupted: checkpoint saved to {path}", file=sys.stderr)
+        path = trainer.save_checkpoint(trainer.step, synced=False)  # rank 0 alone: the ranks are not in step
+        if path is not None:
+            print(f"interrupted: checkpoint saved to {path}", file=sys.stderr)
         raise
     print(f"run saved to {run_dir}")
 
@@ -89,7 +93,9 @@ def main() -> None:
         raise DataError("baseline run folder does not exist", f"{BASELINE_FLAG} {baseline}")
     union = tyro.extras.subcommand_type_from_defaults(defaults=configs, descriptions=descriptions)
     config = tyro.cli(tyro.conf.FlagConversionOff[union], args=argv, description=f"Train a method (nerf2gs). {BASELINE_HELP}")
-    train(config, baseline)
+    from nerf2gs_plugin.engine.launch import launch
+
+    launch(train, config, baseline)  # in this process, or on --machine.num-devices ranks / as a torchrun rank
 
 
 def entrypoint() -> None:

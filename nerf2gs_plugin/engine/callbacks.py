@@ -11,6 +11,7 @@ class TrainingCallbackLocation(Enum):
     BEFORE_STEP = "before_step"  # before the forward pass
     AFTER_BACKWARD = "after_backward"  # gradients exist, optimizer not yet stepped
     AFTER_STEP = "after_step"  # after the optimizer step
+    AFTER_BATCH = "after_batch"  # several batches per step: after the backward of each batch but the last
 
 
 @dataclass

@@ -28,11 +28,13 @@ from nerf2gs_plugin.engine.checkpoints import (
 )
 from nerf2gs_plugin.engine.config import save_config
 from nerf2gs_plugin.engine.divergence import describe, nonfinite_counts, nonfinite_outputs
+from nerf2gs_plugin.engine.launch import MachineConfig
 from nerf2gs_plugin.engine.run_dir import RunDirLock, unique_run_dir
 from nerf2gs_plugin.engine.validate import check_trainer_config
 from nerf2gs_plugin.engine.optimizers import OptimizerConfig, Optimizers
 from nerf2gs_plugin.engine.pipeline import Pipeline, PipelineConfig
 from nerf2gs_plugin.errors import CheckpointError, ConfigError, TrainingDiverged
+from nerf2gs_plugin.utils import collectives
 from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.utils.schedule import scheduled
 
@@ -85,6 +87,8 @@ class TrainerConfig:
     plain line every 10 s with step, rate, ETA and loss."""
     viewer: bool = False
     """Serve the live viewer (viser) while training."""
+    machine: MachineConfig = field(default_factory=MachineConfig)
+    """Data-parallel training (torchrun, or --machine.num-devices N); see ``engine/launch.py``."""
 
     def run_dir(self) -> Path:
         name = self.experiment_name or Path(self.data).name
@@ -95,8 +99,8 @@ class Trainer:
     def __init__(self, config: TrainerConfig) -> None:
         check_trainer_config(config)
         self._unique_dir = config.timestamp == "{timestamp}"  # default stamp: a clash gets a new folder
-        if self._unique_dir:
-            config = dataclasses.replace(config, timestamp=datetime.now().strftime("%Y-%m-%d_%H%M%S"))
+        if self._unique_dir:  # rank 0's clock names the run for every rank
+            config = dataclasses.replace(config, timestamp=collectives.broadcast_object(datetime.now().strftime("%Y-%m-%d_%H%M%S")))
         # recorded absolute, so eval / export / the viewer find the data from any directory
         config = dataclasses.replace(config, data=Path(config.data).expanduser().absolute())
         self.config = config
@@ -108,14 +112,21 @@ class Trainer:
         self.history = StepHistory()
         self.train_seconds = 0.0
         self.step_hooks: list = []  # called after every step (the live viewer attaches here)
+        # data parallel: this rank's index, and its sampling streams (rank x K + k, each seeded seed + stream)
+        self.rank, self.world_size = collectives.rank(), collectives.world_size()
+        self.batches = max(1, config.machine.batches_per_rank)
+        self._streams: list[dict] = []  # the DataManager state of each stream, with several batches per rank
 
     # ------------------------------------------------------------------ setup
     def setup(self) -> None:
         torch.manual_seed(self.config.seed)
         np.random.seed(self.config.seed)
         random.seed(self.config.seed)
-        self.pipeline = Pipeline(self.config.pipeline, self.config.data, self.device, seed=self.config.seed,
+        first_stream = self.rank * self.batches
+        self.pipeline = Pipeline(self.config.pipeline, self.config.data, self.device, seed=self.config.seed + first_stream,
                                  wrap_datamanager=self._augmentation())
+        if self.batches > 1:
+            self._streams = [self._fresh_stream(first_stream + k) for k in range(self.batches)]
         self.optimizers = Optimizers(self.config.optimizers, self.pipeline.model.get_param_groups())
         attrs = TrainingCallbackAttributes(optimizers=self.optimizers, pipeline=self.pipeline)
         self.callbacks = self.pipeline.model.get_training_callbacks(attrs)
@@ -130,7 +141,36 @@ class Trainer:
         from nerf2gs_plugin.engine.reference import augmented_datamanager
 
         ref, augment, device = self.config.augment_from, self.config.augment, self.device
-        return lambda inner: augmented_datamanager(inner, ref, augment, device)
+
+        def wrap(inner):  # rank 0 renders the reference views into the cache, the other ranks then read it
+            with collectives.rank_zero_first():
+                return augmented_datamanager(inner, ref, augment if self.rank == 0 else dataclasses.replace(augment, use_cache=True), device)
+
+        return wrap
+
+    # ------------------------------------------------------------------ sampling streams
+    def _fresh_stream(self, stream: int) -> dict:
+        """A DataManager state that samples as stream ``stream`` does from the start (seed + stream)."""
+        dm = self.pipeline.datamanager
+        current = dm.state_dict()
+        dm.generator.manual_seed(self.config.seed + stream)
+        state = dm.state_dict()
+        dm.load_state_dict(current)
+        return state
+
+    def _stream_states(self) -> list[dict]:
+        """This rank's streams' DataManager states, first to last."""
+        return list(self._streams) if self._streams else [self.pipeline.datamanager.state_dict()]
+
+    def _load_streams(self, ckpt: dict) -> None:
+        """Each stream continues from the checkpoint's state of the same global stream; a stream the
+        checkpoint did not have (it was trained on fewer ranks) starts afresh."""
+        saved = ckpt.get("datamanager_streams") or [ckpt.get("datamanager", {})]
+        first = self.rank * self.batches
+        states = [saved[s] if s < len(saved) else self._fresh_stream(s) for s in range(first, first + self.batches)]
+        if self._streams:
+            self._streams = states
+        self.pipeline.datamanager.load_state_dict(states[0])
 
     def _resume(self, path: Path) -> None:
         _, ckpt_file = resolve_checkpoint(path)
@@ -147,7 +187,7 @@ class Trainer:
         self.optimizers.load_state_dict(ckpt.get("optimizers", {}))
         attrs = TrainingCallbackAttributes(optimizers=self.optimizers, pipeline=self.pipeline)
         self.callbacks = self.pipeline.model.get_training_callbacks(attrs)
-        self.pipeline.datamanager.load_state_dict(ckpt.get("datamanager", {}))
+        self._load_streams(ckpt)
         if "torch_rng" in ckpt:
             torch.set_rng_state(ckpt["torch_rng"].cpu())
         self.step = int(ckpt["step"]) + 1
@@ -155,6 +195,12 @@ class Trainer:
         self.last_good_checkpoint = ckpt_file
 
     def _write_run_files(self) -> None:
+        """Rank 0 writes the run folder; every rank learns its name."""
+        if self.rank == 0:
+            self._write_run_files_rank0()
+        self.run_dir = collectives.broadcast_object(self.run_dir)
+
+    def _write_run_files_rank0(self) -> None:
         if self._unique_dir:
             self.run_dir = unique_run_dir(self.run_dir)
             self.config = dataclasses.replace(self.config, timestamp=self.run_dir.name)
@@ -185,13 +231,22 @@ class Trainer:
         if bad_out:
             raise TrainingDiverged(f"training diverged by step {step}: finite parameters render non-finite {', '.join(bad_out)}{where}")
 
-    def save_checkpoint(self, step: int) -> Path:
-        """Write ``step-<step>.ckpt`` (only from finite state) and flush ``train_log.json`` with it."""
+    def save_checkpoint(self, step: int, synced: bool = True) -> Optional[Path]:
+        """Write ``step-<step>.ckpt`` (only from finite state) and flush ``train_log.json`` with it.
+        With several ranks every rank calls it (``synced``): the replicas' parameter hashes must
+        agree, rank 0 writes (with every rank's sampling streams) and the others return None;
+        not ``synced`` (an interrupt, where the ranks are not in step): rank 0 writes alone."""
+        streams = self._stream_states()
+        if self.world_size > 1 and synced:
+            self.check_replicas(step)
+            streams = [s for rank_streams in collectives.all_gather_object(streams) for s in rank_streams]
+        if self.rank != 0:
+            return None
         self.check_finite_state(step)
         path = checkpoint_path(self.run_dir, step)
         dm = self.pipeline.datamanager
         try:
-            self._write_checkpoint(path, step, dm)
+            self._write_checkpoint(path, step, dm, streams)
         except OSError as e:
             kept = f"; previous checkpoint kept: {self.last_good_checkpoint}" if self.last_good_checkpoint else ""
             raise CheckpointError(f"cannot write checkpoint ({e.strerror or e}){kept}", path) from None
@@ -202,13 +257,21 @@ class Trainer:
         self.last_good_checkpoint = path
         return path
 
+    def check_replicas(self, step: int) -> None:
+        """Every rank's parameters hash the same (data-parallel replicas stay identical)."""
+        digests = collectives.all_gather_object(collectives.param_digest(self.pipeline.model.state_dict()))
+        if len(set(digests)) > 1:
+            odd = [r for r, d in enumerate(digests) if d != digests[0]]
+            raise TrainingDiverged(f"data-parallel replicas differ at step {step}: the parameters of rank(s) "
+                                   f"{', '.join(map(str, odd))} are not rank 0's (hashes {', '.join(digests)})")
+
     def _write_train_log(self) -> None:
         views = getattr(self.pipeline.datamanager, "views", None)  # an AugmentedDataManager's reference renders
         atomic_write_text(self.run_dir / "train_log.json", json.dumps(
             {"train_seconds": self.train_seconds, "reference_render_seconds": getattr(views, "render_seconds", 0.0),
              "history_stride": self.history.stride, "history": self.history.records()}))
 
-    def _write_checkpoint(self, path: Path, step: int, dm: Any) -> None:
+    def _write_checkpoint(self, path: Path, step: int, dm: Any, streams: Optional[list[dict]] = None) -> None:
         save_checkpoint(
             path,
             {
@@ -216,7 +279,8 @@ class Trainer:
                 "step": step,
                 "model": self.pipeline.model.state_dict(),
                 "optimizers": self.optimizers.state_dict(),
-                "datamanager": dm.state_dict(),
+                "datamanager": dm.state_dict() if streams is None else streams[0],
+                **({"datamanager_streams": streams} if streams is not None and len(streams) > 1 else {}),
                 "torch_rng": torch.get_rng_state(),
                 "dataset": dataset_fingerprint(dm.train_data.image_filenames),
                 "train_seconds": self.train_seconds,
@@ -235,6 +299,21 @@ class Trainer:
         model.train()
         self._run_callbacks(Loc.BEFORE_STEP, step)
         self.optimizers.zero_grad()
+        if self.batches == 1:
+            out = self._backward_batch(step)
+        else:
+            out = self._backward_batches(step)
+        if self.world_size * self.batches > 1:  # the global batch's mean gradient, on every rank
+            collectives.average_gradients(list(model.parameters()), self.world_size * self.batches)
+            if self.world_size > 1:
+                out["loss"] = collectives.mean_over_ranks(out["loss"], self.device)
+        self._run_callbacks(Loc.AFTER_BACKWARD, step)
+        self.optimizers.step(step)
+        self._run_callbacks(Loc.AFTER_STEP, step)
+        return out
+
+    def _backward_batch(self, step: int) -> dict[str, float]:
+        """Forward and backward of one batch; its loss and scalar metrics."""
         _, losses, metrics = self.pipeline.get_train_loss_dict(step)
         loss = sum(losses.values())
         if not torch.isfinite(loss):
@@ -242,12 +321,26 @@ class Trainer:
             where = f"; last good checkpoint: {self.last_good_checkpoint}" if self.last_good_checkpoint else "; no checkpoint was written yet"
             raise TrainingDiverged(f"training diverged at step {step}: non-finite loss in {', '.join(bad)}{where}")
         loss.backward()
-        self._run_callbacks(Loc.AFTER_BACKWARD, step)
-        self.optimizers.step(step)
-        self._run_callbacks(Loc.AFTER_STEP, step)
         out = {"loss": float(loss.detach())}
         out.update({k: float(v) for k, v in metrics.items() if torch.is_tensor(v) and v.numel() == 1})
         return out
+
+    def _backward_batches(self, step: int) -> dict[str, float]:
+        """``--machine.batches-per-rank K``: K batches, batch k drawn by stream k and started from the
+        step's global random state, as K ranks would (gradients summed; the caller averages).
+        Returns the batches' mean loss and metrics."""
+        dm = self.pipeline.datamanager
+        rng = _rng_states(self.device)
+        records = []
+        for k in range(self.batches):
+            dm.load_state_dict(self._streams[k])
+            _set_rng_states(rng, self.device)
+            records.append(self._backward_batch(step))
+            self._streams[k] = dm.state_dict()
+            if k < self.batches - 1:
+                self._run_callbacks(Loc.AFTER_BATCH, step)
+        keys = [key for key in records[0] if all(key in r for r in records)]
+        return {key: sum(r[key] for r in records) / len(records) for key in keys}
 
     def train(self) -> Path:
         """Run to ``max_num_iterations``; returns the run directory."""
@@ -257,7 +350,7 @@ class Trainer:
         try:
             return self._train_loop(make_progress)
         finally:
-            self._lock.release()
+            self._lock.release()  # held by rank 0 only
 
     def _train_loop(self, make_progress: Any) -> Path:
         cfg = self.config
@@ -265,7 +358,7 @@ class Trainer:
         ema: dict[str, float] = {}
         # progress False: no live bar, a plain line every 10 s (step, rate, ETA, loss), unless a step
         # hook follows the steps (a bench's own bar): then nothing, so lines do not cut through it
-        with make_progress(enabled=cfg.progress or not self.step_hooks, live=cfg.progress) as progress:
+        with make_progress(enabled=(cfg.progress or not self.step_hooks) and self.rank == 0, live=cfg.progress) as progress:
             task = progress.add_task(f"train {cfg.method_name}", total=cfg.max_num_iterations, completed=start, stats="")
             for step in range(start, cfg.max_num_iterations):
                 t0 = time.perf_counter()
@@ -275,7 +368,7 @@ class Trainer:
                 for k, v in stats.items():
                     ema[k] = v if k not in ema else 0.9 * ema[k] + 0.1 * v
                 record = {"step": step, **stats}
-                if cfg.steps_per_eval_image and (step + 1) % cfg.steps_per_eval_image == 0:
+                if cfg.steps_per_eval_image and (step + 1) % cfg.steps_per_eval_image == 0 and self.rank == 0:
                     record.update(self.pipeline.get_eval_image_metrics(step))
                     ema["eval_psnr_1view"] = record["eval_psnr_1view"]
                 self.history.append(record)
@@ -288,6 +381,16 @@ class Trainer:
                 progress.update(task, advance=1, stats=_format_stats(ema, prims))
         self.save_checkpoint(cfg.max_num_iterations - 1)
         return self.run_dir
+
+
+def _rng_states(device: torch.device) -> tuple:
+    return (torch.get_rng_state(), torch.cuda.get_rng_state(device) if device.type == "cuda" else None)
+
+
+def _set_rng_states(states: tuple, device: torch.device) -> None:
+    torch.set_rng_state(states[0])
+    if states[1] is not None:
+        torch.cuda.set_rng_state(states[1], device)
 
 
 class StepHistory:

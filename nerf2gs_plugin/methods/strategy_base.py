@@ -12,18 +12,32 @@ strategy it is:
 ``grad_key`` names the tensor whose gradient drives densification: ``"means2d"`` (the projected
 centres) for 3DGS and Scaffold-GS, ``"gradient_2dgs"`` for 2DGS surfels. :meth:`initialize_state`
 forgets the statistics (a fresh model, or a checkpoint loaded with another primitive count).
+
+Data-parallel training (several ranks, each rendering its own cameras): a strategy lists its
+accumulated statistics in :attr:`Strategy.reduced_stats` and makes every refine decision inside
+``with self.all_ranks(device):``, which first combines the statistics of all ranks (sum or max)
+and gives every rank rank 0's random generator, so all ranks grow and prune the same primitives
+in the same way. :meth:`accumulate` takes the statistics of one more batch of the same step (one
+process drawing several batches per step, as several ranks would).
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import Any, ClassVar, Optional
+from contextlib import contextmanager
+from typing import Any, ClassVar, Iterator, Optional
 
+import torch
 from torch import Tensor, nn
+
+from nerf2gs_plugin.utils import collectives
 
 
 class Strategy(ABC):
     grad_key: ClassVar[str] = "means2d"
+    reduced_stats: ClassVar[dict[str, str]] = {}
+    """Accumulated statistics combined over data-parallel ranks before a refine decision:
+    attribute path from the strategy (``"max_radii"``, ``"stats.denom"``) -> ``"sum"`` or ``"max"``."""
 
     @abstractmethod
     def initialize_state(self) -> None:
@@ -44,3 +58,44 @@ class Strategy(ABC):
                            info: Optional[dict[str, Any]]) -> dict[str, int]:
         """After the optimizer step: update statistics from ``info`` and refine ``params``.
         Returns counts of what changed (e.g. ``{"cloned": 3, "split": 1, "pruned": 0}``)."""
+
+    def accumulate(self, params: nn.ParameterDict, step: int, info: dict[str, Any]) -> None:
+        """The statistics of a batch of this step other than its last (whose ``info`` goes to
+        :meth:`step_post_backward`), when a process draws several batches per step. Strategies
+        without statistics ignore it; one with statistics must override it."""
+        if self.reduced_stats:
+            raise NotImplementedError(f"{type(self).__name__} cannot take several batches per step")
+
+    def _stat(self, path: str) -> Optional[Tensor]:
+        obj: Any = self
+        for name in path.split("."):
+            obj = getattr(obj, name)
+        return obj
+
+    def _set_stat(self, path: str, value: Optional[Tensor]) -> None:
+        *parents, last = path.split(".")
+        obj: Any = self
+        for name in parents:
+            obj = getattr(obj, name)
+        setattr(obj, last, value)
+
+    @contextmanager
+    def all_ranks(self, device: Optional[torch.device] = None) -> Iterator[None]:
+        """Around a refine decision: with several ranks, every rank enters with the statistics of all
+        ranks (summed / maxed) and rank 0's random state; on the way out the summed statistics
+        that survive the refinement are kept by rank 0 only, so the next combination counts them
+        once. A no-op in one process."""
+        if not collectives.is_distributed():
+            yield
+            return
+        for op in ("sum", "max"):
+            paths = [p for p, o in self.reduced_stats.items() if o == op]
+            for path, value in zip(paths, collectives.all_reduce_tensors([self._stat(p) for p in paths], op, device)):
+                self._set_stat(path, value)
+        collectives.sync_rng_state(device)
+        yield
+        if collectives.rank() != 0:
+            for path, op in self.reduced_stats.items():
+                value = self._stat(path)
+                if op == "sum" and value is not None:
+                    value.zero_()

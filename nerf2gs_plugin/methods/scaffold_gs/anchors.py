@@ -164,6 +164,7 @@ class AnchorStrategy(Strategy):
     the step: the rasterizer's ``meta`` plus the visible anchors, the kept slots and opacities."""
 
     grad_key = "means2d"
+    reduced_stats = {"stats.grad_accum": "sum", "stats.denom": "sum", "stats.opacity_accum": "sum", "stats.anchor_denom": "sum"}
 
     def __init__(self, config: Any, voxel: float) -> None:
         self.config = config  # the model config: its anchor growing / pruning settings
@@ -175,13 +176,19 @@ class AnchorStrategy(Strategy):
 
     def step_post_backward(self, params: Any, optimizers: Any, step: int, info: Optional[dict[str, Any]]) -> dict[str, int]:
         c = self.config
-        m, k = params["anchors"].shape[0], c.n_offsets
-        if info is not None and c.start_stat <= step < c.update_until:
-            meta = info["meta"]
-            self.stats._update(m, k, meta, info["anchor_idx"], info["keep"], info["opacity"], self.grad_tensor(meta))
+        if info is not None:
+            self.accumulate(params, step, info)
         if c.update_from < step < c.update_until and step % c.update_interval == 0:
-            return self.refine(params, optimizers)
+            with self.all_ranks(params["anchors"].device):
+                return self.refine(params, optimizers)
         return {"grown": 0, "pruned": 0}
+
+    def accumulate(self, params: Any, step: int, info: dict[str, Any]) -> None:
+        c = self.config
+        if c.start_stat <= step < c.update_until:
+            meta = info["meta"]
+            m, k = params["anchors"].shape[0], c.n_offsets
+            self.stats._update(m, k, meta, info["anchor_idx"], info["keep"], info["opacity"], self.grad_tensor(meta))
 
     @torch.no_grad()
     def refine(self, params: Any, optimizers: Any) -> dict[str, int]:

@@ -241,7 +241,13 @@ class ScaffoldGSModel(Model):
             info, self._last = self._last, None
             self.strategy.step_post_backward(self.anchor, optimizers, step, info)
 
-        return [TrainingCallback([Loc.BEFORE_STEP], before), TrainingCallback([Loc.AFTER_STEP], after_step)]
+        def after_batch(step: int) -> None:  # a batch of several in this step: its statistics only
+            info, self._last = self._last, None
+            if info is not None:
+                self.strategy.accumulate(self.anchor, step, info)
+
+        return [TrainingCallback([Loc.BEFORE_STEP], before), TrainingCallback([Loc.AFTER_STEP], after_step),
+                TrainingCallback([Loc.AFTER_BATCH], after_batch)]
 
     @property
     def stats(self) -> AnchorStats:

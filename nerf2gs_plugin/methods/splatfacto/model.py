@@ -177,7 +177,13 @@ class SplatfactoModel(Model):
             info, self._meta = self._meta, None
             self.strategy.step_post_backward(self.gauss, optimizers, step, info)
 
-        return [TrainingCallback([Loc.BEFORE_STEP], set_step), TrainingCallback([Loc.AFTER_STEP], after_step)]
+        def after_batch(step: int) -> None:  # a batch of several in this step: its statistics only
+            info, self._meta = self._meta, None
+            if info is not None:
+                self.strategy.accumulate(self.gauss, step, info)
+
+        return [TrainingCallback([Loc.BEFORE_STEP], set_step), TrainingCallback([Loc.AFTER_STEP], after_step),
+                TrainingCallback([Loc.AFTER_BATCH], after_batch)]
 
     # ------------------------------------------------------------------ bookkeeping
     def num_primitives(self) -> int:

@@ -117,6 +117,7 @@ class DefaultStrategy(Strategy):
     """Clone / split / prune / opacity-reset; statistics come from ``info[grad_key].grad``."""
 
     grad_key = "means2d"
+    reduced_stats = {"grad_accum": "sum", "count": "sum", "max_radii": "max"}
 
     def __init__(self, cfg: DefaultStrategyConfig, num_train_images: int = 1, scene_scale: float = 1.0) -> None:
         self.cfg = cfg
@@ -134,6 +135,9 @@ class DefaultStrategy(Strategy):
         if info is not None:
             self.update_stats(params["means"].shape[0], info)
         return self.refine(step, params, optimizers)
+
+    def accumulate(self, params: nn.ParameterDict, step: int, info: dict[str, Any]) -> None:
+        self.update_stats(params["means"].shape[0], info)
 
     @property
     def pause_after_reset(self) -> int:
@@ -180,15 +184,16 @@ class DefaultStrategy(Strategy):
         out = {"cloned": 0, "split": 0, "pruned": 0}
         if step < c.warmup_length or step % c.refine_every != 0 or step == 0:
             return out
-        if step < c.stop_split_at:
-            if not self._in_pause(step) and self.count is not None and self.count.shape[0] == params["means"].shape[0]:
-                out.update(self.grow(step, params, optimizers))
+        with self.all_ranks(params["means"].device):
+            if step < c.stop_split_at:
+                if not self._in_pause(step) and self.count is not None and self.count.shape[0] == params["means"].shape[0]:
+                    out.update(self.grow(step, params, optimizers))
+                    out["pruned"] = self.prune(step, params, optimizers)
+                if c.reset_alpha_every > 0 and step % c.reset_alpha_every == 0:
+                    self.reset_opacities(params, optimizers)
+            elif c.continue_cull_post_densification:
                 out["pruned"] = self.prune(step, params, optimizers)
-            if c.reset_alpha_every > 0 and step % c.reset_alpha_every == 0:
-                self.reset_opacities(params, optimizers)
-        elif c.continue_cull_post_densification:
-            out["pruned"] = self.prune(step, params, optimizers)
-        self._reset_stats(params["means"].shape[0], params["means"].device)
+            self._reset_stats(params["means"].shape[0], params["means"].device)
         return out
 
     def grow(self, step: int, params: nn.ParameterDict, optimizers: Any) -> dict[str, int]:
@@ -393,7 +398,8 @@ class MCMCStrategy(Strategy):
         c = self.cfg
         out = {"relocated": 0, "added": 0}
         if c.refine_start_iter < step < c.refine_stop_iter and step % c.refine_every == 0:
-            out["relocated"] = self.relocate(params, optimizers)
-            out["added"] = self.add(params, optimizers)
+            with self.all_ranks(params["means"].device):  # the same relocation samples on every rank
+                out["relocated"] = self.relocate(params, optimizers)
+                out["added"] = self.add(params, optimizers)
         self.inject_noise(params, self.means_lr(optimizers, step))
         return out
