@@ -181,7 +181,17 @@ def _blocks_gaps(scene: int) -> list[float]:
 
 
 # (text in the README, the numbers it prints, the values they stand for, signed as printed)
+def _dist(i: int, key: str) -> float:
+    return json.loads((RESULTS / "dist_speedup.json").read_text())["rows"][i][key]
+
+
 PROSE = [
+    ("(load average 4.0-4.5), 2 ranks of one thread\nran 5.80 steps/s against 6.25 for one process of one thread drawing both batches (0.93x)",
+     "4.0 4.5 5.80 6.25 0.93", lambda: [min(_dist(i, k) for i in range(3) for k in ("load_before", "load_after")),
+                                        max(_dist(i, k) for i in range(3) for k in ("load_before", "load_after")),
+                                        _dist(2, "steps_per_second"), _dist(0, "steps_per_second"), _dist(2, "speedup_vs_1_thread")]),
+    ("(one process with 2 threads: 4.71 steps/s,\nand its kernel's thread-order sums moved the parameters by up to 0.047)", "4.71 0.047",
+     lambda: [_dist(1, "steps_per_second"), _dist(1, "max_param_diff")]),
     ("0.39 / 0.25 / 0.26 dB below the whole-scene run", "0.39 0.25 0.26", lambda: _blocks_gaps(0)),
     ("0.57 dB below at street level but 0.22 / 0.34 dB above", "0.57 0.22 0.34",
      lambda: [_blocks_gaps(1)[0], -_blocks_gaps(1)[1], -_blocks_gaps(1)[2]]),
@@ -295,3 +305,9 @@ def test_prose_within_bound():
     """"within 0.5 dB of the NeRF at the default scale (Scaffold-GS above it)"."""
     assert "within 0.5 dB of the NeRF at the default scale (Scaffold-GS above it)" in README
     assert max(_below_nerf(_r(D))) <= 0.5 and max(_below_nerf(_r(D), ("scaffold-gs",))) < 0
+
+
+def test_dist_models_equal_to_the_bit():
+    """"The 2-rank model equalled the one-process model to the bit after 100 steps"."""
+    assert "equalled the one-process model to the bit after 100 steps" in README
+    assert _dist(2, "max_param_diff") == 0 and _dist(2, "steps") == 100

@@ -132,7 +132,11 @@ def run_rank(fn: Callable[..., Any], config: Any, *args: Any, error_dir: Optiona
         if device.startswith("cuda"):
             torch.cuda.set_device(device)
         dist.init_process_group("nccl" if device.startswith("cuda") else "gloo", init_method="env://", rank=rank, world_size=world)
-        if rank != 0:
+        if rank == 0:
+            from nerf2gs_plugin.warn import install_plain_warnings
+
+            install_plain_warnings()  # a spawned rank is a fresh interpreter: one plain line per warning, as ns2gs-* print them
+        else:
             import warnings
 
             from nerf2gs_plugin.warn import Nerf2gsWarning
@@ -237,7 +241,9 @@ def _first_failure(error_dir: str, procs: list, failed: int, first_rank: int) ->
         t, peer, code, line = path.read_text().split("\t", 3)
         found.append((int(peer), float(t), int(path.name[4:]), int(code), line))
     if found:
-        _, _, rank, code, line = min(found)
+        peer, _, rank, code, line = min(found)
+        # the same failure on several ranks (a bad flag, a missing file): the lowest rank names it
+        rank = min(r for p, _, r, _, text in found if p == peer and text == line)
         return rank, code, line
     code = procs[failed].exitcode
     return first_rank + failed, 1, f"exited with code {code}" + (" (killed: out of memory?)" if code == -9 else "")

@@ -234,14 +234,17 @@ class Trainer:
     def save_checkpoint(self, step: int, synced: bool = True) -> Optional[Path]:
         """Write ``step-<step>.ckpt`` (only from finite state) and flush ``train_log.json`` with it.
         With several ranks every rank calls it (``synced``): the replicas' parameter hashes must
-        agree, rank 0 writes (with every rank's sampling streams) and the others return None;
-        not ``synced`` (an interrupt, where the ranks are not in step): rank 0 writes alone."""
+        agree and rank 0 writes (with every rank's sampling streams); not ``synced`` (an interrupt,
+        where the ranks are not in step): rank 0 writes alone and the others return None."""
         streams = self._stream_states()
         if self.world_size > 1 and synced:
             self.check_replicas(step)
             streams = [s for rank_streams in collectives.all_gather_object(streams) for s in rank_streams]
         if self.rank != 0:
-            return None
+            if not synced:
+                return None
+            self.last_good_checkpoint = checkpoint_path(self.run_dir, step)  # rank 0's, on the shared run folder
+            return self.last_good_checkpoint
         self.check_finite_state(step)
         path = checkpoint_path(self.run_dir, step)
         dm = self.pipeline.datamanager
