@@ -88,7 +88,7 @@ class TrainerConfig:
     viewer: bool = False
     """Serve the live viewer (viser) while training."""
     machine: MachineConfig = field(default_factory=MachineConfig)
-    """Data-parallel training (torchrun, or --machine.num-devices N); see ``engine/launch.py``."""
+    """Data-parallel training: several ranks on one run (torchrun, or --machine.num-devices N)."""
 
     def run_dir(self) -> Path:
         name = self.experiment_name or Path(self.data).name
@@ -249,7 +249,7 @@ class Trainer:
         path = checkpoint_path(self.run_dir, step)
         dm = self.pipeline.datamanager
         try:
-            self._write_checkpoint(path, step, dm, streams)
+            self._write_checkpoint(path, step, dm, *([streams] if len(streams) > 1 else []))
         except OSError as e:
             kept = f"; previous checkpoint kept: {self.last_good_checkpoint}" if self.last_good_checkpoint else ""
             raise CheckpointError(f"cannot write checkpoint ({e.strerror or e}){kept}", path) from None
@@ -283,7 +283,7 @@ class Trainer:
                 "model": self.pipeline.model.state_dict(),
                 "optimizers": self.optimizers.state_dict(),
                 "datamanager": dm.state_dict() if streams is None else streams[0],
-                **({"datamanager_streams": streams} if streams is not None and len(streams) > 1 else {}),
+                **({"datamanager_streams": streams} if streams is not None else {}),
                 "torch_rng": torch.get_rng_state(),
                 "dataset": dataset_fingerprint(dm.train_data.image_filenames),
                 "train_seconds": self.train_seconds,
