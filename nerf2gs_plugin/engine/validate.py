@@ -31,6 +31,10 @@ def check_trainer_config(cfg: Any) -> None:
                 continue
             if not (isinstance(lr, (int, float)) and math.isfinite(lr) and 0 <= lr <= MAX_LR):  # 0: a frozen group
                 raise ConfigError(f"learning rate must be in [0, {MAX_LR:g}], got {lr!r}", f"--optimizers.{name}.{field.replace('_', '-')}")
+    if getattr(cfg, "machine", None) is not None:
+        from nerf2gs_plugin.engine.launch import check_machine_config
+
+        check_machine_config(cfg.machine)
     aug = cfg.augment
     for field in ("delta_h", "dilate_px", "feather_px", "extra_weight"):
         v = getattr(aug, field)

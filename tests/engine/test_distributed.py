@@ -123,3 +123,21 @@ def test_a_failing_rank_stops_all_with_its_rank_named(tiny_scene, tmp_path, caps
     err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
     assert err == ["error: rank 1: RuntimeError: boom at step 2"], err
     assert not list_checkpoints(tmp_path / os.path.basename(tiny_scene) / "splatfacto" / "run")
+
+
+def test_replicas_that_differ_are_an_error_naming_the_rank(tiny_scene, tmp_path, monkeypatch):
+    """The hash check of every save: rank 1's parameters are not rank 0's."""
+    from nerf2gs_plugin.engine.trainer import Trainer
+    from nerf2gs_plugin.errors import TrainingDiverged
+    from nerf2gs_plugin.utils import collectives
+
+    trainer = Trainer(_config("splatfacto", tiny_scene, tmp_path))
+    trainer.setup()
+    state = trainer.pipeline.model.state_dict()
+    other = {k: v.clone() for k, v in state.items()}
+    other["gauss.means"][7, 1] += 1e-6
+    assert collectives.param_digest(state) == collectives.param_digest({k: v.clone() for k, v in state.items()})
+    assert collectives.param_digest(state) != collectives.param_digest(other)
+    monkeypatch.setattr(collectives, "all_gather_object", lambda obj: [obj, collectives.param_digest(other)])
+    with pytest.raises(TrainingDiverged, match=r"replicas differ at step 3: the parameters of rank\(s\) 1 are not rank 0's"):
+        trainer.check_replicas(3)
