@@ -116,6 +116,17 @@ def _one_line(e: BaseException) -> str:
     return f"{type(e).__name__}: {text[:300]}" if text else type(e).__name__
 
 
+def _failure(e: BaseException) -> tuple[int, bool, str]:
+    """(exit status, raised because another rank went away, one line) of what a rank raised."""
+    if isinstance(e, SystemExit):
+        if isinstance(e.code, int) or e.code is None:
+            return e.code or 0, False, f"exited with code {e.code}"
+        return 1, False, str(e.code)
+    if isinstance(e, KeyboardInterrupt):
+        return 130, False, "interrupted"
+    return 2 if isinstance(e, UserError) else 1, _is_peer_failure(e), _one_line(e)
+
+
 def run_rank(fn: Callable[..., Any], config: Any, *args: Any, error_dir: Optional[str] = None) -> None:
     """Run ``fn(config, *args)`` as the rank the environment names (torchrun's variables): join the
     process group, take this rank's device, keep ranks other than 0 quiet (no stdout, no warnings),
@@ -145,11 +156,14 @@ def run_rank(fn: Callable[..., Any], config: Any, *args: Any, error_dir: Optiona
             warnings.simplefilter("ignore", Nerf2gsWarning)
         fn(config, *args)
     except BaseException as e:  # noqa: BLE001 - every failure of a rank stops the run with one line
-        code = 130 if isinstance(e, KeyboardInterrupt) else 2 if isinstance(e, UserError) else 1
-        peer = _is_peer_failure(e)
-        line = "interrupted" if isinstance(e, KeyboardInterrupt) else _one_line(e)
-        if error_dir is not None:
+        code, peer, line = _failure(e)
+        if not code:
+            pass  # sys.exit(0) inside: a success
+        elif error_dir is not None:
             Path(error_dir, f"rank{rank}").write_text(f"{time.time()!r}\t{int(peer)}\t{code}\t{line}")
+        elif isinstance(e, KeyboardInterrupt):
+            if rank == 0:
+                print("interrupted", file=sys.stderr, flush=True)
         elif not peer:
             print(f"error: rank {rank}: {line}", file=sys.stderr, flush=True)
     finally:
