@@ -4,7 +4,9 @@ AugmentedDataManager, the viewer and export-augmented all use.
 
 An entry ``<reference run>/augment_cache/<key>/`` holds ``composites/00007.png`` (input view 7 with
 its transient pixels from the reference), ``extra_raw/00003.png`` (+ ``_depth.npy``: bird's-eye
-view 3 as rendered), ``extra/00003.png`` (after the enhancer) and ``manifest.json``. An entry is
+view 3 as rendered), ``extra/00003.png`` (after the enhancer) and ``manifest.json``; with
+``--augment.confidence`` also ``composites/00007_conf.npy`` and ``extra/00003_conf.npy`` (float16
+``[H, W]`` per-pixel confidence, :func:`load_confidence`). An entry is
 written under a temporary name and renamed into place, so a present manifest means a whole entry.
 """
 
@@ -116,6 +118,8 @@ def cache_manifests(cache_root: Path) -> list[CacheManifest]:
 def cache_key(ref_key: str, dataset: str, config: dict[str, Any], bev: Optional[Cameras], train: Cameras, enhancer_key: str) -> str:
     """The entry name: everything that changes a rendered image (``config`` is the plain AugmentConfig)."""
     relevant = {k: v for k, v in config.items() if k not in UNKEYED_FIELDS}
+    if relevant.get("confidence", "none") == "none":  # no confidence maps: the entries of runs before the option
+        relevant = {k: v for k, v in relevant.items() if not k.startswith("confidence")}
     h = hashlib.sha1()
     h.update(json.dumps({"v": CACHE_FORMAT_VERSION, "ref": ref_key, "data": dataset, "cfg": relevant, "enh": enhancer_key}, sort_keys=True).encode())
     for cams in (train, bev):
@@ -133,6 +137,20 @@ def save_png(path: Path, img: Tensor) -> None:
     tmp = path.with_name(f".{path.name}.tmp.png")
     cv2.imwrite(str(tmp), arr[..., ::-1])
     os.replace(tmp, path)
+
+
+def confidence_path(png: Path) -> Path:
+    """The confidence map beside a cached render's PNG."""
+    return Path(png).with_name(Path(png).stem + "_conf.npy")
+
+
+def load_confidence(png: Path) -> Tensor:
+    """``[H, W, 1]`` float confidence of the cached render ``png`` (see the module docstring)."""
+    path = confidence_path(png)
+    try:
+        return torch.from_numpy(np.load(path).astype(np.float32))[..., None]
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{path}: unreadable confidence map ({e})") from None
 
 
 def load_png(path: Path) -> Tensor:

@@ -35,6 +35,8 @@ from nerf2gs_plugin.datamanagers.augment_cache import (
     CacheManifest,
     cache_key,
     cache_manifests,
+    confidence_path,
+    load_confidence,
     load_png,
     read_manifest,
     save_png,
@@ -62,6 +64,8 @@ class Reference:
     render: RenderFn
     key: str
     cache_root: Path
+    depth_along: str = "z"
+    """What the renders' ``depth`` measures ("z" or "ray": :attr:`nerf2gs_plugin.engine.model.Model.depth_along`)."""
 
 
 @dataclass
@@ -95,6 +99,14 @@ class AugmentConfig:
     """none | builtin | builtin:PATH | onnx:PATH: image enhancement of the additional views."""
     use_cache: bool = True
     """Reuse the reference's cached renders when their manifest matches (False: render again)."""
+    confidence: Literal["none", "visibility"] = "none"
+    """Per-pixel loss weight of the reference's pixels. none: all 1; visibility: how many training views
+    observed the surface the pixel shows (depth-consistent, not sky/transient there), reaching 1 at
+    confidence-full-views, times the render's accumulation (datamanagers/confidence.py)."""
+    confidence_full_views: int = 3
+    """visibility: observations at which a pixel's confidence reaches 1."""
+    confidence_depth_tol: float = 0.05
+    """visibility: a training view observes a point when their depths agree within this fraction."""
 
 
 def bev_cameras(train: Cameras, up: Tensor, delta_h_world: float, theta_pitch: float, every_n: int = 1,
@@ -147,28 +159,79 @@ class AugmentedViews:
         return self.manifest.render_seconds if self.manifest is not None else 0.0
 
 
+class _Visibility:
+    """The training views as the visibility confidence needs them: cameras, the reference's depth at
+    each (camera-space z) and the pixels that observe no surface (sky or transient)."""
+
+    def __init__(self, train: ImageSet, depths_z: list[Tensor], config: AugmentConfig, depth_along: str) -> None:
+        self.cameras = train.cameras.to("cpu")
+        self.depths_z = depths_z
+        self.blind: list[Optional[Tensor]] = []
+        for i in range(len(train)):
+            b = [train.mask(k, i) for k in ("sky", "transient") if train.mask(k, i) is not None]
+            self.blind.append(torch.stack(b).any(0)[..., 0].cpu() if b else None)
+        self.config = config
+        self.depth_along = depth_along
+
+    def confidence(self, out: dict[str, Tensor], camera: Cameras) -> Tensor:
+        """``[H, W, 1]`` confidence of one render ``out`` of the reference at ``camera``."""
+        from nerf2gs_plugin.datamanagers.confidence import visibility_confidence
+
+        return visibility_confidence(out["depth"].cpu(), camera.to("cpu"), self.depth_along, self.cameras, self.depths_z,
+                                     self.blind, out["accumulation"].cpu() if "accumulation" in out else None,
+                                     self.config.confidence_full_views, self.config.confidence_depth_tol)
+
+
+def _save_confidence(path: Path, conf: Tensor) -> None:
+    np.save(path, conf[..., 0].cpu().numpy().astype(np.float16))
+
+
 def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn: RenderFn, config: AugmentConfig,
-                  enhancer: Optional[ViewEnhancer], comp_idx: list[int], scene_box: Optional[Tensor]) -> dict[str, Any]:
+                  enhancer: Optional[ViewEnhancer], comp_idx: list[int], scene_box: Optional[Tensor],
+                  depth_along: str = "z") -> dict[str, Any]:
     """Render every image of a cache entry into ``work`` (not yet the entry: it is renamed after).
     Bird's-eye views outside the scene box or with mostly empty renders are left out; returns the
-    manifest fields that say which were kept and how long it took."""
+    manifest fields that say which were kept and how long it took. With a confidence, every
+    training view is rendered (its depth is the occlusion test) and each render gets a
+    ``_conf.npy`` beside its PNG."""
     import time
 
+    from nerf2gs_plugin.datamanagers.confidence import depth_to_z
     from nerf2gs_plugin.progress import make_progress
 
     for sub in ("composites", "extra", "extra_raw"):
         (work / sub).mkdir(parents=True, exist_ok=True)
-    n_jobs = len(comp_idx) + (len(bev) if bev is not None else 0)
+    with_conf = config.confidence != "none"
+    train_ids = list(range(len(train))) if with_conf else comp_idx
+    comp_set = set(comp_idx)
+    n_jobs = len(train_ids) + (len(bev) if bev is not None else 0)
     kept: list[int] = []
     outside = empty = 0
     t0 = time.perf_counter()
     with make_progress() as progress:
         task = progress.add_task("render reference views", total=n_jobs, stats="")
+        renders: dict[int, dict[str, Tensor]] = {}  # the composited views' renders
+        depths_z: list[Tensor] = []  # every input view's, with a confidence (float16: one per view is kept)
+        for i in train_ids:
+            out = {k: v.cpu() for k, v in render_fn(train.cameras[i]).items() if k in ("rgb", "depth", "accumulation")}
+            if with_conf:
+                if "depth" not in out:
+                    from nerf2gs_plugin.errors import ConfigError
+
+                    raise ConfigError("--augment.confidence visibility needs a reference that renders depth; this one does not")
+                depths_z.append(depth_to_z(out["depth"], train.cameras[i].to("cpu"), depth_along).half())
+            if i in comp_set:
+                renders[i] = out
+            progress.update(task, advance=1, stats=f"input view {i}")
+        vis = _Visibility(train, depths_z, config, depth_along) if with_conf else None
         for i in comp_idx:
-            out = render_fn(train.cameras[i])["rgb"].cpu()
-            comp = composite(train.image(i).cpu(), out, train.mask("transient", i).cpu(), config.dilate_px, config.feather_px)
+            mask = train.mask("transient", i).cpu()
+            comp = composite(train.image(i).cpu(), renders[i]["rgb"], mask, config.dilate_px, config.feather_px)
             save_png(work / "composites" / f"{i:05d}.png", comp)
-            progress.update(task, advance=1, stats=f"composite {i}")
+            if vis is not None:  # real pixels weigh 1, painted ones as much as the reference knows them
+                painted = composite(torch.zeros_like(comp), torch.ones_like(comp), mask, config.dilate_px, config.feather_px)[..., :1]
+                conf = 1.0 - painted + painted * vis.confidence(renders[i], train.cameras[i])
+                _save_confidence(confidence_path(work / "composites" / f"{i:05d}.png"), conf)
         inside = inside_box(bev.centers, scene_box) if bev is not None else None
         for j in range(len(bev) if bev is not None else 0):
             if not bool(inside[j]):  # outside the scene box: the reference knows nothing there
@@ -186,6 +249,8 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
             save_png(work / "extra_raw" / f"{k:05d}.png", rgb)
             if "depth" in out:
                 np.save(work / "extra_raw" / f"{k:05d}_depth.npy", out["depth"].cpu().numpy().astype(np.float16))
+            if vis is not None:
+                _save_confidence(confidence_path(work / "extra" / f"{k:05d}.png"), vis.confidence(out, bev[j]))
             if enhancer is not None:
                 src = train.image(j * max(config.every_n, 1)).cpu()
                 rgb = enhancer.enhance(rgb, reference=src)
@@ -197,7 +262,8 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
 
 def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, render_fn: RenderFn, ref_key: str,
                            dataset: str, cache_root: Path, config: AugmentConfig,
-                           enhancer: Optional[ViewEnhancer] = None, scene_box: Optional[Tensor] = None) -> AugmentedViews:
+                           enhancer: Optional[ViewEnhancer] = None, scene_box: Optional[Tensor] = None,
+                           depth_along: str = "z") -> AugmentedViews:
     """Render (or reuse from the cache) the composites and the additional views."""
     bev = bev_cameras(train.cameras, up, delta_h_world, config.theta_pitch, config.every_n, config.pitch_mode) if config.extra_views else None
     has_transient = "transient" in train.masks and config.composites
@@ -209,7 +275,7 @@ def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, re
         work = cache_dir.with_name(f".tmp-{key}-{os.getpid()}")
         shutil.rmtree(work, ignore_errors=True)
         comp_idx = [i for i in range(len(train)) if has_transient and bool(train.mask("transient", i).any())]
-        done = _render_entry(work, train, bev, render_fn, config, enhancer, comp_idx, scene_box)
+        done = _render_entry(work, train, bev, render_fn, config, enhancer, comp_idx, scene_box, depth_along)
         kept = done["extra_indices"]
         CacheManifest(reference=ref_key, dataset=dataset, config=asdict(config), enhancer=enhancer_key,
                       composited_images=comp_idx, num_extra=len(kept),
@@ -226,12 +292,17 @@ def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, re
              f"{manifest.dropped_empty} mostly empty renders (coverage < {config.min_coverage})")
     if bev is not None:
         bev = bev[torch.tensor(manifest.extra_indices, dtype=torch.long)]
+    with_conf = config.confidence != "none"
     composites = None
     if manifest.composited_images:
         images = [train.image(i).cpu() for i in range(len(train))]
         for i in manifest.composited_images:
             images[i] = load_png(manifest.composite_png(i))
         composites = train.to("cpu").with_images(images)
+        if with_conf:
+            ones = [torch.ones(*train.hw(i), 1) for i in range(len(train))]
+            composites = composites.with_confidence(
+                [load_confidence(manifest.composite_png(i)) if i in manifest.composited_images else ones[i] for i in range(len(train))])
     extra = extra_raw = None
     if manifest.num_extra:
         assert bev is not None
@@ -239,6 +310,8 @@ def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, re
         extra_raw = [load_png(manifest.extra_png(j, raw=True)) for j in range(manifest.num_extra)]
         extra = ImageSet.from_images(bev.to("cpu"), imgs, weights=torch.full((len(imgs),), float(config.extra_weight)),
                                      names=[f"bev_{j:05d}" for j in range(len(imgs))])
+        if with_conf:
+            extra = extra.with_confidence([load_confidence(manifest.extra_png(j)) for j in range(manifest.num_extra)])
     return AugmentedViews(composites, extra, extra_raw, cache_dir, reused, manifest)
 
 
@@ -265,7 +338,7 @@ class AugmentedDataManager(DataManager):
         td = inner.train_data
         self.views: AugmentedViews = render_augmented_views(
             inner.train_images, td.up, td.metres_to_world(augment.delta_h), reference.render, reference.key,
-            dataset_fingerprint(td.image_filenames), reference.cache_root, augment, enhancer, td.scene_box,
+            dataset_fingerprint(td.image_filenames), reference.cache_root, augment, enhancer, td.scene_box, reference.depth_along,
         )
         print(f"reference renders: {self.views.render_seconds:.1f} s" + (" (reused from the cache)" if self.views.reused else ""))
         if self.views.composites is not None:

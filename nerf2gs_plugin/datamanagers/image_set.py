@@ -23,6 +23,7 @@ class ImageSet:
     masks: dict[str, Tensor] = field(default_factory=dict)  # kind -> [P] bool
     weights: Optional[Tensor] = None  # [N] loss weight per image
     names: list[str] = field(default_factory=list)
+    confidence: Optional[Tensor] = None  # [P] float in [0, 1]: per-pixel loss weight (reference renders), None = all 1
 
     def __post_init__(self) -> None:
         if self.weights is None:
@@ -57,6 +58,8 @@ class ImageSet:
         batch = {"image": self.image(i), "image_idx": i, "weight": self.weights[i]}
         for kind in self.masks:
             batch[f"{kind}_mask"] = self.mask(kind, i)
+        if self.confidence is not None:
+            batch["confidence"] = self._slice(self.confidence, i)
         return batch
 
     def locate(self, flat_index: Tensor) -> tuple[Tensor, Tensor, Tensor]:
@@ -74,11 +77,20 @@ class ImageSet:
             {k: v.to(device) for k, v in self.masks.items()},
             self.weights.to(device),
             list(self.names),
+            self.confidence.to(device) if self.confidence is not None else None,
         )
 
     def with_images(self, images: list[Tensor]) -> "ImageSet":
-        """Same cameras and masks, new pixels (e.g. composites)."""
-        return ImageSet(self.cameras, torch.cat([im.reshape(-1, 3) for im in images]), self.offsets, dict(self.masks), self.weights, list(self.names))
+        """Same cameras, masks and confidence, new pixels (e.g. composites)."""
+        return ImageSet(self.cameras, torch.cat([im.reshape(-1, 3) for im in images]), self.offsets, dict(self.masks), self.weights,
+                        list(self.names), self.confidence)
+
+    def with_confidence(self, maps: Optional[list[Tensor]]) -> "ImageSet":
+        """Same images, a per-pixel confidence map ``[H, W, 1]`` per image (None: none)."""
+        flat = torch.cat([m.reshape(-1).float() for m in maps]).to(self.pixels.device) if maps is not None else None
+        if flat is not None and flat.shape[0] != self.num_pixels:
+            raise ValueError(f"confidence maps hold {flat.shape[0]} pixels, the images {self.num_pixels}")
+        return ImageSet(self.cameras, self.pixels, self.offsets, dict(self.masks), self.weights, list(self.names), flat)
 
     @staticmethod
     def from_images(cameras: Cameras, images: list[Tensor], masks: Optional[dict[str, list[Tensor]]] = None,

@@ -32,6 +32,8 @@ class RayDataManager(DataManager):
             "weight": images.weights[img][:, None],
             "image_idx": img + index_offset,
         }
+        if images.confidence is not None:  # reference renders: a ray weighs as much as the reference knows its pixel
+            batch["weight"] = batch["weight"] * images.confidence[flat][:, None]
         for kind in self.train_images.masks:
             m = images.masks.get(kind)
             batch[f"{kind}_mask"] = m[flat][:, None] if m is not None else torch.zeros(n, 1, dtype=torch.bool, device=self.device)

@@ -32,6 +32,8 @@ class Model(nn.Module, metaclass=ABCMeta):
     Batches (from the DataManager):
       * rays:   ``{"rgb": [R,3], "weight": [R,1], "image_idx": [R], "<kind>_mask": [R,1] bool}``
       * images: ``{"image": [H,W,3], "weight": float tensor [], "image_idx": int, "<kind>_mask": [H,W,1] bool}``
+        and, for a reference's render with ``--augment.confidence``, ``"confidence": [H,W,1]`` float in [0, 1]
+        (a per-pixel loss weight; for rays it is folded into ``weight``)
       with ``<kind>`` in sky / ground / transient when the dataset has those masks.
     """
 
@@ -39,6 +41,10 @@ class Model(nn.Module, metaclass=ABCMeta):
     primitive_kind: Union[str, None] = "primitives"
     """What :meth:`num_primitives` counts, as shown to people ("Gaussians", "anchors"); None for
     a model without primitives (a NeRF: its size is parameters and MB, not hash-table entries)."""
+
+    depth_along: str = "z"
+    """What ``render_camera``'s ``depth`` measures: "z" (camera-space z, splatting) or "ray" (distance along
+    the unit ray, NeRFs); the augmentation lifts a reference's pixels to 3D with it."""
 
     def __init__(self, config: ModelConfig, train_data: DataparserOutputs, **kwargs: Any) -> None:
         super().__init__()

@@ -11,7 +11,8 @@ from nerf2gs_plugin.utils.plotting import pyplot as _mpl, save_figure
 
 
 def preview_augmented(datamanager: AugmentedDataManager, path: Path, n: int = 3) -> Path:
-    """Rows of real image | composite | bird's-eye render | enhanced bird's-eye view."""
+    """Rows of real image | composite | bird's-eye render | enhanced bird's-eye view (| its confidence
+    with ``--augment.confidence``: where the reference's pixels are trusted)."""
     plt = _mpl()
     views = datamanager.views
     real_set = datamanager.original_train_images
@@ -21,6 +22,9 @@ def preview_augmented(datamanager: AugmentedDataManager, path: Path, n: int = 3)
     cols = ["real image", "composite (transients from reference)", "bird's-eye view (reference)"]
     if views.extra_raw is not None and views.extra is not None:
         cols.append("bird's-eye view, enhanced")
+    conf = views.extra.confidence is not None if views.extra is not None else False
+    if conf:
+        cols.append("its confidence (0 black, 1 white)")
     fig, axes = plt.subplots(len(ids), len(cols), figsize=(3.3 * len(cols), 2.1 * len(ids) + 0.4), squeeze=False)
     every = datamanager.every_n
     for r, i in enumerate(ids):
@@ -28,8 +32,10 @@ def preview_augmented(datamanager: AugmentedDataManager, path: Path, n: int = 3)
         j = i // every
         if views.extra_raw is not None and j < len(views.extra_raw):
             row.append(views.extra_raw[j])
-            if len(cols) == 4:
+            if views.extra is not None:
                 row.append(views.extra.image(j))
+            if conf:
+                row.append(views.extra.image_batch(j)["confidence"].expand(-1, -1, 3))
         for c, img in enumerate(row):
             ax = axes[r][c]
             ax.imshow(np.clip(img.cpu().numpy(), 0, 1))

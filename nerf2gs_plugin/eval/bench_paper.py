@@ -62,11 +62,19 @@ def _overrides(scale: str, method: str, extra: Optional[dict] = None) -> dict:
     return _merge({**base, "steps_per_eval_image": 0}, extra or {})
 
 
-def paper_table_plan(scale: str, targets=TARGETS, enhancer: Optional[str] = None) -> list[RunSpec]:
+CONFIDENCE_LABEL = " (confidence)"
+
+
+def paper_table_plan(scale: str, targets=TARGETS, enhancer: Optional[str] = None, confidence: Optional[str] = None) -> list[RunSpec]:
+    """StreetNeRF, then per target: alone, + NeRF views (+ the same with ``--augment.confidence`` when
+    ``confidence`` is set), + NeRF views + enhancer."""
     plan = [RunSpec("StreetNeRF", "streetnerf", _overrides(scale, "streetnerf"))]
     for t in targets:
         plan.append(RunSpec(f"{t}", t, _overrides(scale, t)))
         plan.append(RunSpec(f"{t} + NeRF views", t, _overrides(scale, t), augment_from="StreetNeRF"))
+        if confidence:
+            plan.append(RunSpec(f"{t} + NeRF views{CONFIDENCE_LABEL}", t, _overrides(scale, t), augment_from="StreetNeRF",
+                                augment={"confidence": confidence}))
         if enhancer:
             plan.append(RunSpec(f"{t} + NeRF views + enhancer", t, _overrides(scale, t), augment_from="StreetNeRF",
                                 augment={"enhancer": enhancer}))

@@ -12,7 +12,7 @@ from torch import Tensor, nn
 
 from nerf2gs_plugin.cameras import Cameras
 from nerf2gs_plugin.engine.model import ModelConfig
-from nerf2gs_plugin.utils.image_metrics import ssim
+from nerf2gs_plugin.utils.image_metrics import ssim, ssim_map
 from nerf2gs_plugin.utils.sh import num_sh_bases, sh_basis
 
 BackgroundMode = Literal["sky", "random", "learned", "black", "white"]
@@ -112,10 +112,14 @@ def image_loss(
     if mask_transients and batch.get("transient_mask") is not None:
         m = batch["transient_mask"].to(pred.device)
         pred = torch.where(m, gt, pred)
-    l1 = (pred - gt).abs().mean()
-    loss = (1 - ssim_lambda) * l1
-    if ssim_lambda > 0:
-        loss = loss + ssim_lambda * (1 - ssim(pred, gt))
+    conf = batch.get("confidence")
+    if conf is None:
+        l1 = (pred - gt).abs().mean()
+        loss = (1 - ssim_lambda) * l1
+        if ssim_lambda > 0:
+            loss = loss + ssim_lambda * (1 - ssim(pred, gt))
+    else:
+        loss = confidence_weighted_loss(pred, gt, conf.to(pred), ssim_lambda)
     out = {"main_loss": weight * loss}
     sky = batch.get("sky_mask")
     if sky_alpha_weight > 0 and sky is not None and "accumulation" in outputs:
@@ -124,6 +128,19 @@ def image_loss(
             acc = outputs["accumulation"]
             out["sky_alpha_loss"] = weight * sky_alpha_weight * acc[sky].mean()
     return out
+
+
+def confidence_weighted_loss(pred: Tensor, gt: Tensor, confidence: Tensor, ssim_lambda: float) -> Tensor:
+    """``(1-l) L1 + l (1-SSIM)`` with each pixel's terms times its ``confidence`` ``[H, W, 1]`` (a reference
+    render's pixels weigh as much as the reference knows them; all ones gives the plain loss). SSIM
+    is per pixel over the valid region, so the confidence is cropped to it."""
+    loss = (1 - ssim_lambda) * ((pred - gt).abs() * confidence).mean()
+    if ssim_lambda > 0:
+        smap = ssim_map(pred, gt)  # [1, 3, H - win + 1, W - win + 1]
+        top, left = (pred.shape[0] - smap.shape[2]) // 2, (pred.shape[1] - smap.shape[3]) // 2
+        c = confidence[top : top + smap.shape[2], left : left + smap.shape[3]].permute(2, 0, 1)[None]
+        loss = loss + ssim_lambda * ((1 - smap) * c).mean()
+    return loss
 
 
 def composite(rgb: Tensor, alpha: Tensor, background: Tensor) -> Tensor:

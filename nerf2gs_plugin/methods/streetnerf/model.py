@@ -169,6 +169,7 @@ class StreetNeRFModelConfig(ModelConfig):
 class StreetNeRFModel(Model):
     config: StreetNeRFModelConfig
     primitive_kind = None  # a field: its size is parameters and MB (num_primitives: hash-table entries)
+    depth_along = "ray"  # expected distance along the unit ray
 
     def populate_modules(self, train_data: DataparserOutputs) -> None:
         c = self.config

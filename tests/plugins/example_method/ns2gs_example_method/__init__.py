@@ -31,6 +31,7 @@ class VoxelGridConfig(ModelConfig):
 
 class VoxelGridModel(Model):
     config: VoxelGridConfig
+    depth_along = "ray"  # its depth is the expected distance along the (unit) ray
 
     def populate_modules(self, train_data) -> None:
         r = self.config.resolution

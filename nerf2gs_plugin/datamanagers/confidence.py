@@ -1,0 +1,111 @@
+"""How well the reference knows each pixel it rendered for the target (issue 23, ``--augment.confidence``).
+
+A reference's render is trustworthy where its training cameras saw the surface it shows, and a
+guess elsewhere (rooftops and facade tops from above, the road behind a parked car that never
+moved). ``visibility`` confidence measures exactly that, with the reference's own depth:
+
+  1. every pixel of a rendered view is lifted to the surface point ``X`` its depth says it shows;
+  2. ``X`` is projected into every training camera; that camera *observed* ``X`` when ``X`` falls
+     inside its image, in front of it, on a pixel that is neither sky nor transient in its masks,
+     and the reference's depth rendered at that training view (interpolated in inverse depth)
+     agrees with ``X``'s depth there within ``rel_tol`` (otherwise something nearer hid ``X``: a facade in front of a rooftop);
+  3. confidence = ``min(observations / full_views, 1)`` x the render's accumulation.
+
+So a surface no training view saw gets ~0 and one seen by ``full_views`` views or more gets ~1.
+The cost is one projection of every rendered pixel into every training camera (``P x N`` work, a
+Python loop over the N cameras only), plus one reference render per training view for its depth.
+"""
+
+from __future__ import annotations
+
+from typing import Literal, Optional, Sequence
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from nerf2gs_plugin.cameras import Cameras
+
+DepthAlong = Literal["z", "ray"]
+"""What a model's ``depth`` output measures: camera-space z (splatting) or distance along the ray (NeRFs)."""
+
+
+def _view_cosines(camera: Cameras) -> tuple[Tensor, Tensor]:
+    """Unit world ray directions ``[H*W, 3]`` of one camera and the cosine of each with its viewing axis ``[H*W]``."""
+    rays = camera.generate_rays(0)
+    forward = -camera.camera_to_worlds[0, :, 2]  # OpenGL cameras look down -z
+    return rays.directions, (rays.directions @ forward).clamp_min(1e-6)
+
+
+def depth_to_z(depth: Tensor, camera: Cameras, along: DepthAlong) -> Tensor:
+    """A rendered depth ``[H, W, 1]`` of one camera as camera-space z ``[H, W]``."""
+    d = depth[..., 0].float()
+    if along == "z":
+        return d
+    _, cos = _view_cosines(camera)
+    return d * cos.reshape(d.shape).to(d)
+
+
+def lift(depth: Tensor, camera: Cameras, along: DepthAlong) -> Tensor:
+    """World points ``[H*W, 3]`` that the pixels of one camera's rendered ``depth`` ``[H, W, 1]`` show."""
+    directions, cos = _view_cosines(camera)
+    t = depth.reshape(-1).float().to(directions)
+    if along == "z":
+        t = t / cos
+    return camera.camera_to_worlds[0, :, 3] + directions * t[:, None]
+
+
+def _inverse_depth_at(depth_z: Tensor, uv: Tensor, w: int, h: int) -> Tensor:
+    """The depth ``[P]`` at continuous pixel positions ``uv`` ``[P, 2]``, interpolated bilinearly in
+    inverse depth (exact on planes: a road seen at a grazing angle changes depth by several percent
+    a row); across an occlusion edge it matches neither side, so no view is credited there."""
+    inv = 1.0 / depth_z.clamp_min(1e-6)
+    grid = torch.stack([2.0 * uv[:, 0] / w - 1.0, 2.0 * uv[:, 1] / h - 1.0], -1).to(inv)
+    sampled = F.grid_sample(inv[None, None], grid[None, None], mode="bilinear", padding_mode="border", align_corners=False)
+    return 1.0 / sampled.reshape(-1).clamp_min(1e-12)
+
+
+def observation_counts(points: Tensor, cameras: Cameras, depths_z: Sequence[Tensor],
+                       blind: Optional[Sequence[Optional[Tensor]]] = None, rel_tol: float = 0.05) -> Tensor:
+    """How many of ``cameras`` observed each world point.
+
+    Args:
+        points: ``[P, 3]`` world points (non-finite ones are observed by none).
+        cameras: the N training cameras.
+        depths_z: per camera its rendered camera-space z ``[H, W]`` (the occlusion test).
+        blind: per camera an optional ``[H, W]`` bool of pixels that observe no surface (sky, transients).
+        rel_tol: a projection observes the point when ``|z - depth| <= rel_tol * depth`` at its pixel.
+
+    Returns:
+        ``[P]`` float counts.
+    """
+    counts = torch.zeros(points.shape[0], device=points.device)
+    finite = torch.isfinite(points).all(-1)
+    pts = torch.where(finite[:, None], points, torch.zeros_like(points))
+    for i in range(len(cameras)):
+        uv, z = cameras.project(pts, i)
+        h, w = depths_z[i].shape
+        u, v = uv[:, 0].floor().long(), uv[:, 1].floor().long()
+        inside = finite & (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+        uc, vc = u.clamp(0, w - 1), v.clamp(0, h - 1)
+        d = _inverse_depth_at(depths_z[i].to(points), uv, w, h)
+        seen = inside & ((z - d).abs() <= rel_tol * d.abs())
+        if blind is not None and blind[i] is not None:
+            seen &= ~blind[i].to(points.device)[vc, uc]
+        counts += seen.float()
+    return counts
+
+
+def visibility_confidence(depth: Tensor, camera: Cameras, along: DepthAlong, train_cameras: Cameras,
+                          train_depths_z: Sequence[Tensor], train_blind: Optional[Sequence[Optional[Tensor]]] = None,
+                          accumulation: Optional[Tensor] = None, full_views: int = 3, rel_tol: float = 0.05) -> Tensor:
+    """Per-pixel confidence ``[H, W, 1]`` in [0, 1] of one rendered view (see the module docstring).
+
+    ``depth`` and ``accumulation`` ``[H, W, 1]`` are the reference's render at ``camera`` (one camera).
+    """
+    h, w = depth.shape[:2]
+    counts = observation_counts(lift(depth, camera, along), train_cameras, train_depths_z, train_blind, rel_tol)
+    conf = (counts / max(int(full_views), 1)).clamp(max=1.0).reshape(h, w, 1)
+    if accumulation is not None:
+        conf = conf * accumulation.float().clamp(0.0, 1.0).to(conf)
+    return conf
