@@ -145,7 +145,7 @@ class ScaffoldGSModel(Model):
 
         Returns flat ``[Mv*k]`` tensors: means [.,3], scales [.,3] (linear), quats [.,4],
         opacity [.] (tanh, may be <= 0), colors [.,3]."""
-        c, k = self.config, self.config.n_offsets
+        k = self.config.n_offsets
         a = self.anchor
         anchors, feat, scaling = a["anchors"][idx], a["anchor_feat"][idx], torch.exp(a["scaling"][idx])
         ob = anchors - cam_center

@@ -44,7 +44,6 @@ Any mask kind the data lacks turns its term off with one warning.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any, Optional
 
