@@ -63,7 +63,7 @@ class TrainerConfig:
     run_dir: Optional[Path] = None
     """Write the run into exactly this folder instead of output_dir/experiment/method/timestamp
     (for tools that own their run's place, e.g. the masks' reference); locked like an explicit
-    --timestamp: a folder that holds another run's checkpoints is an error unless resumed."""
+    timestamp: a folder that holds another run's checkpoints is an error unless resumed."""
     max_num_iterations: int = scheduled(2000, "total")
     """Number of training steps."""
     steps_per_eval_image: int = 250
