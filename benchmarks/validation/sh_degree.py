@@ -21,7 +21,7 @@ cfg = apply_plain(get_method("streetnerf").config, ov, where="sh")
 cfg = dataclasses.replace(cfg, data=data, output_dir=out_dir / "runs", timestamp=f"sh{deg}-{steps}", progress=False)
 t = time.time()
 tr = Trainer(cfg); tr.setup(); tr.train()
-run = load_run(cfg.run_dir(), device="cpu")
+run = load_run(cfg.get_run_dir(), device="cpu")
 res = evaluate_run(run, ["val_street", "val_bev"], render_dir=None, lpips_model=None)
 out = {"sh_degree": deg, "steps": steps, "seconds": time.time() - t, "results": res["results"]}
 (out_dir / f"sh{deg}-{steps}.json").write_text(json.dumps(out, indent=1, default=str))

@@ -133,7 +133,7 @@ def merge(cfg: MergeConfig) -> Path:
                        "primitives": int(keep.numel()), "kept": int(keep.sum())})
     merged = _combine(states, weights)
     config = dataclasses.replace(runs[0].config, data=source, load_checkpoint=None, augment_from=None,
-                                 experiment_name=None, timestamp=out.name)
+                                 experiment_name=None, timestamp=out.name, run_dir=None)
     save_config(out / "config.yml", runs[0].method, config)
     save_dataparser_transform(out / "dataparser_transforms.json", target)
     save_train_cameras(out, target.cameras)

@@ -29,17 +29,15 @@ def ground_plane(train_data, rendered: Iterable[tuple[Tensor, Tensor]]) -> tuple
     the RANSAC plane of the sparse points below the cameras, else of the rendered surface points
     (``(points [H, W, 3], acc [H, W])`` per training view, accumulation > 0.5), levelled with the
     camera path (``data/masks/road_plane.py``)."""
-    from nerf2gs_plugin.data.ground import fit_ground_plane
+    from nerf2gs_plugin.data.ground import MAX_TILT_DEG, fit_ground_plane
     from nerf2gs_plugin.data.masks.road_plane import level_plane
-    from nerf2gs_plugin.data.process.ground_check import credible
 
     centres = train_data.cameras.centers.double().numpy()
     cam_up = train_data.up.double().numpy()
     plane = None
     if train_data.points3D_xyz is not None and len(train_data.points3D_xyz):
+        # None also for planes steeper than data.ground.MAX_TILT_DEG (roof lines): try the rendered surfaces
         plane = fit_ground_plane(train_data.points3D_xyz.double().numpy(), centres, cam_up)
-        if credible(plane, cam_up) is not None:  # e.g. a plane through roof lines: try the rendered surfaces
-            plane = None
     used_sparse = plane is not None
     if plane is None:
         pts = [p.reshape(-1, 3)[a.reshape(-1) > 0.5] for p, a in rendered]
@@ -47,8 +45,9 @@ def ground_plane(train_data, rendered: Iterable[tuple[Tensor, Tensor]]) -> tuple
         if len(pts) > MAX_PLANE_POINTS:
             pts = pts[torch.randperm(len(pts), generator=torch.Generator().manual_seed(0))[:MAX_PLANE_POINTS]]
         plane = fit_ground_plane(pts.double().numpy(), centres, cam_up)
-    if credible(plane, cam_up) is not None:
-        raise ConfigError(f"{credible(plane, cam_up)} (neither the sparse points nor the rendered surfaces give one)")
+    if plane is None:
+        raise ConfigError(f"no ground plane found below the cameras within {MAX_TILT_DEG:.0f} deg of their up "
+                          "(neither the sparse points nor the rendered surfaces give one)")
     fitted_on = train_data.points3D_xyz.double().numpy() if used_sparse else pts.double().numpy()
     normal, offset = level_plane(plane.normal, plane.offset, fitted_on, centres)
     return torch.from_numpy(normal).float(), -float(offset)

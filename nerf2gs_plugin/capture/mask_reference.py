@@ -26,7 +26,6 @@ def ensure_reference(data: Path, run: Optional[Path], steps: int = DEFAULT_STEPS
     steps is trained on the mask-less view of ``data`` into ``run`` (resumed when partial)."""
     from nerf2gs_plugin.engine.checkpoints import list_checkpoints, load_checkpoint
     from nerf2gs_plugin.engine.config import read_config_doc
-    from nerf2gs_plugin.engine.run_dir import RunDirLock
     from nerf2gs_plugin.engine.trainer import Trainer
     from nerf2gs_plugin.registry import get_method
     from nerf2gs_plugin.utils.config import apply_plain
@@ -48,12 +47,11 @@ def ensure_reference(data: Path, run: Optional[Path], steps: int = DEFAULT_STEPS
     dm = cfg.pipeline.datamanager
     if hasattr(dm, "downscale"):
         dm = dataclasses.replace(dm, downscale=downscale)
-    cfg = dataclasses.replace(cfg, data=maskless_view(data), progress=progress, timestamp="masks-reference",
+    cfg = dataclasses.replace(cfg, data=maskless_view(data), progress=progress, run_dir=run,
                               pipeline=dataclasses.replace(cfg.pipeline, datamanager=dm),
                               load_checkpoint=ckpts[-1] if ckpts else None)
     log(f"masks: training a {steps}-step StreetNeRF reference without masks -> {run}")
-    trainer = Trainer(cfg)
-    trainer.run_dir, trainer._lock = run, RunDirLock(run)  # the reference's own folder, not outputs/<data>/<method>/<stamp>
+    trainer = Trainer(cfg)  # in the reference's own folder, not outputs/<data>/<method>/<stamp>
     with warnings.catch_warnings():  # "the dataset has no sky masks": intended here, not news
         warnings.filterwarnings("ignore", message="StreetNeRF: the dataset has no .* masks")
         trainer.setup()

@@ -34,15 +34,29 @@ class GroundPlane:
                 "candidates": self.candidates, "median_camera_height": float(self.median_camera_height)}
 
 
+MAX_TILT_DEG = 30.0
+"""The steepest ground plane trusted, degrees between its normal and the cameras' mean up: people and
+cars hold cameras roughly level, so a steeper plane is a wall, a roof line or the foot of the walls.
+The one place this limit lives (RANSAC, the refit and every caller use it)."""
+
+
 def fit_ground_plane(points: np.ndarray, cam_centres: np.ndarray, cam_up: Optional[np.ndarray] = None,
-                     iterations: int = 2000, rel_thresh: float = 0.05, max_tilt_deg: float = 30.0,
+                     iterations: int = 2000, rel_thresh: float = 0.05, max_tilt_deg: float = MAX_TILT_DEG,
                      min_inliers: int = 15, seed: int = 0) -> Optional[GroundPlane]:
     """RANSAC plane over points below the cameras; ``None`` when no credible plane exists.
 
     ``cam_up`` (the cameras' mean up axis in data units) selects the candidate points (below the
-    median camera along it) and rejects planes tilted more than ``max_tilt_deg`` from it (walls).
-    Scale-free: a point is an inlier when its distance to the plane is below ``rel_thresh`` x the
-    median camera height above that plane; the best plane is refitted by least squares on its inliers.
+    median camera along it) and bounds the plane: its normal is never more than ``max_tilt_deg``
+    from it, neither for a RANSAC hypothesis nor after the refit. The best hypothesis is refitted by
+    least squares on its inliers (three rounds); a refit that tilts past the limit (or loses the
+    cameras above it, or its inliers) is dropped and the RANSAC plane kept.
+
+    Inlier band (scale-free, the same for every hypothesis and the refit): a point is an inlier when
+    its distance to the plane is below ``rel_thresh`` x the reference height, the median over the
+    candidate points of the median camera's height above them along ``cam_up``. It is not each
+    hypothesis's own camera height: that grows for planes tilted or far below the cameras and gave
+    them a wider band, so they won by counting walls (castle-P30: a plane 37 deg off with 7.6x the
+    true camera height, where this band finds the courtyard floor 1 deg from the true up).
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     cams = np.asarray(cam_centres, dtype=np.float64).reshape(-1, 3)
@@ -50,9 +64,12 @@ def fit_ground_plane(points: np.ndarray, cam_centres: np.ndarray, cam_up: Option
         return None
     up = np.asarray(cam_up, dtype=np.float64) if cam_up is not None else np.array([0.0, 0.0, 1.0])
     up = up / (np.linalg.norm(up) + 1e-12)
-    cand = pts[pts @ up < np.median(cams @ up)]
+    cam_level = np.median(cams @ up)
+    cand = pts[pts @ up < cam_level]
     if len(cand) < min_inliers:
         return None
+    band = rel_thresh * float(np.median(cam_level - cand @ up))  # > 0: every candidate is below cam_level
+    cos_limit = np.cos(np.radians(max_tilt_deg))
     rng = np.random.default_rng(seed)
     tri = cand[rng.integers(0, len(cand), size=(iterations, 3))]
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
@@ -60,34 +77,35 @@ def fit_ground_plane(points: np.ndarray, cam_centres: np.ndarray, cam_up: Option
     ok = norm > 1e-12
     n, p0 = n[ok] / norm[ok, None], tri[ok, 0]
     n = n * np.where(n @ up < 0, -1.0, 1.0)[:, None]  # point toward the cameras' up
-    ok = n @ up > np.cos(np.radians(max_tilt_deg))
+    ok = n @ up > cos_limit
     if not ok.any():
         return None
     n, p0 = n[ok], p0[ok]
     d = -(n * p0).sum(1)
     cam_h = np.median(cams @ n.T + d, axis=0)  # [T] median camera height above each hypothesis
-    valid = cam_h > 0
     counts = np.zeros(len(n), dtype=np.int64)
     for s in range(0, len(n), 64):  # chunks of hypotheses: no loop over points
         sl = slice(s, s + 64)
-        counts[sl] = (np.abs(cand @ n[sl].T + d[sl]) < rel_thresh * np.abs(cam_h[sl])).sum(0)
-    counts[~valid] = 0
+        counts[sl] = (np.abs(cand @ n[sl].T + d[sl]) < band).sum(0)
+    counts[~(cam_h > 0)] = 0
     if counts.max() < min_inliers:
         return None
     best = int(counts.argmax())
-    normal, offset, med = n[best], float(d[best]), float(cam_h[best])
+    ransac = GroundPlane(n[best], float(d[best]), int(counts[best]), int(len(cand)), float(cam_h[best]))
+    normal, offset = ransac.normal, ransac.offset
     for _ in range(3):  # least-squares refit on the inliers (smallest singular vector), oriented up
-        inl = cand[np.abs(cand @ normal + offset) < rel_thresh * med]
+        inl = cand[np.abs(cand @ normal + offset) < band]
         if len(inl) < 3:
-            return None
+            return ransac
         c = inl.mean(0)
         normal = np.linalg.svd(inl - c, full_matrices=False)[2][-1]
         normal = normal if normal @ up > 0 else -normal
         offset = float(-normal @ c)
-        med = float(np.median(cams @ normal + offset))
-        if not med > 0:
-            return None
-    return GroundPlane(normal, offset, int(len(inl)), int(len(cand)), med)
+    med = float(np.median(cams @ normal + offset))
+    if not (normal @ up > cos_limit and med > 0):  # the refit left the cone (or the cameras): keep RANSAC's
+        return ransac
+    inliers = int((np.abs(cand @ normal + offset) < band).sum())
+    return GroundPlane(normal, offset, inliers, int(len(cand)), med)
 
 
 @dataclass
@@ -109,8 +127,8 @@ def estimate_metric_scale(points: np.ndarray, cam_centres: np.ndarray, cam_up: n
         up = plane.normal if plane is not None else np.asarray(cam_up, dtype=np.float64) / np.linalg.norm(cam_up)
         return MetricScale(float(metres_per_unit), up, "override", plane)
     if plane is None:
-        raise DataError("no ground plane found below the cameras to set the metric scale: pass --metres-per-unit "
-                        "(metres per data unit) instead", where)
+        raise DataError(f"no ground plane found below the cameras (within {MAX_TILT_DEG:.0f} deg of their up) to set the "
+                        "metric scale: pass --metres-per-unit (metres per data unit) instead", where)
     if not camera_height > 0:
         raise DataError(f"--camera-height must be positive, got {camera_height}", where)
     return MetricScale(float(camera_height / plane.median_camera_height), plane.normal, "camera-height", plane)

@@ -1,7 +1,7 @@
 """Exclusive run directories: never two trainings writing into one folder.
 
 With the default timestamp a clash (two runs started in the same second) gets a new unique
-folder (``<stamp>-1``, ``-2``, ...). With an explicit ``--timestamp`` the folder is locked
+folder (``<stamp>-1``, ``-2``, ...). With an explicit ``--timestamp`` (or ``--run-dir``) the folder is locked
 (``fcntl.flock`` on ``.lock``, released by the kernel even on kill -9): a second training there
 is an error, as is one that would overwrite another run's checkpoints without resuming them.
 """
@@ -47,7 +47,7 @@ class RunDirLock:
         except BlockingIOError:
             other = os.read(fd, 32).decode(errors="replace").strip() or "?"
             os.close(fd)
-            raise ConfigError(f"run directory is in use by another training (pid {other}); choose another --timestamp", self.run_dir) from None
+            raise ConfigError(f"run directory is in use by another training (pid {other}); choose another --timestamp or --run-dir", self.run_dir) from None
         os.ftruncate(fd, 0)
         os.write(fd, f"{os.getpid()}\n".encode())
         self.fd = fd
@@ -56,7 +56,7 @@ class RunDirLock:
         if not own and ckpts.is_dir() and any(ckpts.glob("step-*.ckpt")):
             self.release()
             raise ConfigError("run directory already holds another run's checkpoints; choose another --timestamp "
-                              "or resume it with --load-checkpoint", self.run_dir)
+                              "or --run-dir, or resume it with --load-checkpoint", self.run_dir)
 
     def release(self) -> None:
         if self.fd is not None:

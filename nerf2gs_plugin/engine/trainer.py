@@ -62,6 +62,10 @@ class TrainerConfig:
     """Defaults to the dataset folder's name: runs go to output_dir/experiment/method/timestamp."""
     timestamp: str = "{timestamp}"
     """Name of the run folder; the default is the start time (YYYY-MM-DD_HHMMSS)."""
+    run_dir: Optional[Path] = None
+    """Write the run into exactly this folder instead of output_dir/experiment/method/timestamp
+    (for tools that own their run's place, e.g. the masks' reference); locked like an explicit
+    timestamp: a folder that holds another run's checkpoints is an error unless resumed."""
     max_num_iterations: int = scheduled(2000, "total")
     """Number of training steps."""
     steps_per_eval_image: int = 250
@@ -90,7 +94,10 @@ class TrainerConfig:
     machine: MachineConfig = field(default_factory=MachineConfig)
     """Data-parallel training: several ranks on one run (torchrun, or --machine.num-devices N)."""
 
-    def run_dir(self) -> Path:
+    def get_run_dir(self) -> Path:
+        """The run folder: ``run_dir`` when set, else output_dir/experiment/method/timestamp."""
+        if self.run_dir is not None:
+            return Path(self.run_dir)
         name = self.experiment_name or Path(self.data).name
         return Path(self.output_dir) / name / self.method_name / self.timestamp
 
@@ -98,15 +105,18 @@ class TrainerConfig:
 class Trainer:
     def __init__(self, config: TrainerConfig) -> None:
         check_trainer_config(config)
-        self._unique_dir = config.timestamp == "{timestamp}"  # default stamp: a clash gets a new folder
-        if self._unique_dir:  # rank 0's clock names the run for every rank
+        # default stamp and no explicit folder: a clash gets a new folder
+        self._unique_dir = config.timestamp == "{timestamp}" and config.run_dir is None
+        if config.timestamp == "{timestamp}":  # rank 0's clock names the run for every rank
             config = dataclasses.replace(config, timestamp=collectives.broadcast_object(datetime.now().strftime("%Y-%m-%d_%H%M%S")))
         # recorded absolute, so eval / export / the viewer find the data from any directory
         config = dataclasses.replace(config, data=Path(config.data).expanduser().absolute())
+        if config.run_dir is not None:
+            config = dataclasses.replace(config, run_dir=Path(config.run_dir).expanduser().absolute())
         self.config = config
-        self._lock = RunDirLock(config.run_dir())
+        self._lock = RunDirLock(config.get_run_dir())
         self.device = pick_device(config.device)
-        self.run_dir = config.run_dir()
+        self.run_dir = config.get_run_dir()
         self.step = 0
         self.last_good_checkpoint: Optional[Path] = None
         self.history = StepHistory()

@@ -17,7 +17,10 @@ def _flag(name: str) -> str:
 
 
 def check_trainer_config(cfg: Any) -> None:
-    """Step arithmetic, learning rates and augmentation numbers that cannot work."""
+    """Step arithmetic, learning rates, augmentation numbers and run-folder options that cannot work."""
+    if getattr(cfg, "run_dir", None) is not None and (cfg.experiment_name is not None or cfg.timestamp != "{timestamp}"):
+        raise ConfigError("names the run folder itself: leave out --experiment-name and --timestamp (they name "
+                          "output-dir/experiment/method/timestamp)", "--run-dir")
     if cfg.max_num_iterations <= 0:
         raise ConfigError(f"must be a positive number of steps, got {cfg.max_num_iterations}", _flag("max_num_iterations"))
     if cfg.steps_per_save <= 0:

@@ -64,7 +64,7 @@ def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, ref
     cfg = apply_plain(base, spec.overrides, where=f"bench run {spec.label}")
     cfg = dataclasses.replace(cfg, data=Path(data), output_dir=Path(runs_root), timestamp=key, progress=progress,
                               device=str(torch_device))
-    run_dir = cfg.run_dir()
+    run_dir = cfg.get_run_dir()
     if rerun and run_dir.exists():
         log(f"[bench] --rerun: retraining {spec.label} (removing {run_dir})")
         shutil.rmtree(run_dir)

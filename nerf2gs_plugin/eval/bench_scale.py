@@ -140,7 +140,7 @@ def measure(job: Job) -> dict[str, Any]:
                               pipeline=dataclasses.replace(cfg.pipeline, datamanager=dm))
     import shutil
 
-    shutil.rmtree(cfg.run_dir(), ignore_errors=True)
+    shutil.rmtree(cfg.get_run_dir(), ignore_errors=True)
     t0 = time.perf_counter()
     trainer = Trainer(cfg)
     trainer.setup()

@@ -4,7 +4,8 @@
 white-balance differences between input images (StreetNeRF's appearance embedding, in the
 affine form of Urban Radiance Fields' exposure compensation). Cameras that are not training
 images (novel, bird's-eye or augmentation views: index >= num_images) use the mean transform,
-which is the identity when the transforms are regularised towards it.
+which is the identity when the transforms are regularised towards it (or, with ``novel="identity"``,
+the identity itself; a model may also pick a training image's transform for them, e.g. the nearest).
 """
 
 from __future__ import annotations
@@ -23,14 +24,21 @@ class AppearanceTransforms(nn.Module):
     def mean_transform(self) -> Tensor:
         return self.transforms.mean(0)
 
-    def forward(self, rgb: Tensor, image_idx: Tensor | None) -> Tensor:
-        """``rgb [R,3]``, ``image_idx [R]`` (or None: all novel) -> transformed ``[R,3]``."""
+    def forward(self, rgb: Tensor, image_idx: Tensor | None, novel: str = "mean") -> Tensor:
+        """``rgb [R,3]``, ``image_idx [R]`` (or None: all novel) -> transformed ``[R,3]``; novel
+        rows get the ``"mean"`` transform or the ``"identity"``."""
+        if novel == "identity":
+            fallback = torch.eye(3, 4, device=self.transforms.device, dtype=self.transforms.dtype)
+        elif novel == "mean":
+            fallback = self.mean_transform()
+        else:
+            raise ValueError(f"novel must be 'mean' or 'identity', got {novel!r}")
         if image_idx is None:
-            A = self.mean_transform().expand(rgb.shape[0], 3, 4)
+            A = fallback.expand(rgb.shape[0], 3, 4)
         else:
             idx = image_idx.long().to(rgb.device)
             known = (idx >= 0) & (idx < self.num_images)
-            A = torch.where(known[:, None, None], self.transforms[idx.clamp(0, self.num_images - 1)], self.mean_transform()[None])
+            A = torch.where(known[:, None, None], self.transforms[idx.clamp(0, self.num_images - 1)], fallback[None])
         return torch.einsum("rij,rj->ri", A[:, :, :3], rgb) + A[:, :, 3]
 
     def deviation(self) -> Tensor:

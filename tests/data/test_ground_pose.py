@@ -48,6 +48,47 @@ def test_override_and_no_plane_error():
     assert fit_ground_plane(np.zeros((5, 3)), cams, up) is None
 
 
+def _tilt(normal, up) -> float:
+    return float(np.degrees(np.arccos(np.clip(normal @ up / np.linalg.norm(up), -1.0, 1.0))))
+
+
+def _cameras(height=1.5):
+    x = np.linspace(-10, 10, 30)
+    return np.stack([x, np.zeros_like(x), np.full_like(x, height)], 1)
+
+
+def test_a_larger_slope_does_not_win_by_a_wider_band():
+    """A road (400 points, z=0, cameras 1.5 m above) beside a 25 deg embankment with more, noisier
+    points (1000). The embankment's plane, extended under the cameras, lies ~4.8 m below them: with
+    each hypothesis's own camera height setting its inlier band (the old rule) its band was 3x the
+    road's and it won; with one band for every hypothesis the road wins."""
+    rng = np.random.default_rng(0)
+    road = np.stack([rng.uniform(-10, 10, 400), rng.uniform(-4, 4, 400), rng.normal(0, 0.01, 400)], 1)
+    t = np.radians(25.0)
+    n = np.array([-np.sin(t), 0.0, np.cos(t)])
+    u = rng.uniform(0, 1.4 / np.sin(t), 1000)  # up the slope from its foot at x=8, to 1.4 m high
+    slope = np.stack([8 + u * np.cos(t), rng.uniform(-10, 10, 1000), u * np.sin(t)], 1) + rng.normal(0, 0.2, 1000)[:, None] * n
+    up = np.array([0.0, 0.0, 1.0])
+    plane = fit_ground_plane(np.concatenate([road, slope]), _cameras(), up)
+    assert _tilt(plane.normal, up) < 1.0  # the old rule: 25.3 deg, the slope
+    assert plane.median_camera_height == pytest.approx(1.5, rel=0.02)  # the old rule: 4.79
+
+
+def test_the_refit_never_leaves_the_tilt_limit():
+    """Every point lies on a thin strip of a 40 deg plane: RANSAC's hypotheses are held within 30
+    deg of the cameras' up, but the least-squares refit on their inliers turns to the strip's own
+    40 deg (the old refit returned it). The refit is dropped and the RANSAC plane kept."""
+    from nerf2gs_plugin.data.ground import MAX_TILT_DEG
+
+    rng = np.random.default_rng(0)
+    y = rng.uniform(-0.1, 0.1, 300)
+    strip = np.stack([rng.uniform(-10, 10, 300), y, y * np.tan(np.radians(40.0)) + rng.normal(0, 0.002, 300)], 1)
+    up = np.array([0.0, 0.0, 1.0])
+    plane = fit_ground_plane(strip, _cameras(), up)
+    assert plane is not None and _tilt(plane.normal, up) <= MAX_TILT_DEG  # the old refit: 40.1 deg
+    assert _tilt(fit_ground_plane(strip, _cameras(), up, max_tilt_deg=10.0).normal, up) <= 10.0  # any limit holds
+
+
 def test_umeyama_and_ate():
     rng = np.random.default_rng(3)
     true = np.zeros((30, 3, 4))

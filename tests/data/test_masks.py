@@ -311,6 +311,9 @@ def test_make_masks_auto_with_a_very_short_reference(tmp_path):
     logs: list[str] = []
     summary = make_masks(MasksConfig(data=data, reference=ref, reference_steps=5, progress=False), log=logs.append)
     assert (ref / "config.yml").is_file() and summary["reference"] == str(ref)
+    from nerf2gs_plugin.engine.config import read_config_doc
+
+    assert Path(read_config_doc(ref / "config.yml")["config"]["run_dir"]) == ref.absolute()  # the trainer's --run-dir
     outs = parse_dataset(data, "train")
     assert set(outs.mask_filenames) == {"sky", "ground", "transient"}
     assert all(p is not None for p in outs.mask_filenames["sky"])

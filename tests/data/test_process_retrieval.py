@@ -1,5 +1,5 @@
 """Loop-closure pairs without a vocabulary file (``data/process/retrieval.py``) and the ground-plane
-credibility check (``data/process/ground_check.py``)."""
+scale ``process`` asks for when no ground plane is found."""
 
 from __future__ import annotations
 
@@ -48,29 +48,25 @@ def test_reads_descriptors_from_a_colmap_database(tmp_path):
     assert write_pairs(tmp_path / "pairs.txt", [("a.jpg", "b.jpg")]).read_text() == "a.jpg b.jpg\n"
 
 
-def test_a_tilted_plane_is_not_credible_and_process_asks_for_the_scale(tmp_path, monkeypatch):
-    from nerf2gs_plugin.data.ground import GroundPlane
-    from nerf2gs_plugin.data.process.ground_check import credible, tilt_deg
+def test_no_level_plane_and_process_asks_for_the_scale(tmp_path):
+    """Sparse points only on a 40 deg plane below the cameras (a roof line, the foot of walls): no
+    ground plane within ``MAX_TILT_DEG`` (``data/ground.py``, the one place of that limit), so
+    ``process`` asks for ``--metres-per-unit``, and with it takes up from the cameras."""
     from nerf2gs_plugin.data.process.pipeline import ProcessOptions, metric_scale
     from nerf2gs_plugin.errors import DataError
 
-    up = np.array([0.0, 1.0, 0.0])
-    tilt = np.array([0.0, np.cos(np.radians(40)), np.sin(np.radians(40))])
-    assert tilt_deg(tilt, up) == pytest.approx(40.0)
-    assert credible(GroundPlane(up, 0.0, 50, 100, 1.0), up) is None
-    assert "tilted 40 deg" in credible(GroundPlane(tilt, 0.0, 50, 100, 1.0), up)
-    # what the fit returned on castle-P30 (its refit drifted past its own 30 deg gate): rejected
-    import nerf2gs_plugin.data.ground as ground
-
-    monkeypatch.setattr(ground, "estimate_metric_scale", lambda *a, **k: ground.MetricScale(0.7, tilt, "camera-height",
-                                                                                           GroundPlane(tilt, 0.0, 50, 100, 2.3)))
-    c2w = np.tile(np.eye(4)[:3], (6, 1, 1))
-    pts = np.zeros((10, 3))
-    with pytest.raises(DataError, match="tilted 40 deg.*pass --metres-per-unit"):
+    rng = np.random.default_rng(0)
+    c2w = np.tile(np.eye(4)[:3], (6, 1, 1))  # OpenGL: up is +y
+    c2w[:, 0, 3] = np.linspace(-2, 2, 6)
+    c2w[:, 1, 3] = 1.5
+    u, x = rng.uniform(0, 3, 400), rng.uniform(-3, 3, 400)
+    t = np.radians(40.0)
+    pts = np.stack([x, u * np.sin(t) - 1.0, -u * np.cos(t)], 1)  # rises 40 deg away from the cameras
+    with pytest.raises(DataError, match="within 30 deg.*pass --metres-per-unit"):
         metric_scale(pts, c2w, ProcessOptions(out=tmp_path))
     with pytest.warns(UserWarning, match="cameras' mean up"):
         s = metric_scale(pts, c2w, ProcessOptions(out=tmp_path, metres_per_unit=2.0))
-    assert s.metres_per_unit == 2.0 and np.allclose(s.up, up) and s.source == "override"
-    monkeypatch.setattr(ground, "estimate_metric_scale", lambda *a, **k: ground.MetricScale(0.7, up, "camera-height",
-                                                                                           GroundPlane(up, 0.0, 50, 100, 2.3)))
-    assert metric_scale(pts, c2w, ProcessOptions(out=tmp_path)).metres_per_unit == 0.7  # a level plane is kept
+    assert s.metres_per_unit == 2.0 and np.allclose(s.up, [0, 1, 0]) and s.source == "override"
+    level = np.stack([x, np.full(400, -0.0) + rng.normal(0, 0.005, 400), -u], 1)  # a level ground: kept
+    s = metric_scale(level, c2w, ProcessOptions(out=tmp_path))
+    assert s.source == "camera-height" and s.metres_per_unit == pytest.approx(1.0, rel=0.02)

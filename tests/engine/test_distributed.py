@@ -56,7 +56,7 @@ def _config(method, data, out, *, ranks=1, batches=1, steps=STEPS, **kw):
 
 def _run(cfg):
     launch(train, cfg)
-    return cfg.run_dir()
+    return cfg.get_run_dir()
 
 
 def _model(run_dir, step):

@@ -105,6 +105,41 @@ def test_cli_bad_inputs_are_one_line(tiny_scene, tmp_path):
     assert code == 2 and "corrupt or unreadable checkpoint" in err and str(bad) in err
 
 
+def test_run_dir_puts_the_run_exactly_there(tiny_scene, tmp_path):
+    """``--run-dir`` (TrainerConfig.run_dir): the run is written into that folder, not under
+    output_dir/experiment/method/timestamp; locked like an explicit --timestamp; a resume into it works."""
+    from nerf2gs_plugin.errors import ConfigError
+
+    cfg = dataclasses.replace(_config(tiny_scene, tmp_path / "outputs", steps=4), timestamp="{timestamp}", run_dir=tmp_path / "mine")
+    assert cfg.get_run_dir() == tmp_path / "mine"
+    trainer = Trainer(cfg)
+    trainer.setup()
+    assert trainer.train() == tmp_path / "mine" and trainer.run_dir == tmp_path / "mine"
+    assert [p.name for p in list_checkpoints(tmp_path / "mine")] == ["step-000000003.ckpt"]
+    assert (tmp_path / "mine" / "config.yml").is_file() and not (tmp_path / "outputs").exists()
+    assert Path(load_run(tmp_path / "mine").config.run_dir) == (tmp_path / "mine").absolute()  # recorded absolute
+    again = Trainer(dataclasses.replace(cfg, max_num_iterations=6))
+    again.setup()
+    with pytest.raises(ConfigError, match="another run's checkpoints.*--run-dir"):
+        again.train()  # not a resume: the folder's checkpoints are kept
+    resumed = Trainer(dataclasses.replace(cfg, max_num_iterations=6, load_checkpoint=tmp_path / "mine"))
+    resumed.setup()
+    assert resumed.train() == tmp_path / "mine" and list_checkpoints(tmp_path / "mine")[-1].name == "step-000000005.ckpt"
+    with pytest.raises(ConfigError, match="--run-dir.*leave out --experiment-name and --timestamp"):
+        Trainer(dataclasses.replace(cfg, timestamp="stamp"))
+    # the default is unchanged: output_dir/experiment/method/timestamp
+    default = dataclasses.replace(cfg, run_dir=None, timestamp="t")
+    assert default.get_run_dir() == tmp_path / "outputs" / tiny_scene.name / "voxel-grid" / "t"
+
+
+def test_cli_run_dir_flag(tiny_scene, tmp_path):
+    p = subprocess.run([str(BIN / "ns2gs-train"), "voxel-grid", "--data", str(tiny_scene), "--run-dir", str(tmp_path / "r"),
+                        "--max-num-iterations", "2", "--progress", "False", "--steps-per-eval-image", "0"],
+                       capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert list_checkpoints(tmp_path / "r") and not (tmp_path / "outputs").exists()
+
+
 def test_checkpoint_of_other_method_is_rejected(tiny_scene, tmp_path):
     trainer = Trainer(_config(tiny_scene, tmp_path, steps=2))
     trainer.setup()

@@ -141,23 +141,18 @@ def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=Non
 
 
 def metric_scale(xyz: np.ndarray, c2w: np.ndarray, opts: ProcessOptions):
-    """The ground-plane scale and up (:func:`~nerf2gs_plugin.data.ground.estimate_metric_scale`), with
-    a plane tilted far from the cameras' up rejected (:mod:`.ground_check`): then ``--metres-per-unit``
-    is needed, and up is the cameras' mean up."""
-    from nerf2gs_plugin.data.ground import MetricScale, estimate_metric_scale
-    from nerf2gs_plugin.data.process.ground_check import credible
+    """The ground-plane scale and up (:func:`~nerf2gs_plugin.data.ground.estimate_metric_scale`; a
+    plane steeper than ``MAX_TILT_DEG`` from the cameras' up is no plane there). Without a plane,
+    ``--metres-per-unit`` is needed, and up is the cameras' mean up (a warning says so)."""
+    from nerf2gs_plugin.data.ground import estimate_metric_scale
 
     cam_up = c2w[:, :, 1].mean(0)
     scale = estimate_metric_scale(xyz, c2w[:, :, 3], cam_up, opts.camera_height, opts.metres_per_unit, where="--camera-height")
-    why = credible(scale.plane, cam_up)
-    if scale.plane is None or why is None:
-        return scale
-    if opts.metres_per_unit is None:
-        raise DataError(f"{why}: the camera-height scale would be wrong; pass --metres-per-unit (metres per SfM unit)", opts.out)
-    import warnings
+    if scale.plane is None:
+        import warnings
 
-    warnings.warn(f"{why}: up is the cameras' mean up instead", stacklevel=2)
-    return MetricScale(float(opts.metres_per_unit), cam_up / np.linalg.norm(cam_up), "override", None)
+        warnings.warn("no ground plane below the cameras: up is the cameras' mean up instead", stacklevel=2)
+    return scale
 
 
 def exif_focal_for(sources: list[Path], frame_dir: Path, names: list[str]) -> Optional[float]:

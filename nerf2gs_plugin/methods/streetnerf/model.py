@@ -45,7 +45,7 @@ Any mask kind the data lacks turns its term off with one warning.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Optional
+from typing import Any, Literal, Optional
 
 import torch
 from torch import Tensor, nn
@@ -86,6 +86,12 @@ class StreetNeRFModelConfig(ModelConfig):
     """Exclude transient-mask pixels from the colour loss."""
     appearance: bool = True
     """Per-image affine colour transform."""
+    eval_appearance: Literal["mean", "identity", "nearest"] = "mean"
+    """Colour transform of a rendered camera (render_camera: eval, held-out photos, views from above,
+    the augmentation's renders): the mean of the per-image transforms (default), the identity, or
+    the transform of the training camera nearest to it (by centre; a training camera gets its own):
+    photos taken one after another share exposure and white balance, the mean of a whole set may
+    not (castle-P30: the mean transform tints held-out photos blue)."""
     point_depth: bool = True
     """Depth supervision from the dataset's sparse points (ours, see the module docstring); off
     with a warning when the data has no points."""
@@ -190,6 +196,8 @@ class StreetNeRFModel(Model):
         self.sky_model = SkyModel() if c.sky else None
         self.bg_logit = None if c.sky else nn.Parameter(torch.logit(torch.tensor(c.background).clamp(0.01, 0.99)))
         self.appearance = AppearanceTransforms(self.num_train_images) if c.appearance else None
+        if c.appearance:  # for eval_appearance="nearest"; rebuilt from the data, never in checkpoints
+            self.register_buffer("train_centres", train_data.cameras.centers.float().reshape(-1, 3).clone(), persistent=False)
         up = torch.nn.functional.normalize(train_data.up.float().reshape(3), dim=0)
         self.register_buffer("up", up)
         self.register_buffer("ground_height", torch.zeros(()))
@@ -257,7 +265,7 @@ class StreetNeRFModel(Model):
         b = 10.0
         return (b * x) / ((b - 1.0) * x + 1.0)
 
-    def _render_rays(self, rays: RayBundle, image_idx: Optional[Tensor]) -> dict[str, Tensor]:
+    def _render_rays(self, rays: RayBundle, image_idx: Optional[Tensor], novel: str = "mean") -> dict[str, Tensor]:
         c = self.config
         R = len(rays)
         dev = rays.origins.device
@@ -296,7 +304,7 @@ class StreetNeRFModel(Model):
         else:
             color = color + (1.0 - acc) * torch.sigmoid(self.bg_logit)
         if self.appearance is not None:
-            color = self.appearance(color, image_idx)
+            color = self.appearance(color, image_idx, novel)
         t_mid = (t_edges[:, 1:] + t_edges[:, :-1]) / 2
         depth = (w * t_mid).sum(-1, keepdim=True) / acc.clamp_min(1e-6)
         return {"rgb": color, "accumulation": acc, "depth": depth, "weights": w, "s_edges": s_edges, "t_mid": t_mid,
@@ -398,8 +406,12 @@ class StreetNeRFModel(Model):
             rays = camera.generate_rays(0)
             keys = ("rgb", "depth", "accumulation")
             chunks: dict[str, list[Tensor]] = {k: [] for k in keys}
+            nearest = self._nearest_train_image(camera) if self.config.eval_appearance == "nearest" else None
+            novel = "identity" if self.config.eval_appearance == "identity" else "mean"
             for i in range(0, len(rays), self.config.eval_chunk):
-                out = self._render_rays(rays[i : i + self.config.eval_chunk], None)
+                chunk = rays[i : i + self.config.eval_chunk]
+                idx = None if nearest is None else torch.full((len(chunk),), nearest, dtype=torch.long, device=self.device)
+                out = self._render_rays(chunk, idx, novel)
                 for k in keys:
                     chunks[k].append(out[k])
             result = {k: torch.cat(v).reshape(h, w, -1) for k, v in chunks.items()}
@@ -407,6 +419,12 @@ class StreetNeRFModel(Model):
             return result
         finally:
             self.train(was_training)
+
+    def _nearest_train_image(self, camera: Cameras) -> Optional[int]:
+        """The training image whose camera centre is nearest ``camera``'s (None without appearance)."""
+        if self.appearance is None:
+            return None
+        return int((self.train_centres - camera.centers[0].to(self.train_centres)).norm(dim=-1).argmin())
 
     def num_primitives(self) -> int:
         return self.field.encoding.num_entries() + sum(p.encoding.num_entries() for p in self.proposals)

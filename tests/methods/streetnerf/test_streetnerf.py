@@ -222,3 +222,33 @@ def test_without_points_the_plane_is_estimated_before_the_loss_and_then_frozen(t
     loss = model._ground_loss(outputs_at(-0.8), torch.ones(64, dtype=torch.bool))
     assert loss is not None and float(loss) > 0.2
     assert float(model.ground_height) == pytest.approx(-0.4, abs=0.01)
+
+
+def test_eval_appearance_modes(tiny_scene):
+    """``eval_appearance`` picks the colour transform of a rendered camera: the mean of the
+    per-image transforms (default), the identity, or the nearest training camera's transform."""
+    data = parse_dataset(tiny_scene, "train")
+    assert small_model_config().eval_appearance == "mean"
+    model = small_model_config().setup(train_data=data)
+    n = model.num_train_images
+    with torch.no_grad():  # distinct, known transforms: gain and offset per image
+        eye = torch.eye(3, 4)
+        model.appearance.transforms.copy_(torch.stack([eye * (0.8 + 0.4 * k / n) + torch.tensor([0, 0, 0, 0.02 * k]) for k in range(n)]))
+
+    def render(mode, cam):
+        model.config.eval_appearance = mode
+        return model.render_camera(cam)["rgb"]
+
+    def apply(A, raw):
+        return (torch.einsum("ij,hwj->hwi", A[:, :3], raw) + A[:, 3]).clamp(0, 1)
+
+    train_cam = data.cameras[2:3]
+    novel = parse_dataset(tiny_scene, "bev_1").cameras[0:1]
+    T = model.appearance.transforms.detach()
+    for cam in (train_cam, novel):
+        raw = render("identity", cam)
+        torch.testing.assert_close(render("mean", cam), apply(T.mean(0), raw), atol=1e-5, rtol=0)
+        near = int((data.cameras.centers - novel.centers[0]).norm(dim=-1).argmin()) if cam is novel else 2
+        torch.testing.assert_close(render("nearest", cam), apply(T[near], raw), atol=1e-5, rtol=0)
+    assert not torch.allclose(render("nearest", train_cam), render("mean", train_cam), atol=1e-3)
+    model.config.eval_appearance = "mean"
