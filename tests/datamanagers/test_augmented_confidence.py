@@ -115,3 +115,14 @@ def test_a_target_trains_with_confidence_from_a_trained_reference(tiny_scene, tm
     # a reference trained 30 steps knows some pixels and not others: the maps are not constant
     assert float(conf.max()) > float(conf.min())
     assert len(list((ref / "augment_cache").rglob("*_conf.npy"))) == len(dm.extra_images) + len(dm.views.manifest.composited_images)
+
+
+def test_the_preview_shows_the_confidence(tiny_scene, tmp_path):
+    import cv2
+
+    from nerf2gs_plugin.eval.augment_preview import preview_augmented
+
+    with_conf = preview_augmented(_augmented(tiny_scene, tmp_path / "a"), tmp_path / "with.png", 2)
+    without = preview_augmented(_augmented(tiny_scene, tmp_path / "b", dataclasses.replace(CFG, confidence="none")), tmp_path / "without.png", 2)
+    w1, w0 = cv2.imread(str(with_conf)).shape[1], cv2.imread(str(without)).shape[1]
+    assert w1 > w0 * 1.15  # one more column: the bird's-eye view's confidence
