@@ -96,22 +96,21 @@ class PaperTable:
     scale: Literal["quick", "default"] = "default"
     targets: tuple[str, ...] = ("splatfacto", "scaffold-gs", "2dgs")
     enhancer: bool = True
-    confidence: Literal["none", "visibility"] = "none"
-    """Also a "<target> + NeRF views (confidence)" row per target, trained with --augment.confidence this."""
+    confidence: tuple[Literal["visibility", "consistency"], ...] = ()
+    """Also a "<target> + NeRF views (<mode> confidence)" row per target and mode, trained with --augment.confidence <mode>."""
     out: Path = RESULTS
     runs: Path = RUNS
     rerun: bool = False
     """Retrain and re-evaluate every run of the bench even when a finished one with its key exists."""
 
     def main(self) -> None:
-        from nerf2gs_plugin.eval.bench_paper import CONFIDENCE_LABEL, paper_table_plan, run_named_bench
+        from nerf2gs_plugin.eval.bench_paper import confidence_label, paper_table_plan, run_named_bench
 
         data = ensure_street(self.data, self.runs)
         enh = bench_enhancer(data, self.runs, self.scale) if self.enhancer else None
-        conf = None if self.confidence == "none" else self.confidence
-        plan = paper_table_plan(self.scale, self.targets, enh, conf)
+        plan = paper_table_plan(self.scale, self.targets, enh, self.confidence)
         compare = [(f"{t} + NeRF views", t) for t in self.targets] + [(f"{t} + NeRF views + enhancer", t) for t in self.targets if enh]
-        compare += [(f"{t} + NeRF views{CONFIDENCE_LABEL}", f"{t} + NeRF views") for t in self.targets if conf]
+        compare += [(f"{t} + NeRF views{confidence_label(c)}", f"{t} + NeRF views") for t in self.targets for c in self.confidence]
         run_named_bench("paper_table", plan, data, self.runs, self.out, f"Paper table, synthetic street ({self.scale} scale)",
                         compare=compare, figure_labels=["StreetNeRF", "splatfacto", "splatfacto + NeRF views"], rerun=self.rerun)
 

@@ -99,14 +99,17 @@ class AugmentConfig:
     """none | builtin | builtin:PATH | onnx:PATH: image enhancement of the additional views."""
     use_cache: bool = True
     """Reuse the reference's cached renders when their manifest matches (False: render again)."""
-    confidence: Literal["none", "visibility"] = "none"
+    confidence: Literal["none", "visibility", "consistency"] = "none"
     """Per-pixel loss weight of the reference's pixels. none: all 1; visibility: how many training views
     observed the surface the pixel shows (depth-consistent, not sky/transient there), reaching 1 at
-    confidence-full-views, times the render's accumulation (datamanagers/confidence.py)."""
+    confidence-full-views, times the render's accumulation; consistency: each of those observations
+    weighted by how well the reference's colour agrees with that real image (datamanagers/confidence.py)."""
     confidence_full_views: int = 3
     """visibility: observations at which a pixel's confidence reaches 1."""
     confidence_depth_tol: float = 0.05
-    """visibility: a training view observes a point when their depths agree within this fraction."""
+    """visibility, consistency: a training view observes a point when their depths agree within this fraction."""
+    confidence_color_tol: float = 0.1
+    """consistency: mean absolute RGB difference at which an observation counts exp(-1)."""
 
 
 def bev_cameras(train: Cameras, up: Tensor, delta_h_world: float, theta_pitch: float, every_n: int = 1,
@@ -170,6 +173,7 @@ class _Visibility:
         for i in range(len(train)):
             b = [train.mask(k, i) for k in ("sky", "transient") if train.mask(k, i) is not None]
             self.blind.append(torch.stack(b).any(0)[..., 0].cpu() if b else None)
+        self.images = [train.image(i).cpu() for i in range(len(train))] if config.confidence == "consistency" else None
         self.config = config
         self.depth_along = depth_along
 
@@ -179,7 +183,8 @@ class _Visibility:
 
         return visibility_confidence(out["depth"].cpu(), camera.to("cpu"), self.depth_along, self.cameras, self.depths_z,
                                      self.blind, out["accumulation"].cpu() if "accumulation" in out else None,
-                                     self.config.confidence_full_views, self.config.confidence_depth_tol)
+                                     self.config.confidence_full_views, self.config.confidence_depth_tol,
+                                     out["rgb"].cpu(), self.images, self.config.confidence_color_tol)
 
 
 def _save_confidence(path: Path, conf: Tensor) -> None:

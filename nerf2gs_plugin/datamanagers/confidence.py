@@ -12,6 +12,11 @@ moved). ``visibility`` confidence measures exactly that, with the reference's ow
   3. confidence = ``min(observations / full_views, 1)`` x the render's accumulation.
 
 So a surface no training view saw gets ~0 and one seen by ``full_views`` views or more gets ~1.
+``consistency`` also asks whether what the reference shows is what those cameras recorded: each
+observation counts ``exp(-(d / color_tol)^2)``, ``d`` the mean absolute RGB difference between the
+reference's pixel and the real image at the point's projection, so a surface the reference renders
+softer or in other colours than every real view recorded it (a blurred facade seen again from above)
+weighs little, and the target keeps its own street-view evidence there.
 The cost is one projection of every rendered pixel into every training camera (``P x N`` work, a
 Python loop over the N cameras only), plus one reference render per training view for its depth.
 """
@@ -65,9 +70,19 @@ def _inverse_depth_at(depth_z: Tensor, uv: Tensor, w: int, h: int) -> Tensor:
     return 1.0 / sampled.reshape(-1).clamp_min(1e-12)
 
 
+def _sample(image: Tensor, uv: Tensor, w: int, h: int) -> Tensor:
+    """Bilinear samples ``[P, C]`` of an ``[H, W, C]`` image at continuous pixel positions ``uv`` ``[P, 2]``."""
+    grid = torch.stack([2.0 * uv[:, 0] / w - 1.0, 2.0 * uv[:, 1] / h - 1.0], -1).to(image)
+    out = F.grid_sample(image.permute(2, 0, 1)[None].float(), grid[None, None], mode="bilinear", padding_mode="border", align_corners=False)
+    return out[0, :, 0].T
+
+
 def observation_counts(points: Tensor, cameras: Cameras, depths_z: Sequence[Tensor],
-                       blind: Optional[Sequence[Optional[Tensor]]] = None, rel_tol: float = 0.05) -> Tensor:
-    """How many of ``cameras`` observed each world point.
+                       blind: Optional[Sequence[Optional[Tensor]]] = None, rel_tol: float = 0.05,
+                       colors: Optional[Tensor] = None, images: Optional[Sequence[Tensor]] = None,
+                       color_tol: float = 0.1) -> Tensor:
+    """How many of ``cameras`` observed each world point (with ``colors`` and ``images``, each
+    observation weighted by how well the point's colour agrees with that camera's image).
 
     Args:
         points: ``[P, 3]`` world points (non-finite ones are observed by none).
@@ -75,6 +90,8 @@ def observation_counts(points: Tensor, cameras: Cameras, depths_z: Sequence[Tens
         depths_z: per camera its rendered camera-space z ``[H, W]`` (the occlusion test).
         blind: per camera an optional ``[H, W]`` bool of pixels that observe no surface (sky, transients).
         rel_tol: a projection observes the point when ``|z - depth| <= rel_tol * depth`` at its pixel.
+        colors: ``[P, 3]`` the colour the reference gives each point; ``images``: per camera its real
+            ``[H, W, 3]`` image; an observation then counts ``exp(-(mean |colour diff| / color_tol)^2)``.
 
     Returns:
         ``[P]`` float counts.
@@ -92,19 +109,29 @@ def observation_counts(points: Tensor, cameras: Cameras, depths_z: Sequence[Tens
         seen = inside & ((z - d).abs() <= rel_tol * d.abs())
         if blind is not None and blind[i] is not None:
             seen &= ~blind[i].to(points.device)[vc, uc]
-        counts += seen.float()
+        if colors is not None and images is not None:
+            diff = (colors.to(points) - _sample(images[i].to(points), uv, w, h)).abs().mean(-1)
+            counts += seen.float() * torch.exp(-((diff / color_tol) ** 2))
+        else:
+            counts += seen.float()
     return counts
 
 
 def visibility_confidence(depth: Tensor, camera: Cameras, along: DepthAlong, train_cameras: Cameras,
                           train_depths_z: Sequence[Tensor], train_blind: Optional[Sequence[Optional[Tensor]]] = None,
-                          accumulation: Optional[Tensor] = None, full_views: int = 3, rel_tol: float = 0.05) -> Tensor:
+                          accumulation: Optional[Tensor] = None, full_views: int = 3, rel_tol: float = 0.05,
+                          rgb: Optional[Tensor] = None, train_images: Optional[Sequence[Tensor]] = None,
+                          color_tol: float = 0.1) -> Tensor:
     """Per-pixel confidence ``[H, W, 1]`` in [0, 1] of one rendered view (see the module docstring).
 
-    ``depth`` and ``accumulation`` ``[H, W, 1]`` are the reference's render at ``camera`` (one camera).
+    ``depth``, ``accumulation`` ``[H, W, 1]`` and ``rgb`` ``[H, W, 3]`` are the reference's render at
+    ``camera`` (one camera); with ``rgb`` and ``train_images`` the observations are colour-weighted
+    (``consistency``).
     """
     h, w = depth.shape[:2]
-    counts = observation_counts(lift(depth, camera, along), train_cameras, train_depths_z, train_blind, rel_tol)
+    colors = rgb.reshape(-1, 3) if rgb is not None and train_images is not None else None
+    counts = observation_counts(lift(depth, camera, along), train_cameras, train_depths_z, train_blind, rel_tol,
+                                colors, train_images if colors is not None else None, color_tol)
     conf = (counts / max(int(full_views), 1)).clamp(max=1.0).reshape(h, w, 1)
     if accumulation is not None:
         conf = conf * accumulation.float().clamp(0.0, 1.0).to(conf)

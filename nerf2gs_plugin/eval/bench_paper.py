@@ -62,19 +62,21 @@ def _overrides(scale: str, method: str, extra: Optional[dict] = None) -> dict:
     return _merge({**base, "steps_per_eval_image": 0}, extra or {})
 
 
-CONFIDENCE_LABEL = " (confidence)"
+def confidence_label(mode: str) -> str:
+    """The row suffix of a run trained with ``--augment.confidence mode``."""
+    return f" ({mode} confidence)"
 
 
-def paper_table_plan(scale: str, targets=TARGETS, enhancer: Optional[str] = None, confidence: Optional[str] = None) -> list[RunSpec]:
-    """StreetNeRF, then per target: alone, + NeRF views (+ the same with ``--augment.confidence`` when
-    ``confidence`` is set), + NeRF views + enhancer."""
+def paper_table_plan(scale: str, targets=TARGETS, enhancer: Optional[str] = None, confidence: tuple[str, ...] = ()) -> list[RunSpec]:
+    """StreetNeRF, then per target: alone, + NeRF views (+ the same with ``--augment.confidence`` per
+    mode in ``confidence``), + NeRF views + enhancer."""
     plan = [RunSpec("StreetNeRF", "streetnerf", _overrides(scale, "streetnerf"))]
     for t in targets:
         plan.append(RunSpec(f"{t}", t, _overrides(scale, t)))
         plan.append(RunSpec(f"{t} + NeRF views", t, _overrides(scale, t), augment_from="StreetNeRF"))
-        if confidence:
-            plan.append(RunSpec(f"{t} + NeRF views{CONFIDENCE_LABEL}", t, _overrides(scale, t), augment_from="StreetNeRF",
-                                augment={"confidence": confidence}))
+        for mode in confidence:
+            plan.append(RunSpec(f"{t} + NeRF views{confidence_label(mode)}", t, _overrides(scale, t), augment_from="StreetNeRF",
+                                augment={"confidence": mode}))
         if enhancer:
             plan.append(RunSpec(f"{t} + NeRF views + enhancer", t, _overrides(scale, t), augment_from="StreetNeRF",
                                 augment={"enhancer": enhancer}))

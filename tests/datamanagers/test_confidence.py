@@ -107,3 +107,28 @@ def test_counts_ignore_points_behind_or_outside_or_not_finite():
                         [float("nan"), 0.0, 0.0]])
     counts = observation_counts(pts, street, train_z, rel_tol=0.1)
     assert counts.tolist()[1:] == [0.0, 0.0, 0.0] and counts[0] >= 3
+
+
+def _texture(points):
+    """A colour painted on the scene's surfaces: a 2 m checker (several pixels a cell in every view)."""
+    c = ((torch.floor(points[:, 0] / 2) + torch.floor(points[:, 1] / 2) + torch.floor(points[:, 2] / 2)) % 2)[:, None]
+    return 0.2 + 0.6 * c.expand(-1, 3)
+
+
+def test_consistency_trusts_what_the_real_views_recorded_and_not_what_they_did_not():
+    street, bev = _street(), _bev()
+    depths = [_raycast(street, i)[0] for i in range(len(street))]
+    train_z = [depth_to_z(d, street[torch.tensor([i])], "ray") for i, d in enumerate(depths)]
+    images = [_texture(lift(d, street[torch.tensor([i])], "ray")).reshape(32, 48, 3) for i, d in enumerate(depths)]
+    depth, kind = _raycast(bev, 0)
+    truth = _texture(lift(depth, bev, "ray")).reshape(32, 48, 3)
+    seen = visibility_confidence(depth, bev, "ray", street, train_z, rel_tol=0.05)[..., 0]
+    right = visibility_confidence(depth, bev, "ray", street, train_z, rel_tol=0.05, rgb=truth, train_images=images)[..., 0]
+    # the reference renders what the cameras recorded: confident on the road in front (the checker's
+    # edges, where a sample mixes both colours, count for less), nothing where no view saw
+    front = (kind == 0) & (seen == 1)
+    assert float(right[front].mean()) > 0.75 and float(right[kind == 2].max()) <= float(seen[kind == 2].max())
+    # a soft reference (grey where the real views saw a sharp checker) is trusted nowhere
+    grey = torch.full_like(truth, 0.5)
+    soft = visibility_confidence(depth, bev, "ray", street, train_z, rel_tol=0.05, rgb=grey, train_images=images)[..., 0]
+    assert float(soft[front].mean()) < 0.1  # (bar the cells' edges, where the real samples are grey too)
