@@ -60,21 +60,19 @@ def lift(depth: Tensor, camera: Cameras, along: DepthAlong) -> Tensor:
     return camera.camera_to_worlds[0, :, 3] + directions * t[:, None]
 
 
-def _inverse_depth_at(depth_z: Tensor, uv: Tensor, w: int, h: int) -> Tensor:
-    """The depth ``[P]`` at continuous pixel positions ``uv`` ``[P, 2]``, interpolated bilinearly in
-    inverse depth (exact on planes: a road seen at a grazing angle changes depth by several percent
-    a row); across an occlusion edge it matches neither side, so no view is credited there."""
-    inv = 1.0 / depth_z.clamp_min(1e-6)
-    grid = torch.stack([2.0 * uv[:, 0] / w - 1.0, 2.0 * uv[:, 1] / h - 1.0], -1).to(inv)
-    sampled = F.grid_sample(inv[None, None], grid[None, None], mode="bilinear", padding_mode="border", align_corners=False)
-    return 1.0 / sampled.reshape(-1).clamp_min(1e-12)
-
-
 def _sample(image: Tensor, uv: Tensor, w: int, h: int) -> Tensor:
     """Bilinear samples ``[P, C]`` of an ``[H, W, C]`` image at continuous pixel positions ``uv`` ``[P, 2]``."""
     grid = torch.stack([2.0 * uv[:, 0] / w - 1.0, 2.0 * uv[:, 1] / h - 1.0], -1).to(image)
     out = F.grid_sample(image.permute(2, 0, 1)[None].float(), grid[None, None], mode="bilinear", padding_mode="border", align_corners=False)
     return out[0, :, 0].T
+
+
+def _inverse_depth_at(depth_z: Tensor, uv: Tensor, w: int, h: int) -> Tensor:
+    """The depth ``[P]`` at continuous pixel positions ``uv`` ``[P, 2]``, interpolated bilinearly in
+    inverse depth (exact on planes: a road seen at a grazing angle changes depth by several percent
+    a row); across an occlusion edge it matches neither side, so no view is credited there."""
+    inv = 1.0 / depth_z.clamp_min(1e-6)
+    return 1.0 / _sample(inv[..., None], uv, w, h)[:, 0].clamp_min(1e-12)
 
 
 def observation_counts(points: Tensor, cameras: Cameras, depths_z: Sequence[Tensor],
