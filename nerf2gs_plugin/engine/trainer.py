@@ -285,6 +285,9 @@ class Trainer:
              "history_stride": self.history.stride, "history": self.history.records()}))
 
     def _write_checkpoint(self, path: Path, step: int, dm: Any, streams: Optional[list[dict]] = None) -> None:
+        # The log first: a kill between the two writes leaves the log ahead of the newest checkpoint
+        # (training that happened, resumed from the older state), never a checkpoint without its log.
+        self._write_train_log()
         save_checkpoint(
             path,
             {
@@ -300,7 +303,6 @@ class Trainer:
                 "size": self.pipeline.model.size_report(),
             },
         )
-        self._write_train_log()
 
     # ------------------------------------------------------------------ loop
     def _run_callbacks(self, where: Loc, step: int) -> None:

@@ -249,8 +249,8 @@ def kill_resume_cases(data: Path, work: Path, n: int = 5, seed: int = 0, method:
             ckpts = list_checkpoints(run_dirs[i])
             step = int(load_checkpoint(ckpts[-1])["step"])  # the newest must load: atomic writes
             log = json.loads((run_dirs[i] / "train_log.json").read_text())
-            if int(log["history"][-1]["step"]) != step:
-                found.append((case, None, f"train_log.json ends at step {log['history'][-1]['step']}, the checkpoint is at {step}"))
+            if int(log["history"][-1]["step"]) < step:  # written before the checkpoint: never behind it
+                found.append((case, None, f"train_log.json ends at step {log['history'][-1]['step']}, behind the checkpoint at {step}"))
                 continue
             found.append((case, ckpts[-1], step))
         except Exception as e:  # noqa: BLE001
