@@ -29,7 +29,7 @@ CACHE_FORMAT_VERSION = 1
 CACHE_DIR_NAME = "augment_cache"
 MANIFEST_NAME = "manifest.json"
 # AugmentConfig fields that do not change a rendered image (so not in the key)
-UNKEYED_FIELDS = ("extra_prob", "extra_weight", "use_cache", "enhancer")
+UNKEYED_FIELDS = ("extra_prob", "extra_weight", "use_cache", "enhancer", "real_only_from")
 
 
 @dataclass

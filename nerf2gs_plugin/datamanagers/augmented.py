@@ -43,6 +43,7 @@ from nerf2gs_plugin.datamanagers.augment_cache import (
 )
 from nerf2gs_plugin.datamanagers.base import DataManager
 from nerf2gs_plugin.datamanagers.image_set import ImageSet
+from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.warn import warn
 
 RenderFn = Callable[[Cameras], dict[str, Tensor]]
@@ -110,6 +111,9 @@ class AugmentConfig:
     """visibility, consistency: a training view observes a point when their depths agree within this fraction."""
     confidence_color_tol: float = 0.1
     """consistency: mean absolute RGB difference at which an observation counts exp(-1)."""
+    real_only_from: float = 1.0
+    """Fraction of the run after which only the input views (composites) are sampled: 0.9 gives the last
+    10% of the steps to the target's own street evidence (1.0: the additional views to the end)."""
 
 
 def bev_cameras(train: Cameras, up: Tensor, delta_h_world: float, theta_pitch: float, every_n: int = 1,
@@ -117,8 +121,6 @@ def bev_cameras(train: Cameras, up: Tensor, delta_h_world: float, theta_pitch: f
     """The additional-view cameras: input intrinsics, raised and pitched poses."""
     sub = train[torch.arange(0, len(train), max(every_n, 1))]
     if pitch_mode not in ("absolute", "relative"):
-        from nerf2gs_plugin.errors import ConfigError
-
         raise ConfigError(f"--augment.pitch-mode must be absolute or relative, got {pitch_mode!r}")
     poses = birds_eye_poses_absolute if pitch_mode == "absolute" else birds_eye_poses
     return sub.with_poses(poses(sub.camera_to_worlds, up, delta_h_world, theta_pitch))
@@ -331,8 +333,12 @@ class AugmentedDataManager(DataManager):
     """
 
     def __init__(self, inner: DataManager, reference: Reference, augment: AugmentConfig,
-                 enhancer: Optional[ViewEnhancer] = None) -> None:
+                 enhancer: Optional[ViewEnhancer] = None, total_steps: Optional[int] = None) -> None:
         # no DataManager.__init__: the dataset is inner's, parsed once
+        if not 0.0 < augment.real_only_from <= 1.0:
+            raise ConfigError(f"must be in (0, 1], got {augment.real_only_from}", "--augment.real-only-from")
+        self.real_only_step: Optional[int] = (
+            int(round(augment.real_only_from * total_steps)) if total_steps is not None and augment.real_only_from < 1.0 else None)
         self.inner = inner
         self.reference = reference
         self.augment = augment
@@ -402,6 +408,8 @@ class AugmentedDataManager(DataManager):
         self.inner.set_extra_images(images, prob)
 
     def next_train(self, step: int) -> tuple[Any, dict[str, Any]]:
+        if self.real_only_step is not None and step >= self.real_only_step:
+            self.inner.extra_prob = 0.0  # the final phase: input views only (the draw still happens: streams stay aligned)
         return self.inner.next_train(step)
 
     def next_eval(self, step: int) -> tuple[Cameras, dict[str, Any]]:

@@ -114,7 +114,10 @@ def build_enhancer(spec: str):
     return make_enhancer(spec)
 
 
-def augmented_datamanager(inner: DataManager, reference: Path, augment: AugmentConfig, device: torch.device | str) -> AugmentedDataManager:
+def augmented_datamanager(inner: DataManager, reference: Path, augment: AugmentConfig, device: torch.device | str,
+                          total_steps: Optional[int] = None) -> AugmentedDataManager:
     """The factory the Trainer and ``ns2gs-data export-augmented`` call: ``inner`` wrapped in an
-    AugmentedDataManager fed by the reference run at ``reference``."""
-    return AugmentedDataManager(inner, load_reference(reference, inner, device), augment, build_enhancer(augment.enhancer))
+    AugmentedDataManager fed by the reference run at ``reference`` (``total_steps``: the run's length,
+    for ``--augment.real-only-from``)."""
+    return AugmentedDataManager(inner, load_reference(reference, inner, device), augment, build_enhancer(augment.enhancer),
+                                total_steps)

@@ -154,7 +154,8 @@ class Trainer:
 
         def wrap(inner):  # rank 0 renders the reference views into the cache, the other ranks then read it
             with collectives.rank_zero_first():
-                return augmented_datamanager(inner, ref, augment if self.rank == 0 else dataclasses.replace(augment, use_cache=True), device)
+                return augmented_datamanager(inner, ref, augment if self.rank == 0 else dataclasses.replace(augment, use_cache=True), device,
+                                             self.config.max_num_iterations)
 
         return wrap
 

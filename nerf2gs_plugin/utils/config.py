@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Any, TypeVar, get_type_hints
+from typing import Any, TypeVar, get_args, get_type_hints
 
 from nerf2gs_plugin.errors import ConfigError
 
@@ -87,7 +87,7 @@ def apply_plain(default: T, values: dict, where: str = "config") -> T:
 def _coerce(value: Any, current: Any, hint: Any, where: str) -> Any:
     if value is None:
         return None
-    if isinstance(current, Path) or hint in (Path, "Path"):
+    if isinstance(current, Path) or hint in (Path, "Path") or Path in get_args(hint):  # Optional[Path] too
         return Path(value)
     if isinstance(current, bool):
         if not isinstance(value, bool):

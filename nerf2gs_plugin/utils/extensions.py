@@ -84,6 +84,7 @@ def _build(name: str, sources: list[Path], headers: list[Path], cflags: list[str
         build_name = _build_name(name, sources, headers)
         cache = extension_cache_dir()
         cache.mkdir(parents=True, exist_ok=True)
+        _remove_stale_lock(cache / build_name / "lock")
         if not (cache / build_name / f"{build_name}.so").is_file():
             print(f"compiling the {name} kernel (first use, about 1 min)...", file=sys.stderr, flush=True)
         include = sorted({str(h.parent) for h in headers})
@@ -93,6 +94,26 @@ def _build(name: str, sources: list[Path], headers: list[Path], cflags: list[str
         msg = str(e).strip().splitlines()[0][:200] if str(e).strip() else ""
         _FAILED[name] = f"{type(e).__name__}: {msg}"
         print(f"the {name} kernel did not build: {_FAILED[name]}", file=sys.stderr, flush=True)
+
+
+# A build takes 1-2 min on 2 cores; a lock this old was left by a build that was killed, and torch's
+# FileBaton would wait on it forever.
+STALE_LOCK_SECONDS = 20 * 60
+
+
+def _remove_stale_lock(lock: Path, max_age_s: float = STALE_LOCK_SECONDS) -> bool:
+    """Delete torch's build ``lock`` when it is older than any build (returns whether it did)."""
+    import time
+
+    try:
+        age = time.time() - lock.stat().st_mtime
+    except FileNotFoundError:
+        return False
+    if age < max_age_s:
+        return False
+    lock.unlink(missing_ok=True)
+    print(f"removed a stale kernel-build lock ({lock}, {age / 60:.0f} min old: a build was killed)", file=sys.stderr, flush=True)
+    return True
 
 
 def _raise_unless_opted_out(name: str) -> None:

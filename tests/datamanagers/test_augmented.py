@@ -212,3 +212,22 @@ def test_read_manifest_is_the_one_reader(tiny_scene, tmp_path, monkeypatch):
     bad.write_text(json.dumps({k: v for k, v in doc.items() if k != "num_extra"}))
     with pytest.raises(ValueError, match="malformed"):
         real(bad)
+
+
+def test_real_only_from_ends_on_the_input_views(tiny_scene, tmp_path):
+    """--augment.real-only-from 0.5 over 40 steps: bird's-eye views are drawn before step 20, never
+    after; the default (1.0) draws them to the end; a fraction outside (0, 1] is refused."""
+    from nerf2gs_plugin.errors import ConfigError
+
+    def drawn(frac):
+        dm = AugmentedDataManager(_dm(tiny_scene), Reference(CountingRenderer(), "ref:r", tmp_path),
+                                  AugmentConfig(delta_h=3.0, extra_prob=0.5, real_only_from=frac), total_steps=40)
+        n_real = len(dm.train_images)
+        return [int(dm.next_train(s)[1]["image_idx"]) >= n_real for s in range(40)]
+
+    half, full = drawn(0.5), drawn(1.0)
+    assert any(half[:20]) and not any(half[20:])
+    assert any(full[20:])
+    assert half[:20] == full[:20]  # the same draws until the switch
+    with pytest.raises(ConfigError, match="real-only-from"):
+        drawn(0.0)

@@ -19,13 +19,14 @@ def test_config_round_trip(tmp_path):
     import dataclasses
 
     cfg = _default()
-    cfg = dataclasses.replace(cfg, data=Path("/some/data"), max_num_iterations=77,
+    cfg = dataclasses.replace(cfg, data=Path("/some/data"), max_num_iterations=77, augment_from=Path("/a/reference"),
                               optimizers={"grid": OptimizerConfig(lr=0.5, lr_final=0.01)})
     save_config(tmp_path / "config.yml", cfg.method_name, cfg)
     text = (tmp_path / "config.yml").read_text()
     assert "!!python" not in text  # safe YAML, plain values only
     loaded = load_config(tmp_path / "config.yml", _default())
     assert loaded.max_num_iterations == 77 and loaded.data == Path("/some/data")
+    assert isinstance(loaded.augment_from, Path) and loaded.augment_from == Path("/a/reference")  # Optional[Path]
     assert loaded.optimizers["grid"].lr == 0.5 and loaded.optimizers["grid"].lr_final == 0.01
     assert loaded.pipeline.model.resolution == cfg.pipeline.model.resolution
 

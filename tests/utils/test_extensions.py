@@ -37,3 +37,21 @@ def test_the_opt_out_falls_back_to_none(broken_source, monkeypatch):
     assert "nerf2gs_test_broken" in extensions.failed_extensions()
     monkeypatch.setenv(OPT_OUT_ENV, "0")
     assert not extensions.kernels_opted_out()
+
+
+def test_a_stale_build_lock_is_removed_a_fresh_one_kept(tmp_path, capsys):
+    """A lock left by a killed build (older than any build) would make torch wait forever: removed,
+    with one line; a lock of a build still running (fresh) is left alone."""
+    import os
+    import time
+
+    from nerf2gs_plugin.utils.extensions import STALE_LOCK_SECONDS, _remove_stale_lock
+
+    lock = tmp_path / "lock"
+    lock.write_text("")
+    assert not _remove_stale_lock(lock) and lock.exists()
+    old = time.time() - STALE_LOCK_SECONDS - 5
+    os.utime(lock, (old, old))
+    assert _remove_stale_lock(lock) and not lock.exists()
+    assert "stale kernel-build lock" in capsys.readouterr().err
+    assert not _remove_stale_lock(lock)  # none there: nothing to do
