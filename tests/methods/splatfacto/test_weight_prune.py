@@ -14,12 +14,12 @@ from splat_tiny_scene import make_cameras, make_train_data, needs_rasterizer, ps
 
 from nerf2gs_plugin.methods.splatfacto.config import gaussian_optimizers, splatfacto_config
 from nerf2gs_plugin.methods.splatfacto.strategy import light_mask
-from nerf2gs_plugin.methods.two_dgs.model import TwoDGSModelConfig
 
 STEPS = 80
 
 
-def _cfg(fraction: float, base=splatfacto_config.pipeline.model):
+def _cfg(fraction: float):
+    base = splatfacto_config.pipeline.model
     strategy = dataclasses.replace(base.strategy, warmup_length=10, refine_every=10, reset_alpha_every=0, stop_split_at=50,
                                    stop_screen_size_at=0, densify_grad_thresh=0.0002, prune_weight_fraction=fraction)
     return dataclasses.replace(base, sh_degree_interval=20, strategy=strategy)
@@ -37,10 +37,10 @@ def scene():
     return cams, imgs, skies
 
 
-def _trained(scene, fraction: float, base=splatfacto_config.pipeline.model):
+def _trained(scene, fraction: float):
     cams, imgs, skies = scene
     torch.manual_seed(0)
-    model = _cfg(fraction, base).setup(train_data=make_train_data(cams))
+    model = _cfg(fraction).setup(train_data=make_train_data(cams))
     p0 = psnr(model, cams, imgs)
     train(model, gaussian_optimizers(STEPS), cams, imgs, skies, STEPS, pipeline=_views(cams))
     return model, p0, psnr(model, cams, imgs)
@@ -59,11 +59,11 @@ def test_light_mask_follows_how_the_weight_is_spread():
 
 
 @needs_rasterizer
-@pytest.mark.parametrize("base", [splatfacto_config.pipeline.model, TwoDGSModelConfig()], ids=["splatfacto", "2dgs"])
-def test_blend_weights_sum_to_the_rendered_alpha(scene, base):
+def test_blend_weights_sum_to_the_rendered_alpha(scene):
+    """Per pixel the blending weights of all Gaussians add up to its alpha (2DGS: test_two_dgs.py)."""
     cams = scene[0]
     torch.manual_seed(0)
-    model = _cfg(0.0, base).setup(train_data=make_train_data(cams)).eval()
+    model = _cfg(0.0).setup(train_data=make_train_data(cams)).eval()
     w = model.blend_weights(cams[:3])
     alpha = sum(float(model.render_camera(cams[i])["accumulation"].sum()) for i in range(3))
     assert w.shape == (model.num_primitives(),) and bool((w >= 0).all())
