@@ -10,7 +10,7 @@ The SH degree used for rendering rises by one every ``sh_degree_interval`` steps
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Literal, Optional
+from typing import Any, Callable, Literal, Optional
 
 import torch
 from torch import Tensor, nn
@@ -86,7 +86,8 @@ class SplatfactoModel(Model):
         self.background = Background(cfg.background, cfg.sky_sh_degree)
         self.register_buffer("step", torch.zeros((), dtype=torch.long))
         self._meta: Optional[dict[str, Any]] = None
-        self.strategy = self._make_strategy()
+        self._train_cameras: Optional[Callable[[], Cameras]] = None  # set with the training callbacks
+        self._setup_strategy()
 
     def _initial_points(self, data: DataparserOutputs, gen: torch.Generator) -> tuple[Tensor, Tensor]:
         """Sparse points (normalised world) and their colours in [0,1]; random in the box if none."""
@@ -106,6 +107,11 @@ class SplatfactoModel(Model):
         if c.strategy_type == "mcmc":
             return MCMCStrategy(c.mcmc)
         return DefaultStrategy(c.strategy, num_train_images=self.num_train_images)
+
+    def _setup_strategy(self) -> None:
+        self.strategy = self._make_strategy()
+        if isinstance(self.strategy, DefaultStrategy):
+            self.strategy.weights_fn = self.training_blend_weights
 
     def get_param_groups(self) -> dict[str, list[nn.Parameter]]:
         groups = {name: [p] for name, p in self.gauss.items()}
@@ -142,6 +148,39 @@ class SplatfactoModel(Model):
         rgb = composite(render[0, ..., :3], alpha, bg).clamp(0.0, 1.0)
         return {"rgb": rgb, "depth": render[0, ..., 3:4], "accumulation": alpha, "background": bg}
 
+    def _render_features(self, camera: Cameras, features: Tensor) -> Tensor:
+        """``[1, H, W, D]``: plain per-primitive ``features [N, D]`` composited by the rasterizer of
+        :meth:`_render` (the parameters detached, so only ``features`` can carry a gradient)."""
+        from nerf2gs_plugin.rendering import rasterize_gaussians
+
+        g = {k: v.detach() for k, v in self.gauss.items()}
+        h, w = int(camera.height[0]), int(camera.width[0])
+        render, _, _ = rasterize_gaussians(
+            g["means"], normalize_quats(g["quats"]), torch.exp(g["scales"]), torch.sigmoid(g["opacities"]), features,
+            camera.viewmats(), camera.Ks(), w, h, near_plane=self.config.near_plane, far_plane=self.config.far_plane,
+            render_mode="RGB", rasterize_mode=self.config.rasterize_mode, backend=self.config.backend,
+        )
+        return render
+
+    def blend_weights(self, cameras: Cameras) -> Tensor:
+        """``[N]``: each primitive's alpha x transmittance summed over every pixel of ``cameras``. It
+        is the gradient of the summed render of all-ones features, so the rasterizer's own backward
+        counts it (one view at a time; no primitives x pixels tensor)."""
+        n, dev = self.num_primitives(), self.gauss["means"].device
+        total = torch.zeros(n, device=dev)
+        for i in range(len(cameras)):
+            ones = torch.ones(n, 1, device=dev, requires_grad=True)
+            with torch.enable_grad():
+                render = self._render_features(cameras[i].to(dev), ones)
+                (grad,) = torch.autograd.grad(render.sum(), ones)
+            total += grad[:, 0]
+        return total
+
+    def training_blend_weights(self) -> Optional[Tensor]:
+        """:meth:`blend_weights` over every training view (real and extra), or None before the
+        training callbacks named them (the strategy's weight prune then does nothing)."""
+        return None if self._train_cameras is None else self.blend_weights(self._train_cameras())
+
     def get_outputs(self, inputs: Cameras) -> dict[str, Tensor]:
         return self._render(inputs, training=self.training)
 
@@ -169,6 +208,8 @@ class SplatfactoModel(Model):
     # ------------------------------------------------------------------ training callbacks
     def get_training_callbacks(self, attrs: TrainingCallbackAttributes) -> list[TrainingCallback]:
         optimizers = attrs.optimizers
+        if getattr(attrs.pipeline, "datamanager", None) is not None:
+            self._train_cameras = lambda: attrs.pipeline.datamanager.all_train_cameras
 
         def set_step(step: int) -> None:
             self.step.fill_(step)
@@ -196,7 +237,7 @@ class SplatfactoModel(Model):
             if saved is not None and saved.shape != self.gauss[name].shape:
                 self.gauss[name] = nn.Parameter(torch.zeros(saved.shape, dtype=saved.dtype, device=self.gauss[name].device))
         self.load_state_dict(state)
-        self.strategy = self._make_strategy()
+        self._setup_strategy()
 
     def export_gaussians(self) -> dict[str, Tensor]:
         """The standard 3DGS quantities for :func:`write_gaussian_ply`."""

@@ -10,7 +10,9 @@ its optimizer group, so :meth:`Optimizers.replace_param` keeps the Adam moments 
   the projected means; clone small / split large Gaussians whose average gradient is high; prune
   by opacity and size; reset opacities periodically, pausing refinement after a reset for
   ``min(num_images, cap)`` steps (nerfstudio pauses for ``num_images`` steps, which silently stops
-  refinement on large image sets).
+  refinement on large image sets). With ``prune_weight_fraction`` > 0 it also prunes once after
+  densification by each Gaussian's blending weight over the training views (see
+  :func:`light_mask`), so the model ends at what the views show rather than at a fixed budget.
 * :class:`MCMCStrategy` - 3DGS as MCMC (Kheradmand et al. 2024): dead Gaussians are relocated
   onto live ones, new ones are added up to a hard budget ``cap_max``, and position noise scaled
   by the covariance explores the scene.
@@ -20,7 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 import torch
 from torch import Tensor, nn
@@ -111,6 +113,11 @@ class DefaultStrategyConfig:
     """Cap on nerfstudio's pause after an opacity reset (num_images + refine_every steps)."""
     max_gaussians: int = 0
     """Soft budget of Gaussians (0 = unlimited, as nerfstudio)."""
+    prune_weight_fraction: float = 0.0
+    """0 = off (nerfstudio). Else, at the first refinement at or after stop-split-at, render every
+    training view once and prune the Gaussians that together carry this fraction of the total
+    blending weight (alpha x transmittance summed over all training pixels), lightest first
+    (LightGaussian / Taming-3DGS significance): the count left follows the scene and its views."""
 
 
 class DefaultStrategy(Strategy):
@@ -123,6 +130,9 @@ class DefaultStrategy(Strategy):
         self.cfg = cfg
         self.num_train_images = num_train_images  # of the dataset, not a setting: not in the config
         self.scene_scale = scene_scale
+        self.weights_fn: Optional[Callable[[], Optional[Tensor]]] = None
+        """Set by the model: each primitive's blending weight summed over the training pixels ``[N]``
+        (None when it has no training views to render); read by the weight prune only."""
         self.initialize_state()
 
     def initialize_state(self) -> None:
@@ -193,6 +203,8 @@ class DefaultStrategy(Strategy):
                     self.reset_opacities(params, optimizers)
             elif c.continue_cull_post_densification:
                 out["pruned"] = self.prune(step, params, optimizers)
+            if c.prune_weight_fraction > 0 and c.stop_split_at <= step < c.stop_split_at + c.refine_every:
+                out["pruned"] += self.prune_by_weight(params, optimizers)
             self._reset_stats(params["means"].shape[0], params["means"].device)
         return out
 
@@ -243,11 +255,37 @@ class DefaultStrategy(Strategy):
             keep_rows(params, optimizers, ~cull)
         return n
 
+    def prune_by_weight(self, params: nn.ParameterDict, optimizers: Any) -> int:
+        """Drop the lightest Gaussians carrying ``prune_weight_fraction`` of the training views'
+        blending weight (:func:`light_mask`); nothing without :attr:`weights_fn` or its weights."""
+        weights = self.weights_fn() if self.weights_fn is not None else None
+        if weights is None or weights.shape[0] != params["means"].shape[0]:
+            return 0
+        cull = light_mask(weights, self.cfg.prune_weight_fraction)
+        if bool(cull.all()):  # never empty the scene
+            cull[weights.argmax()] = False
+        n = int(cull.sum())
+        if n:
+            keep_rows(params, optimizers, ~cull)
+        return n
+
     def reset_opacities(self, params: nn.ParameterDict, optimizers: Any) -> None:
         """Clamp opacities to ``2 * cull_alpha_thresh`` and clear their Adam moments."""
         cap = float(logit(min(self.cfg.cull_alpha_thresh * 2.0, 0.99)))
         params["opacities"].data.clamp_(max=cap)
         zero_state_rows(params, optimizers, slice(None), ["opacities"])
+
+
+def light_mask(weights: Tensor, fraction: float) -> Tensor:
+    """``[N]`` bool: the primitives that together carry at most ``fraction`` of the summed ``weights``,
+    lightest first (unseen ones, weight 0, always). How many that is depends on how the weight is
+    spread: a scene whose views rest on few primitives loses many, one that needs them all few."""
+    order = torch.argsort(weights, stable=True)
+    cum = torch.cumsum(weights[order].double(), 0)
+    light = torch.zeros(weights.shape[0], dtype=torch.bool, device=weights.device)
+    if cum.numel():
+        light[order[cum <= fraction * cum[-1]]] = True
+    return light
 
 
 def _limit(clone: Tensor, split: Tensor, score: Tensor, room: int, k: int) -> tuple[Tensor, Tensor]:

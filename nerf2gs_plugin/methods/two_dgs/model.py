@@ -110,6 +110,20 @@ class TwoDGSModel(SplatfactoModel):
         out["normals"] = self._world_normals(normals[0].detach(), viewmats[0])
         return out
 
+    def _render_features(self, camera: Cameras, features: Tensor) -> Tensor:
+        from nerf2gs_plugin.rendering import rasterize_surfels
+
+        g = {k: v.detach() for k, v in self.gauss.items()}
+        h, w = int(camera.height[0]), int(camera.width[0])
+        s2 = torch.exp(g["scales"])
+        render, *_ = rasterize_surfels(
+            g["means"], normalize_quats(g["quats"]), torch.cat([s2, torch.zeros_like(s2[:, :1])], dim=1),
+            torch.sigmoid(g["opacities"]), features, camera.viewmats(), camera.Ks(), w, h,
+            near_plane=self.config.near_plane, far_plane=self.config.far_plane, render_mode="RGB",
+            backend=self.config.backend, densify_signal=self.config.densify_signal,
+        )
+        return render
+
     def _world_normals(self, n: Tensor, viewmat: Tensor) -> Tensor:
         """Unit normals in the world frame ``[H,W,3]`` for the viewer."""
         if self.config.normals_frame == "camera":

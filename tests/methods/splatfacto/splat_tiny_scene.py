@@ -102,10 +102,10 @@ def psnr(model, cameras: Cameras, images: list[Tensor]) -> float:
 
 
 def train(model, optimizer_configs: dict, cameras: Cameras, images: list[Tensor], skies: Optional[list[Tensor]],
-          steps: int, start: int = 0) -> Optimizers:
-    """The Trainer's step, without data manager or checkpoints."""
+          steps: int, start: int = 0, pipeline: Any = None) -> Optimizers:
+    """The Trainer's step, without data manager or checkpoints (``pipeline``: what the callbacks see)."""
     opts = Optimizers(optimizer_configs, model.get_param_groups())
-    callbacks = model.get_training_callbacks(TrainingCallbackAttributes(optimizers=opts, pipeline=None))
+    callbacks = model.get_training_callbacks(TrainingCallbackAttributes(optimizers=opts, pipeline=pipeline))
     model.train()
     for step in range(start, start + steps):
         i = step % len(cameras)

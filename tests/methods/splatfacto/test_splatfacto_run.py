@@ -73,3 +73,23 @@ def test_trains_on_cuda_through_gsplat(tmp_path):
     model.get_outputs(trainer.pipeline.datamanager.train_images.cameras[0])  # a training render keeps its meta
     assert model._meta["backend"] == "gsplat"
     assert _train_psnr(trainer) > p0 + 1.0
+
+
+def test_weight_prune_reads_the_training_views_through_the_trainer(tmp_path):
+    """strategy.prune_weight_fraction in a real run: the model renders the data manager's training
+    views once after densification and ends with fewer Gaussians than the same run without it."""
+    data = write_dataset(tmp_path / "data")
+    counts = {}
+    for fraction in (0.0, 0.3):
+        cfg = _config(data, tmp_path / f"out{fraction}", 12)
+        model = cfg.pipeline.model
+        strategy = dataclasses.replace(model.strategy, stop_split_at=9, prune_weight_fraction=fraction)
+        cfg = dataclasses.replace(cfg, pipeline=dataclasses.replace(cfg.pipeline, model=dataclasses.replace(model, strategy=strategy)))
+        torch.manual_seed(0)
+        trainer = Trainer(cfg)
+        trainer.setup()
+        trainer.train()
+        counts[fraction] = trainer.pipeline.model.num_primitives()
+        weights = trainer.pipeline.model.training_blend_weights()
+        assert weights is not None and weights.shape == (counts[fraction],)
+    assert counts[0.3] < 0.9 * counts[0.0], counts

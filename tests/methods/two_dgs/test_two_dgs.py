@@ -49,6 +49,19 @@ def test_spec():
 
 
 @needs_rasterizer
+def test_blend_weights_sum_to_the_rendered_alpha(scene, trained):
+    """The weight prune's significance (splatfacto's strategy.prune_weight_fraction) for surfels:
+    per pixel the surfels' blending weights add up to its alpha."""
+    cams = scene[0]
+    model = trained[0].eval()
+    w = model.blend_weights(cams[:3])
+    alpha = sum(float(model.render_camera(cams[i])["accumulation"].sum()) for i in range(3))
+    model.train()
+    assert w.shape == (model.num_primitives(),) and bool((w >= 0).all()) and int((w > 0).sum()) > 0
+    assert float(w.sum()) == pytest.approx(alpha, rel=1e-4)
+
+
+@needs_rasterizer
 def test_training_raises_psnr(scene, trained):
     cams, imgs, _ = scene
     model, p0 = trained

@@ -1,0 +1,44 @@
+"""A splatting method at the quick scale, with or without the blending-weight prune, evaluated on
+the validation views (val_street, val_bev), never the test views.
+
+Usage: python benchmarks/validation/size_prune.py METHOD LABEL DATA OUT [FIELD=VALUE ...]
+(FIELD: a dotted field of the model config, e.g. strategy.prune_weight_fraction=0.02; writes
+OUT/<data name>-<METHOD>-<LABEL>.json with primitives, MB, FPS and the PSNR per split).
+Produced the numbers of the blending-weight prune (issue 20, part 1) in the size branch's report.
+"""
+import dataclasses, json, sys, time
+from pathlib import Path
+import torch
+torch.set_num_threads(1)
+from nerf2gs_plugin.utils.config import apply_plain
+from nerf2gs_plugin.engine.trainer import Trainer
+from nerf2gs_plugin.eval.bench_paper import _overrides
+from nerf2gs_plugin.eval.bench_size import _nested
+from nerf2gs_plugin.registry import get_method
+from nerf2gs_plugin.engine.reference import load_run
+from nerf2gs_plugin.eval.evaluate import evaluate_run
+
+method, label, data, out_dir = sys.argv[1], sys.argv[2], Path(sys.argv[3]), Path(sys.argv[4])
+extra: dict = {}
+for item in sys.argv[5:]:
+    field, value = item.split("=", 1)
+    model = extra.setdefault("pipeline", {}).setdefault("model", {})
+    nested = _nested(field, json.loads(value))
+    key = next(iter(nested))
+    model[key] = {**model.get(key, {}), **nested[key]} if isinstance(nested[key], dict) else nested[key]
+cfg = apply_plain(get_method(method).config, _overrides("quick", method, extra), where="size_prune")
+name = f"{data.name}-{method}-{label}"
+cfg = dataclasses.replace(cfg, data=data, output_dir=out_dir / "runs", timestamp=name, progress=False)
+t = time.time()
+tr = Trainer(cfg)
+tr.setup()
+tr.train()
+train_s = time.time() - t
+run = load_run(cfg.get_run_dir(), device="cpu")
+res = evaluate_run(run, ["val_street", "val_bev"], render_dir=None, lpips_model=None)
+psnr = {k: v.get("psnr") for k, v in res["results"].items()}
+out = {"method": method, "label": label, "data": str(data), "overrides": extra, "train_seconds": train_s,
+       "primitives": res["size"]["primitives"], "megabytes": res["size"].get("checkpoint_megabytes", res["size"].get("megabytes")),
+       "fps": res.get("fps"), "psnr": psnr, "mean_psnr": sum(psnr.values()) / len(psnr), "results": res["results"]}
+(out_dir / f"{name}.json").write_text(json.dumps(out, indent=1, default=str))
+print(json.dumps({k: out[k] for k in ("primitives", "megabytes", "mean_psnr", "psnr", "train_seconds")}))

@@ -1,0 +1,104 @@
+"""The blending-weight prune (``strategy.prune_weight_fraction``): weights are what the rasterizer
+composites, the prune ends smaller than densification alone and still learns, and a scene seen by
+more views keeps more primitives."""
+
+from __future__ import annotations
+
+import dataclasses
+from types import SimpleNamespace
+
+import pytest
+import torch
+
+from splat_tiny_scene import make_cameras, make_train_data, needs_rasterizer, psnr, render_truth, train
+
+from nerf2gs_plugin.methods.splatfacto.config import gaussian_optimizers, splatfacto_config
+from nerf2gs_plugin.methods.splatfacto.strategy import light_mask
+
+STEPS = 80
+
+
+def _cfg(fraction: float):
+    base = splatfacto_config.pipeline.model
+    strategy = dataclasses.replace(base.strategy, warmup_length=10, refine_every=10, reset_alpha_every=0, stop_split_at=50,
+                                   stop_screen_size_at=0, densify_grad_thresh=0.0002, prune_weight_fraction=fraction)
+    return dataclasses.replace(base, sh_degree_interval=20, strategy=strategy)
+
+
+def _views(cams):
+    """What the training callbacks read the training views from (the pipeline's data manager)."""
+    return SimpleNamespace(datamanager=SimpleNamespace(all_train_cameras=cams))
+
+
+@pytest.fixture(scope="module")
+def scene():
+    cams = make_cameras(8, 40, 24)
+    imgs, skies = render_truth(cams)
+    return cams, imgs, skies
+
+
+def _trained(scene, fraction: float):
+    cams, imgs, skies = scene
+    torch.manual_seed(0)
+    model = _cfg(fraction).setup(train_data=make_train_data(cams))
+    p0 = psnr(model, cams, imgs)
+    train(model, gaussian_optimizers(STEPS), cams, imgs, skies, STEPS, pipeline=_views(cams))
+    return model, p0, psnr(model, cams, imgs)
+
+
+def test_light_mask_follows_how_the_weight_is_spread():
+    even = torch.ones(100)
+    tailed = torch.cat([torch.full((10,), 100.0), torch.full((90,), 0.1)])  # 10 carry 99% of the weight
+    assert int(light_mask(even, 0.05).sum()) == 5
+    assert int(light_mask(tailed, 0.05).sum()) == 90
+    w = torch.rand(1000, generator=torch.Generator().manual_seed(0)) ** 4
+    m = light_mask(w, 0.1)
+    assert float(w[m].sum()) <= 0.1 * float(w.sum()) < float(w[m].sum()) + float(w[~m].min())  # the lightest, as many as fit
+    assert bool(light_mask(torch.tensor([0.0, 1.0, 2.0]), 0.0)[0])  # unseen primitives always go
+    assert int(light_mask(torch.zeros(0), 0.5).sum()) == 0
+
+
+@needs_rasterizer
+def test_blend_weights_sum_to_the_rendered_alpha(scene):
+    """Per pixel the blending weights of all Gaussians add up to its alpha (2DGS: test_two_dgs.py)."""
+    cams = scene[0]
+    torch.manual_seed(0)
+    model = _cfg(0.0).setup(train_data=make_train_data(cams)).eval()
+    w = model.blend_weights(cams[:3])
+    alpha = sum(float(model.render_camera(cams[i])["accumulation"].sum()) for i in range(3))
+    assert w.shape == (model.num_primitives(),) and bool((w >= 0).all())
+    assert float(w.sum()) == pytest.approx(alpha, rel=1e-4)
+    assert int((w > 0).sum()) > model.num_primitives() // 2  # most initial points are in view
+
+
+@needs_rasterizer
+def test_prune_ends_smaller_and_still_learns(scene):
+    dense, _, p_dense = _trained(scene, 0.0)
+    pruned, p0, p1 = _trained(scene, 0.1)
+    assert pruned.num_primitives() < 0.8 * dense.num_primitives(), (pruned.num_primitives(), dense.num_primitives())
+    assert p1 > p0 + 3.0, (p0, p1)
+    assert p1 > p_dense - 1.5, (p1, p_dense)
+
+
+@needs_rasterizer
+def test_more_views_keep_more_primitives(scene):
+    """The same trained model pruned on two of its views or on all eight: what only the other views
+    see has no weight in the first, so the scene seen by more views keeps a larger model."""
+    cams = scene[0]
+    model, _, _ = _trained(scene, 0.0)
+    kept = {}
+    for name, views in (("few", cams[:2]), ("all", cams)):
+        model._train_cameras = lambda v=views: v
+        kept[name] = int((~light_mask(model.training_blend_weights(), 0.05)).sum())
+    assert kept["few"] < 0.9 * kept["all"] <= model.num_primitives(), kept
+
+
+@needs_rasterizer
+def test_prune_is_off_by_default_and_without_views(scene):
+    assert splatfacto_config.pipeline.model.strategy.prune_weight_fraction == 0.0
+    cams, imgs, skies = scene
+    torch.manual_seed(0)
+    model = _cfg(0.5).setup(train_data=make_train_data(cams))
+    assert model.training_blend_weights() is None  # no training callbacks yet: nothing to render
+    n = model.num_primitives()
+    assert model.strategy.prune_by_weight(model.gauss, None) == 0 and model.num_primitives() == n
