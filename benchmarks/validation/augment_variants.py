@@ -17,6 +17,7 @@ Produced benchmarks/results/augment_variants.{json,md} with
 """
 import dataclasses
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -78,7 +79,7 @@ def main() -> None:
     scene, run, baseline, reference, splits = scene_arg.split(":")
     splits = splits.split(",")
     run, baseline, reference = Path(run), Path(baseline), Path(reference)
-    work = work / scene.split(" ")[0]
+    work = work / re.sub(r"\W", "", scene.split(" ")[0])  # "castle-P30" -> castleP30, "2DGS," -> 2DGS
     work.mkdir(parents=True, exist_ok=True)
     rows = {"reference": summary(evaluated(reference, splits, work / "reference_eval.json"), splits),
             "baseline (no NeRF views)": summary(evaluated(baseline, splits, work / "baseline_eval.json"), splits),
