@@ -97,8 +97,9 @@ class Eval:
 def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: tuple[str, ...] = (), max_images: Optional[int] = None) -> dict:
     """Per split: mean PSNR (and LPIPS, when its weights are installed) of the held-out inputs
     (reference renders or degraded images) and of their enhancement. The reference view given to the
-    enhancer is the training view nearest each camera (warped in through the reference's depth for
-    a ``warped``-conditioned model; without ``reference`` there is no depth, so it gets none)."""
+    enhancer is the training view nearest each camera (for a ``warped``-conditioned model, the nearest
+    facing the same way, warped in through the reference's depth; without ``reference`` there is no
+    depth, so it gets none)."""
     import torch
 
     from nerf2gs_plugin.data import list_splits
@@ -129,6 +130,7 @@ def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: 
     train = dm.train_images
     train_c = train.cameras.camera_to_worlds[:, :3, 3]
     source_depths: dict[int, torch.Tensor] = {}
+    from nerf2gs_plugin.enhancers.warp import condition_source
 
     def warped(camera, rendered: dict, k: int) -> torch.Tensor:
         """Training view ``k`` warped into ``camera`` through the reference's depth, as the augmentation does."""
@@ -150,8 +152,8 @@ def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: 
                 rendered = run.model.render_camera(imgs.cameras[i])
                 render = rendered["rgb"].detach().cpu()
                 k = int(torch.cdist(imgs.cameras.camera_to_worlds[i : i + 1, :3, 3], train_c).argmin())
-                if getattr(enh, "reference_kind", "image") == "warped":  # the nearest training view, warped in
-                    ref = warped(imgs.cameras[i], rendered, k)
+                if getattr(enh, "reference_kind", "image") == "warped":  # the nearest training view facing the same way, warped in
+                    ref = warped(imgs.cameras[i], rendered, condition_source(imgs.cameras.camera_to_worlds[i], train.cameras.camera_to_worlds))
                 else:
                     ref = train.image(k).cpu()
                 out = enh.enhance(render, reference=ref)

@@ -195,13 +195,13 @@ def _save_confidence(path: Path, conf: Tensor) -> None:
 
 def _warped_source(out: dict[str, Tensor], camera: Cameras, train: ImageSet, render_fn: RenderFn,
                    renders: dict[int, dict[str, Tensor]], depths: dict[int, Tensor], depth_along: str) -> Tensor:
-    """``[H, W, 4]``: the training view nearest ``camera`` warped into it through the render's depth
-    ``out["depth"]``, and its validity: the reference input of a ``warped``-conditioned enhancer."""
-    from nerf2gs_plugin.enhancers.warp import clear_mask, nearest_camera, warped_reference
+    """``[H, W, 4]``: the training view nearest ``camera`` (facing the same way) warped into it through
+    the render's depth ``out["depth"]``, and its validity: the reference input of a ``warped``-conditioned enhancer."""
+    from nerf2gs_plugin.enhancers.warp import clear_mask, condition_source, warped_reference
 
     if "depth" not in out:
         raise ConfigError("an enhancer conditioned on warped views needs a reference that renders depth; this one does not")
-    k = nearest_camera(camera.camera_to_worlds[0, :, 3], train.cameras.camera_to_worlds[:, :3, 3])
+    k = condition_source(camera.camera_to_worlds[0], train.cameras.camera_to_worlds)
     if k not in depths:  # rendered once per source view (the composites' renders are reused)
         depths[k] = (renders[k] if k in renders else render_fn(train.cameras[k]))["depth"].cpu()
     return warped_reference(camera.to("cpu"), out["depth"].cpu(), train.cameras[k].to("cpu"), depths[k], train.image(k).cpu(),

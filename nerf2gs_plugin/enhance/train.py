@@ -138,6 +138,20 @@ def _nearest_other(centres: Tensor) -> Tensor:
     return d.argmin(1) if len(centres) > 1 else torch.zeros(len(centres), dtype=torch.long)
 
 
+def _train_poses(data: Path, downscale: float) -> Tensor:
+    from nerf2gs_plugin.data import parse_dataset
+
+    return parse_dataset(data, "train", downscale=downscale).cameras.camera_to_worlds[:, :3, :4].float()
+
+
+def _condition_sources(c2ws: Tensor, fit: list[int], indices: Sequence[int]) -> dict[int, int]:
+    """Training index -> the training view (never itself, never a held-out one) whose warp conditions its pairs."""
+    from nerf2gs_plugin.enhancers.warp import condition_source
+
+    pos = {i: k for k, i in enumerate(fit)}
+    return {i: fit[condition_source(c2ws[i], c2ws[fit], pos.get(i))] for i in indices}
+
+
 def load_split_images(data: Path, split: str, downscale: float = 1.0) -> tuple[list[Tensor], Tensor]:
     """A split's images ``[3, H, W]`` and camera centres."""
     from nerf2gs_plugin.data import parse_dataset
@@ -277,6 +291,7 @@ def _train(config: EnhancerTrainConfig, gen: torch.Generator) -> TrainReport:
         raise ConfigError("--condition warped needs --reference (the reference's depth warps the real views)")
     t0 = time.time()
     images, centres = load_split_images(config.data, "train", config.downscale)
+    train_c2w = _train_poses(config.data, config.downscale) if warped else None
     fit, held = split_indices(len(images), config.holdout_every, None, gen)
     if not fit:
         raise DataError(f"no training images left to train on (holdout_every={config.holdout_every}, {len(images)} images)", config.data)
@@ -292,7 +307,7 @@ def _train(config: EnhancerTrainConfig, gen: torch.Generator) -> TrainReport:
     pairs: list[Pair] = []
     if config.reference:
         rendered = sorted(fit[k] for k in torch.randperm(len(fit), generator=gen)[: config.max_renders].tolist())
-        condition_of = {i: int(neighbour[i]) for i in rendered + held} if warped else None
+        condition_of = _condition_sources(train_c2w, fit, rendered + held) if warped else None
         pairs = render_pairs(config.reference, config.data, rendered + held, gen, perturbed=config.perturbed, progress=config.progress,
                              condition_of=condition_of)
         if config.downscale != 1.0 and pairs and pairs[0].render.shape[-2:] != images[pairs[0].index].shape[-2:]:

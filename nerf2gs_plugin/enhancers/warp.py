@@ -92,5 +92,20 @@ def nearest_camera(centre: Tensor, centres: Tensor, exclude: Optional[int] = Non
     return int(d.argmin())
 
 
-__all__ = ["DEPTH_TOLERANCE", "REFERENCE_KINDS", "WARPED_CHANNELS", "clear_mask", "nearest_camera", "ray_depth",
+def condition_source(c2w: Tensor, c2ws: Tensor, exclude: Optional[int] = None) -> int:
+    """Index of the camera in ``c2ws`` ``[N, 3, 4]`` a view ``c2w`` ``[3, 4]`` takes its warped condition
+    from: the nearest centre among those facing the same way (viewing axes under 90 deg apart), else
+    the nearest (never ``exclude``). Nearest by centre alone can pick a camera of the other pass of a
+    street, looking the other way: its warp would be all invalid."""
+    c2w, c2ws = c2w.float().cpu(), c2ws.float().cpu()
+    d = (c2ws[:, :, 3] - c2w[:, 3]).norm(dim=-1)
+    if exclude is not None and len(d) > 1:
+        d[exclude] = float("inf")
+    facing = (c2ws[:, :, 2] @ c2w[:, 2]) > 0  # OpenGL cameras look down -z: same sign, same way
+    if bool((facing & torch.isfinite(d)).any()):
+        d = torch.where(facing, d, torch.full_like(d, float("inf")))
+    return int(d.argmin())
+
+
+__all__ = ["DEPTH_TOLERANCE", "REFERENCE_KINDS", "WARPED_CHANNELS", "clear_mask", "condition_source", "nearest_camera", "ray_depth",
            "warp_into", "warped_reference"]

@@ -12,7 +12,7 @@ import torch
 
 from nerf2gs_plugin.cameras import Cameras
 from nerf2gs_plugin.enhance.pairs import perturb_pose
-from nerf2gs_plugin.enhancers.warp import clear_mask, nearest_camera, ray_depth, warped_reference
+from nerf2gs_plugin.enhancers.warp import clear_mask, condition_source, nearest_camera, ray_depth, warped_reference
 from nerf2gs_plugin.errors import ConfigError
 
 
@@ -84,6 +84,14 @@ def test_clear_mask_and_nearest_camera():
     centres = torch.tensor([[0.0, 0, 0], [1.0, 0, 0], [3.0, 0, 0]])
     assert nearest_camera(torch.tensor([0.9, 0, 0]), centres) == 1
     assert nearest_camera(centres[1], centres, exclude=1) == 0
+    # the condition's source faces the same way: the other pass of a street, looking back, is never it
+    fwd, back = _street_camera(1.5, 10.0), _street_camera(1.5, 10.0)
+    back[:, :3] = back[:, :3] @ torch.diag(torch.tensor([-1.0, 1.0, -1.0]))  # turned 180 deg about up
+    poses = torch.stack([back.clone(), fwd.clone(), fwd.clone()])
+    poses[1, 0, 3], poses[2, 0, 3] = 0.5, 3.0  # the same-way cameras are farther than the turned one
+    raised = _street_camera(6.0, 40.0)
+    assert nearest_camera(raised[:, 3], poses[:, :, 3]) == 0 and condition_source(raised, poses) == 1
+    assert condition_source(raised, poses, exclude=1) == 2 and condition_source(raised, poses[:1]) == 0  # none faces it: the nearest
 
 
 @pytest.fixture(scope="module")
@@ -223,7 +231,7 @@ def test_augmentation_feeds_each_birds_eye_view_its_reference(tiny_scene, tiny_r
         assert len(warped.refs) == len(bev)
         for k, ref in enumerate(warped.refs):
             cam = bev[k]
-            src = nearest_camera(cam.camera_to_worlds[0, :, 3], train.cameras.camera_to_worlds[:, :3, 3])
+            src = condition_source(cam.camera_to_worlds[0], train.cameras.camera_to_worlds)
             expect = warped_reference(cam, run.model.render_camera(cam)["depth"], train.cameras[src],
                                       run.model.render_camera(train.cameras[src])["depth"], train.image(src),
                                       clear_mask(train.mask("transient", src), 24, 32), "ray")
