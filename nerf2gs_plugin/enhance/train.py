@@ -15,8 +15,8 @@ any other model, through :mod:`nerf2gs_plugin.enhancers.onnx_runtime`.
 
 ``condition`` (default ``none``: one input, the render) conditions the network on a real view, in
 the spirit of Difix: ``view`` concatenates the nearest other training image as it is; ``warped``
-(needs a reference) the nearest other training view warped into the render's camera through the
-reference's depth, and its validity mask (:func:`~nerf2gs_plugin.enhancers.warp.warped_reference`:
+(needs a reference) the nearest other training view facing the same way, warped into the render's
+camera through the reference's depth, and its validity mask (:func:`~nerf2gs_plugin.enhancers.warp.warped_reference`:
 7 input channels in all), so where a real camera saw the surface the network can copy its detail.
 A pair's condition is never warped from its own target view (the network would learn to copy its
 target); the exported model says ``reference_kind: warped`` and the augmentation feeds each
@@ -70,8 +70,8 @@ class EnhancerTrainConfig:
     """Channels of the first U-Net level (x2, x4 below)."""
     condition: Literal["none", "view", "warped"] = "none"
     """Reference input of the network (channel concatenation). none: the render alone; view: the nearest
-    other training image as it is; warped: the nearest other training view warped into the render's
-    camera through the reference's depth, plus its validity mask (needs --reference)."""
+    other training image as it is; warped: the nearest other training view facing the same way, warped
+    into the render's camera through the reference's depth, plus its validity mask (needs --reference)."""
     perturbed: bool = True
     """With a reference: also pairs from cameras raised 2-8 m and pitched down 10-35 deg from the
     training poses (novel-view artifacts), with the training image warped in as ground truth."""
