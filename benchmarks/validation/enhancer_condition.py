@@ -5,7 +5,7 @@ on one StreetNeRF reference, then measured alone on that reference's renders of 
 
 Usage: python benchmarks/validation/enhancer_condition.py REFERENCE_RUN DATA OUT_DIR [SCALE]
 (SCALE: a bench enhancer scale, default quick. Writes OUT_DIR/{none,warped}/enhancer.onnx (+ report)
-and OUT_DIR/enhancer_condition.{json,md}.)
+and OUT_DIR/enhancer_condition.{json,md}; a model already there with its report is evaluated again, not retrained.)
 """
 import dataclasses
 import json
@@ -18,7 +18,7 @@ import torch
 torch.set_num_threads(1)
 from nerf2gs_plugin.cli.enhance import evaluate_enhancer  # noqa: E402
 from nerf2gs_plugin.enhance.bench import bench_enhancer_config  # noqa: E402
-from nerf2gs_plugin.enhance.train import train_enhancer  # noqa: E402
+from nerf2gs_plugin.enhance.train import TrainReport, report_path, train_enhancer  # noqa: E402
 from nerf2gs_plugin.eval.machine import machine_info, machine_line  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
@@ -30,11 +30,16 @@ for condition in ("none", "warped"):
     model = out_dir / condition / "enhancer.onnx"
     cfg = dataclasses.replace(bench_enhancer_config(data, model, scale), reference=(reference,), condition=condition, threads=1)
     t = time.time()
-    report = train_enhancer(cfg)
-    for line in report.summary_lines():
-        print(f"[{condition}] {line}", flush=True)
+    if model.is_file() and report_path(model).is_file():  # trained before: measured again (evaluation code changed)
+        saved = json.loads(report_path(model).read_text())
+        report = TrainReport(**{k: saved[k] for k in ("out", "steps", "seconds", "validation", "selected_step", "pairs")})
+        print(f"[{condition}] reuse {model} (trained in {report.seconds:.0f} s)", flush=True)
+    else:
+        report = train_enhancer(cfg)
+        for line in report.summary_lines():
+            print(f"[{condition}] {line}", flush=True)
     ev = evaluate_enhancer(f"onnx:{model}", data, reference, SPLITS)
-    results[condition] = {"train_seconds": time.time() - t, "selected_step": report.selected_step,
+    results[condition] = {"train_seconds": report.seconds, "seconds": time.time() - t, "selected_step": report.selected_step,
                           "heldout_training_views": report.validation, "splits": ev["splits"], "pairs": report.pairs}
     print(condition, json.dumps(ev["splits"]), flush=True)
 
