@@ -96,7 +96,10 @@ class Eval:
 
 def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: tuple[str, ...] = (), max_images: Optional[int] = None) -> dict:
     """Per split: mean PSNR (and LPIPS, when its weights are installed) of the held-out inputs
-    (reference renders or degraded images) and of their enhancement."""
+    (reference renders or degraded images) and of their enhancement. The reference view given to the
+    enhancer is the training view nearest each camera (for a ``warped``-conditioned model, the nearest
+    facing the same way, warped in through the reference's depth; without ``reference`` there is no
+    depth, so it gets none)."""
     import torch
 
     from nerf2gs_plugin.data import list_splits
@@ -114,7 +117,7 @@ def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: 
             imgs, cents = load_split_images(data, s)
             imgs, cents = imgs[:max_images], cents[:max_images]
             refs = [train_imgs[int(k)] for k in torch.cdist(cents, train_c).argmin(1)]
-            r = heldout_psnr(enh.enhance, imgs, KINDS, 1.0, 0, refs)
+            r = heldout_psnr(enh.enhance, imgs, KINDS, 1.0, 0, None if getattr(enh, "reference_kind", "image") == "warped" else refs)
             result["splits"][s] = {"images": r["images"], "psnr_before": r["psnr_degraded"], "psnr_after": r["psnr_enhanced"]}
         return result
     from nerf2gs_plugin.engine.reference import load_run
@@ -126,6 +129,18 @@ def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: 
     dm = run.pipeline.datamanager
     train = dm.train_images
     train_c = train.cameras.camera_to_worlds[:, :3, 3]
+    source_depths: dict[int, torch.Tensor] = {}
+    from nerf2gs_plugin.enhancers.warp import condition_source
+
+    def warped(camera, rendered: dict, k: int) -> torch.Tensor:
+        """Training view ``k`` warped into ``camera`` through the reference's depth, as the augmentation does."""
+        from nerf2gs_plugin.enhancers.warp import clear_mask, warped_reference
+
+        if k not in source_depths:
+            source_depths[k] = run.model.render_camera(train.cameras[k])["depth"].detach().cpu()
+        return warped_reference(camera.to("cpu"), rendered["depth"].detach().cpu(), train.cameras[k].to("cpu"), source_depths[k],
+                                train.image(k).cpu(), clear_mask(train.mask("transient", k), *train.hw(k)), run.model.depth_along)
+
     with make_progress() as bar, torch.no_grad():
         for s in names:
             _, imgs = dm.eval_split(s)
@@ -134,9 +149,14 @@ def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: 
             before, after, lp_before, lp_after = [], [], [], []
             for i in range(n):
                 gt = imgs.image(i).cpu()
-                render = run.model.render_camera(imgs.cameras[i])["rgb"].detach().cpu()
+                rendered = run.model.render_camera(imgs.cameras[i])
+                render = rendered["rgb"].detach().cpu()
                 k = int(torch.cdist(imgs.cameras.camera_to_worlds[i : i + 1, :3, 3], train_c).argmin())
-                out = enh.enhance(render, reference=train.image(k).cpu())
+                if getattr(enh, "reference_kind", "image") == "warped":  # the nearest training view facing the same way, warped in
+                    ref = warped(imgs.cameras[i], rendered, condition_source(imgs.cameras.camera_to_worlds[i], train.cameras.camera_to_worlds))
+                else:
+                    ref = train.image(k).cpu()
+                out = enh.enhance(render, reference=ref)
                 before.append(float(psnr(render, gt)))
                 after.append(float(psnr(out, gt)))
                 if lpips is not None:

@@ -193,6 +193,21 @@ def _save_confidence(path: Path, conf: Tensor) -> None:
     np.save(path, conf[..., 0].cpu().numpy().astype(np.float16))
 
 
+def _warped_source(out: dict[str, Tensor], camera: Cameras, train: ImageSet, render_fn: RenderFn,
+                   renders: dict[int, dict[str, Tensor]], depths: dict[int, Tensor], depth_along: str) -> Tensor:
+    """``[H, W, 4]``: the training view nearest ``camera`` (facing the same way) warped into it through
+    the render's depth ``out["depth"]``, and its validity: the reference input of a ``warped``-conditioned enhancer."""
+    from nerf2gs_plugin.enhancers.warp import clear_mask, condition_source, warped_reference
+
+    if "depth" not in out:
+        raise ConfigError("an enhancer conditioned on warped views needs a reference that renders depth; this one does not")
+    k = condition_source(camera.camera_to_worlds[0], train.cameras.camera_to_worlds)
+    if k not in depths:  # rendered once per source view (the composites' renders are reused)
+        depths[k] = (renders[k] if k in renders else render_fn(train.cameras[k]))["depth"].cpu()
+    return warped_reference(camera.to("cpu"), out["depth"].cpu(), train.cameras[k].to("cpu"), depths[k], train.image(k).cpu(),
+                            clear_mask(train.mask("transient", k), *train.hw(k)), depth_along)
+
+
 def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn: RenderFn, config: AugmentConfig,
                   enhancer: Optional[ViewEnhancer], comp_idx: list[int], scene_box: Optional[Tensor],
                   depth_along: str = "z") -> dict[str, Any]:
@@ -240,6 +255,7 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
                 conf = 1.0 - painted + painted * vis.confidence(renders[i], train.cameras[i])
                 _save_confidence(confidence_path(work / "composites" / f"{i:05d}.png"), conf)
         inside = inside_box(bev.centers, scene_box) if bev is not None else None
+        source_depths: dict[int, Tensor] = {}  # a warped-conditioned enhancer's source views: the reference's depth there
         for j in range(len(bev) if bev is not None else 0):
             if not bool(inside[j]):  # outside the scene box: the reference knows nothing there
                 outside += 1
@@ -259,7 +275,10 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
             if vis is not None:
                 _save_confidence(confidence_path(work / "extra" / f"{k:05d}.png"), vis.confidence(out, bev[j]))
             if enhancer is not None:
-                src = train.image(j * max(config.every_n, 1)).cpu()
+                if getattr(enhancer, "reference_kind", "image") == "warped":
+                    src = _warped_source(out, bev[j], train, render_fn, renders, source_depths, depth_along)
+                else:
+                    src = train.image(j * max(config.every_n, 1)).cpu()
                 rgb = enhancer.enhance(rgb, reference=src)
             save_png(work / "extra" / f"{k:05d}.png", rgb)
             progress.update(task, advance=1, stats=f"bird's-eye {j}")

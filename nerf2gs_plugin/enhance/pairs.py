@@ -12,6 +12,12 @@ Two kinds, both with a loss mask:
   (stretched texture, floaters seen from a new angle) with a ground truth, which renders at the
   training poses alone do not show.
 
+With ``condition_of`` (``--condition warped``), every pair also carries its condition: the real
+training view ``condition_of[i]`` (never ``i`` itself, whose image is the target) warped into the
+pair's camera through the reference's depth there, with its validity mask
+(:func:`~nerf2gs_plugin.enhancers.warp.warped_reference`), as the augmentation builds it for a
+bird's-eye view.
+
 Everything is vectorised over pixels; the loops run over images.
 """
 
@@ -21,19 +27,20 @@ import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Mapping, Optional, Sequence
 
 import torch
 import torch.nn.functional as F
 from torch import Tensor
 from nerf2gs_plugin.data.normalize import load_dataparser_transform
+from nerf2gs_plugin.errors import ConfigError
+from nerf2gs_plugin.enhancers.warp import clear_mask, warp_into, warped_reference
 from nerf2gs_plugin.progress import make_progress
 
 # Camera perturbation for ``perturbed`` pairs, in metres and degrees (uniform ranges).
 RAISE_M = (2.0, 8.0)
 PITCH_DEG = (10.0, 35.0)
 SIDE_M = 1.0
-DEPTH_TOLERANCE = 0.03  # relative depth disagreement that counts as occluded
 
 
 @dataclass
@@ -45,6 +52,8 @@ class Pair:
     mask: Tensor
     index: int
     kind: str  # "pose" or "perturbed"
+    condition: Optional[Tensor] = None  # [4, H, W]: another training view warped in, and where it is valid
+    condition_index: Optional[int] = None  # the training view it was warped from
 
 
 def _chw(img: Tensor) -> Tensor:
@@ -75,45 +84,22 @@ def perturb_pose(c2w: Tensor, up: Tensor, gen: torch.Generator, metres: float) -
     return out
 
 
-def warp_into(camera, depth: Tensor, source_c2w: Tensor, fx: float, fy: float, cx: float, cy: float,
-              source_depth: Tensor, source_image: Tensor, source_mask: Tensor) -> tuple[Tensor, Tensor]:
-    """Warp ``source_image`` ``[3, h, w]`` (seen by the source camera) into ``camera`` through its
-    rendered ray ``depth`` ``[H, W, 1]``: (warped image ``[3, H, W]``, valid mask ``[1, H, W]``)."""
-    h, w = int(camera.height[0]), int(camera.width[0])
-    sh, sw = source_image.shape[-2:]
-    rays = camera.generate_rays(0)
-    points = rays.origins + rays.directions * depth.reshape(-1, 1).to(rays.origins)
-    rot, origin = source_c2w[:, :3].to(points), source_c2w[:, 3].to(points)
-    local = (points - origin) @ rot  # camera frame (OpenGL: looks down -z)
-    z = -local[:, 2]
-    zc = z.clamp_min(1e-6)
-    u = cx + fx * local[:, 0] / zc
-    v = cy - fy * local[:, 1] / zc
-    grid = torch.stack([2 * u / sw - 1, 2 * v / sh - 1], -1).reshape(1, h, w, 2).float().cpu()
-    sample = lambda img, mode: F.grid_sample(img[None].float().cpu(), grid, mode=mode, align_corners=False, padding_mode="border")[0]  # noqa: E731
-    warped = sample(source_image, "bilinear")
-    seen_depth = sample(source_depth, "nearest")[0]
-    dist = (points - origin).norm(dim=-1).reshape(h, w).float().cpu()
-    inside = (grid.abs() <= 1).all(-1)[0] & (z.reshape(h, w).cpu() > 1e-3)
-    visible = (dist - seen_depth).abs() < DEPTH_TOLERANCE * seen_depth + 1e-3 * seen_depth.median()
-    clear = sample(source_mask, "nearest")[0] > 0.5
-    return warped, (inside & visible & clear).float()[None]
-
-
 def _loss_mask(images, i: int) -> Tensor:
     """``[1, H, W]``: 1 where the ground truth may be compared with a render (transients grown by 2 px are 0)."""
-    transient = images.mask("transient", i)
-    if transient is None:
-        h, w = images.hw(i)
-        return torch.ones(1, h, w)
-    t = F.max_pool2d(transient.float().cpu().permute(2, 0, 1)[None], 5, 1, 2)[0]
-    return 1 - t
+    return clear_mask(images.mask("transient", i), *images.hw(i))
 
 
 def reference_pairs(refs: Sequence[Path], data: Path, indices: Sequence[int], gen: torch.Generator,
-                    perturbed: bool = True, progress: bool = True) -> list[Pair]:
-    """``pose`` pairs (and ``perturbed`` ones when asked) at the training images ``indices``, from each reference."""
+                    perturbed: bool = True, progress: bool = True,
+                    condition_of: Optional[Mapping[int, int]] = None) -> list[Pair]:
+    """``pose`` pairs (and ``perturbed`` ones when asked) at the training images ``indices``, from each
+    reference; with ``condition_of`` (training index -> another training index), conditioned pairs."""
     from nerf2gs_plugin.engine.reference import load_run
+
+    if condition_of is not None:
+        own = [i for i in indices if condition_of[i] == i]
+        if own:
+            raise ValueError(f"a pair's condition must come from another training view (image {own[0]} conditions on itself)")
 
     pairs: list[Pair] = []
     runs = [load_run(Path(r), data=data) for r in refs]
@@ -124,11 +110,13 @@ def reference_pairs(refs: Sequence[Path], data: Path, indices: Sequence[int], ge
             cams = imgs.cameras
             up = F.normalize(cams.camera_to_worlds[:, :3, 1].float().mean(0), dim=0)
             metres = metres_per_unit(run.run_dir)
+            depths: dict[int, Tensor] = {}  # the reference's depth at training views (condition sources)
             for i in indices:
                 cam = cams[i]
                 out = run.model.render_camera(cam)
                 gt, mask = _chw(imgs.image(i)), _loss_mask(imgs, i)
                 pairs.append(Pair(_chw(out["rgb"]), gt, mask, i, "pose"))
+                views = [(pairs[-1], cam, out)]
                 if perturbed:
                     c2w = perturb_pose(cam.camera_to_worlds[0], up, gen, metres)
                     moved = dataclasses.replace(cam, camera_to_worlds=c2w[None])
@@ -136,8 +124,26 @@ def reference_pairs(refs: Sequence[Path], data: Path, indices: Sequence[int], ge
                     target, valid = warp_into(moved, novel["depth"], cam.camera_to_worlds[0], float(cam.fx[0]), float(cam.fy[0]),
                                               float(cam.cx[0]), float(cam.cy[0]), _chw(out["depth"]), gt, mask)
                     pairs.append(Pair(_chw(novel["rgb"]), target, valid, i, "perturbed"))
+                    views.append((pairs[-1], moved, novel))
+                if condition_of is not None:
+                    depths.setdefault(i, out.get("depth"))
+                    for q, camera, seen in views:
+                        q.condition_index = int(condition_of[i])
+                        q.condition = _condition(run, imgs, depths, q.condition_index, camera, seen)
                 bar.update(task, advance=1, stats=f"{run.config.method_name} step {run.step}")
     return pairs
+
+
+def _condition(run, imgs, depths: dict, j: int, camera, seen: dict[str, Tensor]) -> Tensor:
+    """``[4, H, W]``: training view ``j`` warped into ``camera`` through the reference's depth ``seen["depth"]`` there."""
+    if j not in depths:  # a condition source not (yet) rendered: its depth is rendered once
+        depths[j] = run.model.render_camera(imgs.cameras[j]).get("depth")
+    if depths[j] is None or "depth" not in seen:
+        raise ConfigError(f"--condition warped needs a reference that renders depth ({run.config.method_name} does not)")
+    along = getattr(run.model, "depth_along", "ray")
+    ref = warped_reference(camera, seen["depth"].detach().cpu(), imgs.cameras[j], depths[j].detach().cpu(), imgs.image(j).cpu(),
+                           _loss_mask(imgs, j), along)
+    return ref.permute(2, 0, 1).contiguous()
 
 
 def split_indices(n: int, holdout_every: int, max_train: Optional[int], gen: torch.Generator) -> tuple[list[int], list[int]]:

@@ -12,6 +12,15 @@ best state is exported, the untrained network (the identity: its last layer star
 so the exported model never scores worse than no enhancement on those held-out training views.
 The trained network is exported to ONNX with its I/O convention in the metadata and is run, like
 any other model, through :mod:`nerf2gs_plugin.enhancers.onnx_runtime`.
+
+``condition`` (default ``none``: one input, the render) conditions the network on a real view, in
+the spirit of Difix: ``view`` concatenates the nearest other training image as it is; ``warped``
+(needs a reference) the nearest other training view facing the same way, warped into the render's
+camera through the reference's depth, and its validity mask (:func:`~nerf2gs_plugin.enhancers.warp.warped_reference`:
+7 input channels in all), so where a real camera saw the surface the network can copy its detail.
+A pair's condition is never warped from its own target view (the network would learn to copy its
+target); the exported model says ``reference_kind: warped`` and the augmentation feeds each
+bird's-eye view the nearest training view warped through the bird's-eye render's depth.
 """
 
 from __future__ import annotations
@@ -20,7 +29,7 @@ import json
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable, Optional, Sequence
+from typing import Callable, Literal, Optional, Sequence
 
 import torch
 import torch.nn.functional as F
@@ -29,6 +38,7 @@ from torch import Tensor
 from nerf2gs_plugin.enhance.degrade import KINDS, degrade
 from nerf2gs_plugin.enhance.pairs import Pair, split_indices
 from nerf2gs_plugin.enhance.unet import MULTIPLE, ResidualUNet, export_onnx
+from nerf2gs_plugin.enhancers.warp import WARPED_CHANNELS
 from nerf2gs_plugin.errors import ConfigError, DataError
 from nerf2gs_plugin.eval.lpips import to_nchw
 from nerf2gs_plugin.eval.metrics import LPIPS
@@ -58,8 +68,10 @@ class EnhancerTrainConfig:
     lr: float = 2e-3
     width: int = 16
     """Channels of the first U-Net level (x2, x4 below)."""
-    condition: bool = False
-    """Also feed the nearest other training view (channel concatenation) as a reference input."""
+    condition: Literal["none", "view", "warped"] = "none"
+    """Reference input of the network (channel concatenation). none: the render alone; view: the nearest
+    other training image as it is; warped: the nearest other training view facing the same way, warped
+    into the render's camera through the reference's depth, plus its validity mask (needs --reference)."""
     perturbed: bool = True
     """With a reference: also pairs from cameras raised 2-8 m and pitched down 10-35 deg from the
     training poses (novel-view artifacts), with the training image warped in as ground truth."""
@@ -124,6 +136,20 @@ def _nearest_other(centres: Tensor) -> Tensor:
     d = torch.cdist(centres, centres)
     d.fill_diagonal_(float("inf"))
     return d.argmin(1) if len(centres) > 1 else torch.zeros(len(centres), dtype=torch.long)
+
+
+def _train_poses(data: Path, downscale: float) -> Tensor:
+    from nerf2gs_plugin.data import parse_dataset
+
+    return parse_dataset(data, "train", downscale=downscale).cameras.camera_to_worlds[:, :3, :4].float()
+
+
+def _condition_sources(c2ws: Tensor, fit: list[int], indices: Sequence[int]) -> dict[int, int]:
+    """Training index -> the training view (never itself, never a held-out one) whose warp conditions its pairs."""
+    from nerf2gs_plugin.enhancers.warp import condition_source
+
+    pos = {i: k for k, i in enumerate(fit)}
+    return {i: fit[condition_source(c2ws[i], c2ws[fit], pos.get(i))] for i in indices}
 
 
 def load_split_images(data: Path, split: str, downscale: float = 1.0) -> tuple[list[Tensor], Tensor]:
@@ -258,8 +284,14 @@ def _train(config: EnhancerTrainConfig, gen: torch.Generator) -> TrainReport:
 
     if not 0 <= config.pair_fraction <= 1:
         raise ConfigError(f"--pair-fraction must be in [0, 1] (got {config.pair_fraction})")
+    if config.condition not in ("none", "view", "warped"):
+        raise ConfigError(f"--condition must be none, view or warped (got {config.condition!r})")
+    warped = config.condition == "warped"
+    if warped and not config.reference:
+        raise ConfigError("--condition warped needs --reference (the reference's depth warps the real views)")
     t0 = time.time()
     images, centres = load_split_images(config.data, "train", config.downscale)
+    train_c2w = _train_poses(config.data, config.downscale) if warped else None
     fit, held = split_indices(len(images), config.holdout_every, None, gen)
     if not fit:
         raise DataError(f"no training images left to train on (holdout_every={config.holdout_every}, {len(images)} images)", config.data)
@@ -268,19 +300,23 @@ def _train(config: EnhancerTrainConfig, gen: torch.Generator) -> TrainReport:
     d = torch.cdist(centres, centres[fit_t])
     d[fit_t, torch.arange(len(fit))] = float("inf")
     neighbour = fit_t[d.argmin(1)] if len(fit) > 1 else torch.full((len(images),), fit[0])
+    if warped and len(fit) < 2:
+        raise DataError(f"--condition warped needs at least 2 training images left to train on (got {len(fit)})", config.data)
 
     lpips = LPIPS.load_default() if (config.lpips_weight > 0 or config.reference) else None
     pairs: list[Pair] = []
     if config.reference:
         rendered = sorted(fit[k] for k in torch.randperm(len(fit), generator=gen)[: config.max_renders].tolist())
-        pairs = render_pairs(config.reference, config.data, rendered + held, gen, perturbed=config.perturbed, progress=config.progress)
+        condition_of = _condition_sources(train_c2w, fit, rendered + held) if warped else None
+        pairs = render_pairs(config.reference, config.data, rendered + held, gen, perturbed=config.perturbed, progress=config.progress,
+                             condition_of=condition_of)
         if config.downscale != 1.0 and pairs and pairs[0].render.shape[-2:] != images[pairs[0].index].shape[-2:]:
             raise ConfigError("--downscale must match the reference run's image size when --reference is given")
     held_set = set(held)
     train_pairs = [q for q in pairs if q.index not in held_set]
-    ref_of = lambda i: images[int(neighbour[i])] if config.condition else None  # noqa: E731
+    ref_of = lambda i: images[int(neighbour[i])] if config.condition == "view" else None  # noqa: E731
     if pairs:
-        val_items = [(q.render, q.target, q.mask, ref_of(q.index)) for q in pairs if q.index in held_set]
+        val_items = [(q.render, q.target, q.mask, q.condition if warped else ref_of(q.index)) for q in pairs if q.index in held_set]
     else:  # held-out training images, degraded synthetically with a fixed seed
         vgen = torch.Generator().manual_seed(config.seed + 7919)
         val_items = [(degrade(images[i][None], vgen, config.degradations, config.strength)[0], images[i],
@@ -289,7 +325,7 @@ def _train(config: EnhancerTrainConfig, gen: torch.Generator) -> TrainReport:
 
     sizes = [tuple(images[i].shape[-2:]) for i in fit] + [tuple(q.render.shape[-2:]) for q in train_pairs]
     sampler = _CropSampler(config.crop, sizes, gen)
-    net = ResidualUNet(config.width, config.condition)
+    net = ResidualUNet(config.width, config.condition != "none", WARPED_CHANNELS if warped else 3)
     lpips_term = _lpips_loss(lpips, config.lpips_weight)
     opt = torch.optim.Adam(net.parameters(), lr=config.lr)
     sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=config.lr, total_steps=config.steps, pct_start=0.05)
@@ -314,6 +350,8 @@ def _train(config: EnhancerTrainConfig, gen: torch.Generator) -> TrainReport:
                     tgt.append(sampler.cut(q.target, y, x))
                     msk.append(sampler.cut(q.mask, y, x))
                     i = q.index
+                    if warped:
+                        ref.append(sampler.cut(q.condition, y, x))
                 else:
                     k = int(torch.randint(len(fit), (), generator=gen))
                     i = fit[k]
@@ -322,10 +360,12 @@ def _train(config: EnhancerTrainConfig, gen: torch.Generator) -> TrainReport:
                     inp.append(degrade(clean[None], gen, config.degradations, config.strength)[0])
                     tgt.append(clean)
                     msk.append(torch.ones(1, sampler.crop, sampler.crop))
-                if config.condition:
+                    if warped:  # no depth for a synthetic degradation: no valid warped pixel
+                        ref.append(torch.zeros(WARPED_CHANNELS, sampler.crop, sampler.crop))
+                if config.condition == "view":
                     ref.append(sampler.cut(images[int(neighbour[i])], y, x))
             inp_t, tgt_t, msk_t = torch.stack(inp), torch.stack(tgt), torch.stack(msk)
-            out = net(inp_t, torch.stack(ref) if config.condition else None)
+            out = net(inp_t, torch.stack(ref) if config.condition != "none" else None)
             loss = ((out - tgt_t).abs() * msk_t).sum() / (msk_t.sum() * 3).clamp_min(1)
             if lpips_term is not None:
                 loss = loss + lpips_term(out * msk_t + tgt_t * (1 - msk_t), tgt_t)
@@ -351,6 +391,8 @@ def _train(config: EnhancerTrainConfig, gen: torch.Generator) -> TrainReport:
     meta = {"tile_size": "512", "overlap": "96", "description": "nerf2gs built-in residual U-Net (not Difix)",
             "nerf2gs.steps": str(config.steps), "nerf2gs.width": str(config.width),
             "nerf2gs.selected_step": str(best[1] if best is not None else config.steps)}
+    if warped:
+        meta["nerf2gs.condition"] = config.condition
     out = Path(config.out)
     atomic_write_bytes(out, export_onnx(net, out, meta))
 
@@ -362,10 +404,12 @@ def _train(config: EnhancerTrainConfig, gen: torch.Generator) -> TrainReport:
         for s in splits:
             imgs, cents = load_split_images(config.data, s, config.downscale)
             held_imgs += imgs
-            if config.condition:
+            if config.condition == "view":
                 near = torch.cdist(cents, centres[fit_t]).argmin(1)
                 refs += [images[fit[int(k)]] for k in near]
-        heldout = heldout_psnr(enh.enhance, held_imgs, config.degradations, config.strength, config.seed, refs if config.condition else None)
+        # warped: no reference depth for a degraded image, so no condition (the model gets all-zero validity)
+        heldout = heldout_psnr(enh.enhance, held_imgs, config.degradations, config.strength, config.seed,
+                               refs if config.condition == "view" else None)
         heldout["splits"] = splits
     counts = {kind: sum(q.kind == kind for q in train_pairs) for kind in ("pose", "perturbed")}
     report = TrainReport(str(out), config.steps, train_seconds, losses, heldout,

@@ -1,7 +1,9 @@
 """Our built-in enhancer network: a small residual U-Net (NOT Difix; no diffusion, no pretrained
 weights). It predicts a correction that is added to the input render, so an untrained network is
-the identity. Optionally conditioned on a reference view (a nearby training image) by channel
-concatenation. Two stride-2 levels: H and W must be multiples of 4 (``MULTIPLE``)."""
+the identity. Optionally conditioned on a reference input by channel concatenation: a nearby training
+image as it is (3 channels), or one warped into the render's camera with its validity mask (4 channels,
+:func:`~nerf2gs_plugin.enhancers.warp.warped_reference`). Two stride-2 levels: H and W must be
+multiples of 4 (``MULTIPLE``)."""
 
 from __future__ import annotations
 
@@ -18,12 +20,16 @@ def _block(cin: int, cout: int) -> nn.Sequential:
 
 
 class ResidualUNet(nn.Module):
-    """``forward(image[, reference])``: images ``[B, 3, H, W]`` in 0..1 -> enhanced image in 0..1."""
+    """``forward(image[, reference])``: images ``[B, 3, H, W]`` in 0..1 -> enhanced image in 0..1.
+    With ``condition``, a ``[B, reference_channels, H, W]`` reference in 0..1 too: 3 channels, an image
+    (the image itself when none is given); 4, a warped view and its validity (all zero when none is given)."""
 
-    def __init__(self, width: int = 16, condition: bool = False) -> None:
+    def __init__(self, width: int = 16, condition: bool = False, reference_channels: int = 3) -> None:
         super().__init__()
-        self.width, self.condition = width, condition
-        cin = 6 if condition else 3
+        if reference_channels not in (3, 4):
+            raise ValueError(f"reference_channels must be 3 (an image) or 4 (a warped image and its validity), got {reference_channels}")
+        self.width, self.condition, self.reference_channels = width, condition, reference_channels
+        cin = 3 + reference_channels if condition else 3
         c1, c2, c3 = width, 2 * width, 4 * width
         self.enc1 = _block(cin, c1)
         self.down1 = nn.Conv2d(c1, c2, 3, stride=2, padding=1)
@@ -41,8 +47,9 @@ class ResidualUNet(nn.Module):
     def forward(self, image: Tensor, reference: Optional[Tensor] = None) -> Tensor:
         x = image * 2 - 1
         if self.condition:
-            ref = image if reference is None else reference
-            x = torch.cat([x, ref * 2 - 1], 1)
+            if reference is None:
+                reference = image if self.reference_channels == 3 else image.new_zeros(image.shape[0], 4, *image.shape[2:])
+            x = torch.cat([x, reference * 2 - 1], 1)
         e1 = self.enc1(x)
         e2 = self.enc2(self.down1(e1))
         m = self.mid(self.down2(e2))
@@ -72,7 +79,7 @@ def export_onnx(net: ResidualUNet, path, metadata: dict[str, str], opset: int = 
 
     net = net.eval().cpu()
     names = ["image", "reference"] if net.condition else ["image"]
-    dummy = tuple(torch.rand(1, 3, 32, 32) for _ in names)
+    dummy = tuple(torch.rand(1, c, 32, 32) for c in (3, net.reference_channels)[: len(names)])
     axes = {n: {0: "batch", 2: "height", 3: "width"} for n in names + ["enhanced"]}
     buf = io.BytesIO()
     with warnings.catch_warnings(), torch.no_grad():
@@ -83,6 +90,8 @@ def export_onnx(net: ResidualUNet, path, metadata: dict[str, str], opset: int = 
     conv = {"layout": "NCHW", "range": "0,1", "input": "image", "output": "enhanced", "multiple": str(MULTIPLE)}
     if net.condition:
         conv["reference_input"] = "reference"
+        if net.reference_channels == 4:
+            conv["reference_kind"] = "warped"
     conv.update({k: str(v) for k, v in metadata.items()})
     del model.metadata_props[:]
     for k, v in conv.items():

@@ -28,6 +28,10 @@ DEFAULT_BUILTIN = Path("outputs/enhancer/enhancer.onnx")
 class Enhancer(ABC):
     """Image in (plus an optional reference view, e.g. the source training image), image out."""
 
+    reference_kind: str = "image"
+    """What ``enhance``'s ``reference`` should be: ``image``, a real training view as it is; ``warped``,
+    the nearest one warped into the image's camera with its validity (:mod:`~nerf2gs_plugin.enhancers.warp`)."""
+
     @abstractmethod
     def enhance(self, rgb: Tensor, reference: Optional[Tensor] = None) -> Tensor:
         """``rgb`` ``[H, W, 3]`` float in 0..1 -> enhanced ``[H, W, 3]`` float in 0..1."""
@@ -55,6 +59,7 @@ class OnnxModelEnhancer(Enhancer):
 
         self.runtime = OnnxEnhancer(path, tile_size=tile_size, overlap=overlap)
         self.path = Path(path)
+        self.reference_kind = self.runtime.reference_kind
 
     def enhance(self, rgb: Tensor, reference: Optional[Tensor] = None) -> Tensor:
         return self.runtime.enhance(rgb, reference)

@@ -16,6 +16,10 @@ key                meaning (default)
 ``reference_input`` name of an optional reference-image input, same layout and range; it gets
                    the source training view (resized to the image size), or a copy of the image
                    itself when the caller has none (none: the model takes one image)
+``reference_kind`` what the reference input holds: ``image`` (above) or ``warped``: the nearest
+                   training view warped into the image's camera and its validity mask, 4 channels
+                   at the image's size (:func:`nerf2gs_plugin.enhancers.warp.warped_reference`),
+                   all zero when the caller has none (``image``)
 ``output``         name of the enhanced-image output (the model's first output)
 ``tile_size``      ``S`` or ``HxW``: tile size. If the model's graph fixes H and W those are used
                    and must agree; with dynamic H/W it is the largest piece run in one pass (none:
@@ -44,10 +48,11 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from nerf2gs_plugin.enhancers.warp import REFERENCE_KINDS, WARPED_CHANNELS
 from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.utils.onnx_model import open_session, read_convention
 
-KEYS = ("layout", "range", "input", "reference_input", "output", "tile_size", "multiple", "overlap")
+KEYS = ("layout", "range", "input", "reference_input", "reference_kind", "output", "tile_size", "multiple", "overlap")
 
 
 def _parse_hw(value: str, path: Path) -> tuple[int, int]:
@@ -119,6 +124,16 @@ class OnnxEnhancer:
         c_dim, h_dim, w_dim = (1, 2, 3) if self.layout == "NCHW" else (3, 1, 2)
         if isinstance(shape[c_dim], int) and shape[c_dim] != 3:
             raise ConfigError(f"input '{self.input_name}' has shape {shape}; expected 3 channels in {self.layout}", self.path)
+        self.reference_kind = conv.get("reference_kind", "image")
+        if self.reference_kind not in REFERENCE_KINDS:
+            raise ConfigError(f"reference_kind must be {' or '.join(REFERENCE_KINDS)}, got {self.reference_kind!r}", self.path)
+        if self.reference_kind == "warped":
+            if self.reference_name is None:
+                raise ConfigError("reference_kind 'warped' needs a reference_input", self.path)
+            ref_c = inputs[self.reference_name].shape[c_dim] if len(inputs[self.reference_name].shape) == 4 else None
+            if isinstance(ref_c, int) and ref_c != WARPED_CHANNELS:
+                raise ConfigError(f"reference_kind 'warped' needs a {WARPED_CHANNELS}-channel reference input, "
+                                  f"'{self.reference_name}' has {ref_c}", self.path)
         self.dynamic_batch = not isinstance(shape[0], int)
         if not self.dynamic_batch and shape[0] != 1:
             raise ConfigError(f"input '{self.input_name}' has a fixed batch of {shape[0]}; expected 1 or dynamic", self.path)
@@ -167,7 +182,9 @@ class OnnxEnhancer:
         device = rgb.device
         img = rgb.detach().float().cpu().permute(2, 0, 1)[None].clamp(0, 1)
         ref = None
-        if self.reference_name is not None:
+        if self.reference_kind == "warped":
+            ref = self._warped(img, reference)
+        elif self.reference_name is not None:
             ref = img if reference is None else reference.detach().float().cpu().permute(2, 0, 1)[None].clamp(0, 1)
             if ref.shape[-2:] != img.shape[-2:]:
                 ref = F.interpolate(ref, size=img.shape[-2:], mode="bilinear", align_corners=False)
@@ -175,6 +192,15 @@ class OnnxEnhancer:
         return out[0].permute(1, 2, 0).clamp(0, 1).to(device)
 
     # ------------------------------------------------------------------ internals
+    def _warped(self, img: Tensor, reference: Optional[Tensor]) -> Tensor:
+        """The ``warped`` reference ``[1, 4, H, W]``: the caller's, or all zero (no valid pixel) without one."""
+        if reference is None:
+            return img.new_zeros(1, WARPED_CHANNELS, *img.shape[-2:])
+        if reference.ndim != 3 or tuple(reference.shape) != (*img.shape[-2:], WARPED_CHANNELS):
+            raise ConfigError(f"this model takes a warped reference view [H, W, {WARPED_CHANNELS}] (RGB and validity, "
+                              f"at the image's size {tuple(img.shape[-2:])}), got {tuple(reference.shape)}", self.path)
+        return reference.detach().float().cpu().permute(2, 0, 1)[None].clamp(0, 1)
+
     def _pad(self, x: Tensor, th: int, tw: int) -> Tensor:
         ph, pw = th - x.shape[-2], tw - x.shape[-1]
         if ph <= 0 and pw <= 0:

@@ -52,7 +52,7 @@ def test_train_lowers_loss_and_improves_heldout_psnr(tiny_scene, tmp_path):
 
 def test_conditioned_model_exports_two_inputs(tiny_scene, tmp_path):
     out = tmp_path / "cond.onnx"
-    train_enhancer(EnhancerTrainConfig(data=tiny_scene, out=out, steps=3, batch_size=2, crop=16, condition=True, progress=False,
+    train_enhancer(EnhancerTrainConfig(data=tiny_scene, out=out, steps=3, batch_size=2, crop=16, condition="view", progress=False,
                                        eval_splits=("street",)))
     enh = make_enhancer(f"onnx:{out}")
     assert enh.runtime.reference_name == "reference" and enh.runtime.multiple == 4
