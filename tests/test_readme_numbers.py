@@ -256,7 +256,20 @@ def _enh_targets_gap() -> float:
     return max(abs(r["new"]["val_bev"]["psnr"] - r["enhancer"]["val_bev"]["psnr"]) for r in d.values())
 
 
+def _stab_aug() -> dict:
+    return json.loads((RESULTS / "stability_augmented" / "stability.json").read_text())
+
+
+def _stab_aug_case(case: str, what: str = "bev_psnr") -> float:
+    return next(r[what] for r in _stab_aug()["rows"] if f"{r['stress']} {r['level_label']}" == case)
+
+
 PROSE = [
+    ("(BEV 3.89 dB below the unstressed 20.13 dB); with 25% its views still beat\nSplatfacto alone from above (19.07 vs 18.78 dB BEV in `stability.md`'s seeds), with 12% they cost it\n(17.78)",
+     "3.89 20.13 19.07 18.78 17.78",
+     lambda: [_stab_aug()["breaking_point"]["splatfacto + NeRF views"]["reference steps"]["drop_db"],
+              _stab_aug()["summary"]["splatfacto + NeRF views"]["seed_bev_mean"], _stab_aug_case("reference steps 25%"),
+              _stability()["summary"]["splatfacto"]["seed_bev_mean"], _stab_aug_case("reference steps 12%")]),
     ("lifts val_street by +0.83 dB (LPIPS -0.041) on the embedded street and +0.86 dB on the second, where the\nunconditioned one gives +0.12 / +0.24, but it moves val_bev by -0.01 dB on both",
      "0.83 -0.041 0.86 0.12 0.24 -0.01",
      lambda: [_enh_cond("street", "warped", "val_street"), _enh_cond("street", "warped", "val_street", "lpips"),
