@@ -169,10 +169,13 @@ def run_rank(fn: Callable[..., Any], config: Any, *args: Any, error_dir: Optiona
     finally:
         if dist.is_initialized() and code == 0:
             dist.destroy_process_group()
-    if code:
+    if code or error_dir is not None:
         for stream in (sys.stdout, sys.stderr):
             stream.flush()
-        os._exit(code)  # no interpreter teardown that could wait on the dead ranks
+        # no interpreter teardown: on failure it could wait on the dead ranks; on success a spawned rank's
+        # static destructors met a still-joinable communication thread once ("terminate called without an
+        # active exception", exit -6 after the run had finished and its group was destroyed)
+        os._exit(code)
 
 
 def _spawned(local_rank: int, env: dict[str, str], fn: Callable[..., Any], config: Any, args: tuple, error_dir: str,
