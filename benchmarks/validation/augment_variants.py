@@ -25,15 +25,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from nerf2gs_plugin.engine.config import load_config, read_config_doc  # noqa: E402
 from nerf2gs_plugin.engine.reference import load_run  # noqa: E402
 from nerf2gs_plugin.engine.trainer import Trainer  # noqa: E402
+from nerf2gs_plugin.eval.bench_size import _nested  # noqa: E402
 from nerf2gs_plugin.eval.evaluate import evaluate_run  # noqa: E402
 from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
 from nerf2gs_plugin.registry import get_method  # noqa: E402
+from nerf2gs_plugin.utils.config import apply_plain  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
-
-
-def with_field(cfg, dotted: str, value):
-    head, _, rest = dotted.partition(".")
-    return dataclasses.replace(cfg, **{head: with_field(getattr(cfg, head), rest, value) if rest else value})
 
 
 def evaluated(run: Path, splits: list[str], out: Path) -> dict:
@@ -48,8 +45,8 @@ def trained(run: Path, work: Path, name: str, changes: dict) -> Path:
     """``run``'s saved config with ``changes``, trained under ``work`` as ``name`` (reused when finished)."""
     method = read_config_doc(run / "config.yml")["method_name"]
     cfg = load_config(run / "config.yml", get_method(method).config)
-    for k, v in changes.items():
-        cfg = with_field(cfg, k, v)
+    for k, v in changes.items():  # the config machinery's own nested, type-checked override
+        cfg = apply_plain(cfg, _nested(k, v), where=f"variant {name}")
     cfg = dataclasses.replace(cfg, output_dir=work, timestamp=name, progress=False)
     done = list(work.glob(f"*/{method}/{name}/checkpoints/*.ckpt"))
     if done:
