@@ -111,9 +111,10 @@ class AugmentConfig:
     """visibility, consistency: a training view observes a point when their depths agree within this fraction."""
     confidence_color_tol: float = 0.1
     """consistency: mean absolute RGB difference at which an observation counts exp(-1)."""
-    real_only_from: float = 1.0
+    real_only_from: float = 0.9
     """Fraction of the run after which only the input views (composites) are sampled: 0.9 gives the last
-    10% of the steps to the target's own street evidence (1.0: the additional views to the end)."""
+    10% of the steps to the target's own street evidence (1.0: the additional views to the end; 0.9 was
+    chosen on validation views of two streets and a real capture: benchmarks/results/augment_variants.md)."""
 
 
 def bev_cameras(train: Cameras, up: Tensor, delta_h_world: float, theta_pitch: float, every_n: int = 1,

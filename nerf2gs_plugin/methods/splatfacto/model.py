@@ -49,8 +49,10 @@ class SplatfactoModelConfig(SplatModelConfig):
     """Densification: default (clone / split / prune, settings under strategy) or mcmc (settings under mcmc)."""
     strategy: DefaultStrategyConfig = field(default_factory=lambda: DefaultStrategyConfig(
         warmup_length=300, reset_alpha_every=1000, stop_split_at=1500, stop_screen_size_at=400,
-        max_pause_after_reset=300, max_gaussians=60000))
-    """The default strategy at CPU scale (paper values in config.py): 60k-Gaussian soft budget."""
+        max_pause_after_reset=300, max_gaussians=60000, prune_weight_fraction=0.1))
+    """The default strategy at CPU scale (paper values in config.py): 60k-Gaussian soft budget, and once
+    densification stops the Gaussians carrying the lightest 10% of the training views' blending weight are
+    pruned, so the size follows the scene (chosen on validation views: benchmarks/results/size_prune.md)."""
     mcmc: MCMCStrategyConfig = field(default_factory=lambda: MCMCStrategyConfig(
         cap_max=30000, refine_start_iter=300, refine_stop_iter=2500))
     """The MCMC strategy at CPU scale (with --pipeline.model.strategy-type mcmc): 30k-Gaussian hard budget."""

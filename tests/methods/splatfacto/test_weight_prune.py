@@ -13,7 +13,7 @@ import torch
 from splat_tiny_scene import make_cameras, make_train_data, needs_rasterizer, psnr, render_truth, train
 
 from nerf2gs_plugin.methods.splatfacto.config import gaussian_optimizers, splatfacto_config
-from nerf2gs_plugin.methods.splatfacto.strategy import light_mask
+from nerf2gs_plugin.methods.splatfacto.strategy import DefaultStrategyConfig, light_mask
 
 STEPS = 80
 
@@ -94,8 +94,10 @@ def test_more_views_keep_more_primitives(scene):
 
 
 @needs_rasterizer
-def test_prune_is_off_by_default_and_without_views(scene):
-    assert splatfacto_config.pipeline.model.strategy.prune_weight_fraction == 0.0
+def test_prune_default_and_without_views(scene):
+    # on at the CPU scale (size follows the scene); nerfstudio's own strategy defaults keep it off
+    assert splatfacto_config.pipeline.model.strategy.prune_weight_fraction == 0.1
+    assert DefaultStrategyConfig().prune_weight_fraction == 0.0
     cams, imgs, skies = scene
     torch.manual_seed(0)
     model = _cfg(0.5).setup(train_data=make_train_data(cams))
