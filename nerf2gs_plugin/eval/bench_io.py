@@ -187,7 +187,10 @@ class BenchRunner:
         res = json.loads(eval_path.read_text()) if eval_path.is_file() else None
         if res is None or res.get("eval_key") != want:
             run = load_run(run_dir, device=self.device)
-            names = [s for s in self.splits if s in run.pipeline.datamanager.eval_split_names()] or None
+            names = [s for s in self.splits if s in run.pipeline.datamanager.eval_split_names()]
+            if not names and self.splits != EVAL_SPLITS:
+                return {"results": {}}  # asked for splits (validation views) this dataset does not have
+            names = names or None
             res = evaluate_run(run, names, render_dir=run_dir / "eval_renders", lpips_model=self.lpips())
             res["eval_key"] = want
             res["measured"] = {"machine": machine_line(), "device": device_label(self.device),

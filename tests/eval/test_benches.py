@@ -259,10 +259,12 @@ def test_size_plan_and_smallest_within():
     labels = [s.label for s in plan]
     assert len(labels) == len(set(labels))
     assert "splatfacto max_gaussians=5000" in labels and "scaffold-gs max_anchors=2000" in labels and "2dgs densify_grad_thresh=0.0016" in labels
+    assert "splatfacto prune_weight_fraction=0" in labels  # the unpruned model is one of the swept configurations
     for spec in plan:
         apply_plain(get_method(spec.method).config, spec.overrides)  # valid fields and types
-    own = next(s for s in plan if s.label == "splatfacto max_gaussians=60000")  # the registered default
+    own = next(s for s in plan if s.label == "splatfacto default")  # the registered default, the paper table's run
     assert "pipeline" not in own.overrides
+    assert "splatfacto max_gaussians=60000" not in labels  # the default's own value is not run twice
     aug = size_plan("quick", ("splatfacto",), augment=True)
     assert aug[0].method == "streetnerf" and all(s.augment_from == "StreetNeRF" for s in aug[1:])
     with pytest.raises(ConfigError, match="no sweep for method 'nope'"):
@@ -273,6 +275,14 @@ def test_size_plan_and_smallest_within():
             {"label": "d", "method": "m", "error": "boom"}]
     pick = smallest_within(rows)["m"]
     assert pick["best"] == "a" and pick["smallest"] == "b" and pick["reduction"] == pytest.approx(4.0)
+    assert pick["chosen_on"] == "test views" and "default" not in pick
+    # with validation views the picks follow them, and the default is placed against the band
+    val = [dict(rows[0], val_quality=19.0), dict(rows[1], val_quality=19.9, default=True), dict(rows[2], val_quality=19.5), rows[3]]
+    pick = smallest_within(val)["m"]
+    assert pick["chosen_on"] == "validation views" and pick["best"] == "b" and pick["smallest"] == "c"
+    assert pick["default"]["label"] == "b" and pick["default_over_smallest"] == pytest.approx(3.0)
+    assert pick["default_below_best_db"] == 0 and pick["target_met"] is False
+    assert pick["smallest_within_0_5dB"] == {"label": "c", "primitives": 5000, "mean_psnr": 19.5}
 
 
 def test_stability_and_size_end_to_end_on_plugin_method(tiny_scene, tmp_path, monkeypatch):
@@ -319,10 +329,11 @@ def test_stability_and_size_end_to_end_on_plugin_method(tiny_scene, tmp_path, mo
     sizes = [RunSpec(f"voxel-grid r={r}", "voxel-grid", grid(r)) for r in (8, 16)]  # r=16 is reused
     res = bench_size.run(sizes, tiny_scene, runs, out, "test")
     assert [r["primitives"] for r in res["rows"]] == [8**3, 16**3]
+    assert all(r["val_quality"] is None for r in res["rows"])  # no validation views here: chosen on the test views
     size_log = (runs / "logs" / "model_size.log").read_text()
-    assert size_log.count("[bench] train ") == 1 and size_log.count("[bench] reuse ") == 1
+    assert size_log.count("[bench] train ") == 1  # the validation pass reuses the runs it just trained
     pick = res["picks"]["voxel-grid"]
-    assert pick["smallest_primitives"] <= pick["best_primitives"]
+    assert pick["smallest_primitives"] <= pick["best_primitives"] and pick["chosen_on"] == "test views"
     assert (out / "model_size.png").is_file() and "smallest within 0.5 dB" in (out / "model_size.md").read_text()
 
 
