@@ -160,7 +160,7 @@ class SpeedQuality:
 @dataclass
 class Stability:
     """Each method swept to its breaking point: 3 seeds (the unstressed baseline), then per stress
-    (pose noise, views kept, transients, mask errors, exposure, random init; for "<target>+nerf" also
+    (pose noise, views kept, transients, mask erosion / dilation / drop, exposure, random init; for "<target>+nerf" also
     the reference's training length) levels mild -> harsh until the first failure (PSNR more than
     3 dB below the seeds, NaN, divergence or an error). Runs already trained are reused."""
 
@@ -170,7 +170,7 @@ class Stability:
     """Registered methods, or <target>+nerf for the target trained with StreetNeRF's views (the
     reference trained on the same stressed data)."""
     stresses: tuple[str, ...] = ()
-    """Only these stresses (pose noise, views kept, transients, mask errors, exposure, init,
+    """Only these stresses (pose noise, views kept, transients, mask erosion / dilation / drop, exposure, init,
     reference steps); default all."""
     seeds: int = 3
     """Unstressed runs per method (the baseline the 3 dB rule is measured against)."""

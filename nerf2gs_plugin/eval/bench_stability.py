@@ -2,7 +2,7 @@
 
 Cases per method: 3 seeds (mean and std: the unstressed baseline), then each stress of
 :mod:`nerf2gs_plugin.eval.stability_levels` walked mild -> harsh (pose noise, fraction of views
-kept, transient share, mask errors, per-frame exposure, random init; for "target + NeRF views"
+kept, transient share, mask errors (erosion, dilation, drop: one ladder each), per-frame exposure, random init; for "target + NeRF views"
 also the reference's training length, the reference always trained on the stressed data). A
 stress stops at its first failure, its breaking point (:mod:`nerf2gs_plugin.eval.breaking_point`).
 Datasets for the stress cases are perturbed copies of the bench's dataset

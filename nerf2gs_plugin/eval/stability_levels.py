@@ -45,10 +45,12 @@ STRESS_LEVELS: dict[str, tuple[Level, ...]] = {
     "pose noise": tuple(_pose(d, c) for d, c in ((0.25, 2.5), (0.5, 5), (1, 10), (2, 20), (4, 40))),
     "views kept": tuple(Level(f"{100 // k}%", Perturbation(keep_every=k)) for k in (2, 4, 8)),
     "transients": tuple(Level(f"{f}x", transients_factor=f) for f in (2, 4, 8)),
-    "mask errors": (Level("eroded 2px", Perturbation(mask_erode_px=2)), Level("dilated 2px", Perturbation(mask_dilate_px=2)),
-                    Level("eroded 6px", Perturbation(mask_erode_px=6)), Level("dilated 6px", Perturbation(mask_dilate_px=6)),
-                    Level("50% dropped", Perturbation(mask_drop_fraction=0.5, seed=NOISE_SEED)),
-                    Level("all dropped", Perturbation(drop_masks=True), case_name="no masks")),
+    # one kind of mask error per ladder, so each is walked to its own breaking point (a mixed ladder
+    # stopped at the first kind that failed and never reached the harsher levels of the others)
+    "mask erosion": tuple(Level(f"{px}px", Perturbation(mask_erode_px=px)) for px in (2, 6, 12)),
+    "mask dilation": tuple(Level(f"{px}px", Perturbation(mask_dilate_px=px)) for px in (2, 6, 12)),
+    "mask drop": (Level("50%", Perturbation(mask_drop_fraction=0.5, seed=NOISE_SEED)),
+                  Level("100%", Perturbation(drop_masks=True), case_name="no masks")),
     "exposure": tuple(Level(f"+-{s:g} stop", Perturbation(exposure_spread=s, seed=NOISE_SEED)) for s in (0.25, 0.5, 1.0, 2.0)),
     "init": (Level("random", Perturbation(drop_points=True), case_name="random init"),),
     "reference steps": tuple(Level(f"{round(f * 100):g}%", reference_steps_fraction=f) for f in (0.5, 0.25, 0.12, 0.06)),

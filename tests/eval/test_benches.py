@@ -85,7 +85,8 @@ def test_stability_plan_walks_each_stress_mild_to_harsh():
     assert [(p.rotation_deg, p.translation_m) for p in pose] == [(0.25, 0.025), (0.5, 0.05), (1, 0.1), (2, 0.2), (4, 0.4)]
     assert [c.perturbation.keep_every for c in sf if c.stress == "views kept"] == [2, 4, 8]
     assert [c.transients_factor for c in sf if c.stress == "transients"] == [2, 4, 8]
-    assert [c.level_label for c in sf if c.stress == "mask errors"][-2:] == ["50% dropped", "all dropped"]
+    assert [c.level_label for c in sf if c.stress == "mask drop"] == ["50%", "100%"]
+    assert [c.level_label for c in sf if c.stress == "mask erosion"] == ["2px", "6px", "12px"]  # one kind, mild -> harsh
     spreads = [c.perturbation.exposure_spread for c in sf if c.stress == "exposure"]
     assert spreads == sorted(spreads) and len(spreads) >= 3
     for stress in STRESS_LEVELS:  # levels numbered 1.. in order
