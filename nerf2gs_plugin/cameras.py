@@ -19,6 +19,8 @@ from typing import Optional, Sequence, Union
 import torch
 from torch import Tensor
 
+from nerf2gs_plugin.utils.lie import skew
+
 # OpenGL <-> OpenCV camera axes: flip y and z.
 _GL_TO_CV = torch.diag(torch.tensor([1.0, -1.0, -1.0]))
 
@@ -291,8 +293,6 @@ def birds_eye_poses_absolute(camera_to_worlds: Tensor, up: Tensor, delta_h: floa
 def _axis_angle(axis: Tensor, angle: float) -> Tensor:
     """Rotation matrices ``[N, 3, 3]`` about unit axes ``[N, 3]`` by one angle (radians)."""
     axis = torch.nn.functional.normalize(axis, dim=-1)
-    x, y, z = axis.unbind(-1)
-    zero = torch.zeros_like(x)
-    Kx = torch.stack([zero, -z, y, z, zero, -x, -y, x, zero], dim=-1).reshape(-1, 3, 3)
+    Kx = skew(axis).reshape(-1, 3, 3)
     eye = torch.eye(3, dtype=axis.dtype, device=axis.device).expand_as(Kx)
     return eye + math.sin(angle) * Kx + (1 - math.cos(angle)) * (Kx @ Kx)

@@ -9,6 +9,12 @@ plugin) gains it and never knows the views are not real:
       plane's horizon (paper Fig. 3; ``pitch_mode="relative"`` adds it to the input's own tilt),
       rendered by the reference and optionally passed through an enhancer. A view outside the
       scene box or a mostly empty render (low accumulation) is dropped with one warning.
+A reference that refined its training poses (a camera optimizer) renders the composites, and
+everything else that re-renders an input view (the confidence's depths, a warped enhancer's source),
+from its refined poses (:attr:`Reference.train_cameras`): that is where it learned each photo was
+taken, so its render lines up with the photo it is pasted into. The bird's-eye cameras stay derived
+from the dataset's poses: they are novel views with no photo, rendered and trained at the one same
+pose, and the target trains its input views at the dataset's poses too.
 Renders are cached under the reference run, keyed by everything that changes them (the cache
 format: :mod:`nerf2gs_plugin.datamanagers.augment_cache`). This module knows no reference method,
 no enhancer implementation and no engine: the engine loads the reference and builds the enhancer.
@@ -18,7 +24,7 @@ from __future__ import annotations
 
 import os
 import shutil
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any, Callable, Iterator, Literal, Optional, Protocol
 
@@ -67,6 +73,9 @@ class Reference:
     cache_root: Path
     depth_along: str = "z"
     """What the renders' ``depth`` measures ("z" or "ray": :attr:`nerf2gs_plugin.engine.model.Model.depth_along`)."""
+    train_cameras: Optional[Callable[[Cameras], Optional[Cameras]]] = None
+    """The training cameras -> the reference's refined ones (``Model.refined_train_cameras``), or None
+    / a None result: the reference renders input views at the dataset's poses."""
 
 
 @dataclass
@@ -290,8 +299,11 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
 def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, render_fn: RenderFn, ref_key: str,
                            dataset: str, cache_root: Path, config: AugmentConfig,
                            enhancer: Optional[ViewEnhancer] = None, scene_box: Optional[Tensor] = None,
-                           depth_along: str = "z") -> AugmentedViews:
-    """Render (or reuse from the cache) the composites and the additional views."""
+                           depth_along: str = "z", render_cameras: Optional[Cameras] = None) -> AugmentedViews:
+    """Render (or reuse from the cache) the composites and the additional views. ``render_cameras``:
+    the training cameras at the poses the reference renders the input views from (its refined
+    poses; the ``ref_key``'s checkpoint hash keys them); None: ``train``'s own. The bird's-eye
+    cameras and the returned image sets keep ``train``'s poses."""
     bev = bev_cameras(train.cameras, up, delta_h_world, config.theta_pitch, config.every_n, config.pitch_mode) if config.extra_views else None
     has_transient = "transient" in train.masks and config.composites
     enhancer_key = enhancer.cache_key() if enhancer is not None else "none"
@@ -302,7 +314,8 @@ def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, re
         work = cache_dir.with_name(f".tmp-{key}-{os.getpid()}")
         shutil.rmtree(work, ignore_errors=True)
         comp_idx = [i for i in range(len(train)) if has_transient and bool(train.mask("transient", i).any())]
-        done = _render_entry(work, train, bev, render_fn, config, enhancer, comp_idx, scene_box, depth_along)
+        seen_from = train if render_cameras is None else replace(train, cameras=render_cameras)
+        done = _render_entry(work, seen_from, bev, render_fn, config, enhancer, comp_idx, scene_box, depth_along)
         kept = done["extra_indices"]
         CacheManifest(reference=ref_key, dataset=dataset, config=asdict(config), enhancer=enhancer_key,
                       composited_images=comp_idx, num_extra=len(kept),
@@ -367,9 +380,11 @@ class AugmentedDataManager(DataManager):
         if augment.composites and "transient" not in inner.train_images.masks:
             warn("the dataset has no transient masks", "input-view composites are off (only the bird's-eye views are added)")
         td = inner.train_data
+        refined = reference.train_cameras(inner.train_images.cameras) if reference.train_cameras is not None else None
         self.views: AugmentedViews = render_augmented_views(
             inner.train_images, td.up, td.metres_to_world(augment.delta_h), reference.render, reference.key,
             dataset_fingerprint(td.image_filenames), reference.cache_root, augment, enhancer, td.scene_box, reference.depth_along,
+            refined,
         )
         print(f"reference renders: {self.views.render_seconds:.1f} s" + (" (reused from the cache)" if self.views.reused else ""))
         if self.views.composites is not None:

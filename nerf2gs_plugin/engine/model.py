@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from abc import ABCMeta, abstractmethod
 from dataclasses import dataclass, field
-from typing import Any, Union
+from typing import Any, Optional, Union
 
 import torch
 from torch import Tensor, nn
@@ -88,6 +88,12 @@ class Model(nn.Module, metaclass=ABCMeta):
     def render_camera(self, camera: Cameras) -> dict[str, Tensor]:
         """One camera (``len(camera) == 1``) in, ``{"rgb": [H,W,3], "depth": [H,W,1],
         "accumulation": [H,W,1], ...}`` out, on the model's device."""
+
+    def refined_train_cameras(self, cameras: Cameras) -> Optional[Cameras]:
+        """The training cameras (``cameras``, in training-image order) where the model learned their
+        images were taken (a camera optimizer's refined poses), or None when the dataset's poses are
+        the model's (the default). The augmentation renders the input views from these."""
+        return None
 
     def num_primitives(self) -> int:
         """Gaussians, anchors or surfels; grid cells or hash entries for fields."""

@@ -9,6 +9,7 @@ from typing import Optional
 import torch
 from torch import nn
 
+from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.utils.schedule import scheduled
 
 
@@ -48,7 +49,8 @@ class Optimizers:
     def __init__(self, configs: dict[str, OptimizerConfig], param_groups: dict[str, list[nn.Parameter]]) -> None:
         missing = [name for name in param_groups if name not in configs]
         if missing:
-            raise KeyError(f"no optimizer config for parameter group(s) {missing}; configs: {sorted(configs)}")
+            raise ConfigError(f"no optimizer config for parameter group(s) {missing} (the method config's optimizers name "
+                              f"{sorted(configs)}): add an OptimizerConfig under each name to its optimizers")
         self.configs = configs
         self.optimizers: dict[str, torch.optim.Adam] = {}
         for name, params in param_groups.items():

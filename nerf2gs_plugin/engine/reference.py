@@ -103,7 +103,8 @@ def load_reference(reference: Path, datamanager, device: torch.device | str) -> 
     ref = load_run(ckpt_file, device=device, data=datamanager.data)
     if not hasattr(ref.model, "render_camera") or getattr(type(ref.model).render_camera, "__isabstractmethod__", False):
         raise CheckpointError(f"method '{ref.config.method_name}' cannot render cameras (no render_camera)", ckpt_file)
-    return Reference(ref.model.render_camera, f"{ref.config.method_name}:{ref.checkpoint_hash}", run_dir, ref.model.depth_along)
+    return Reference(ref.model.render_camera, f"{ref.config.method_name}:{ref.checkpoint_hash}", run_dir, ref.model.depth_along,
+                     getattr(ref.model, "refined_train_cameras", None))
 
 
 def build_enhancer(spec: str):

@@ -32,8 +32,12 @@ def contraction_scale(x: Tensor) -> Tensor:
     ``(2 - 1/|x|)/|x|``; a sample's radius shrinks by their geometric mean (Zip-NeRF's
     isotropic approximation of the contracted Gaussian)."""
     n = x.abs().amax(-1).clamp_min(1e-9)
-    outside = (1.0 / n**2 * ((2.0 - 1.0 / n) / n) ** 2) ** (1.0 / 3.0)
-    return torch.where(n <= 1.0, torch.ones_like(n), outside)
+    inside = n <= 1.0
+    # the formula only for points outside: inside, at |x| = 0.5, its cube root has an infinite slope,
+    # and a NaN gradient of the unused branch would reach positions that require grad (camera optimizer)
+    n_out = torch.where(inside, torch.ones_like(n), n)
+    outside = (1.0 / n_out**2 * ((2.0 - 1.0 / n_out) / n_out) ** 2) ** (1.0 / 3.0)
+    return torch.where(inside, torch.ones_like(n), outside)
 
 
 def to_grid_unit(xc: Tensor) -> Tensor:

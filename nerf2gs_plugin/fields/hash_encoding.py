@@ -4,10 +4,12 @@
   it runs on any device and is the CUDA path here (tcnn is not installed).
 * ``cpu``: a C++/OpenMP kernel (``hashgrid.cpp``) compiled on first use with
   ``torch.utils.cpp_extension.load`` and cached in ``TORCH_EXTENSIONS_DIR``; forward and backward
-  (w.r.t. the table) match the reference, which the tests check.
+  (w.r.t. the table, and w.r.t. the positions when they require grad) match the reference, which
+  the tests check.
 * ``auto``: the kernel for CPU tensors when it compiles, the reference otherwise.
 
-Positions get no gradient from the encoding (sample positions are never optimised here).
+Positions get a gradient only when they require one (a camera optimizer moves the training rays,
+so the sample positions depend on the poses); otherwise the kernel skips that work.
 
 Anti-aliasing (Zip-NeRF, Barron et al. 2023, Sec. 3): a sample of radius ``sigma`` (in [0,1]
 grid units) scales level ``l``'s features by ``erf(1 / sqrt(8 sigma^2 n_l^2))`` so that levels
@@ -83,17 +85,23 @@ class _HashGridCPU(torch.autograd.Function):
     def forward(ctx, x: Tensor, table: Tensor, res: Tensor) -> Tensor:  # type: ignore[override]
         ext = load_kernel()
         x = x.detach().contiguous().float()
-        ctx.save_for_backward(x, res)
+        table = table.detach().contiguous()
+        if ctx.needs_input_grad[0]:  # positions that require grad (a camera optimizer): keep the table for their gradient
+            ctx.save_for_backward(x, res, table)
+        else:
+            ctx.save_for_backward(x, res)
         ctx.table_size = table.shape[1]
-        return ext.forward(x, table.detach().contiguous(), res)
+        return ext.forward(x, table, res)
 
     @staticmethod
     def backward(ctx, grad_out: Tensor):  # type: ignore[override]
-        x, res = ctx.saved_tensors
-        grad_table = None
+        x, res = ctx.saved_tensors[:2]
+        grad_table = grad_x = None
         if ctx.needs_input_grad[1]:
             grad_table = load_kernel().backward(x, grad_out.contiguous(), res, ctx.table_size)
-        return None, grad_table, None
+        if ctx.needs_input_grad[0]:
+            grad_x = load_kernel().backward_x(x, ctx.saved_tensors[2], grad_out.contiguous(), res)
+        return grad_x, grad_table, None
 
 
 def hash_encode(x: Tensor, table: Tensor, resolutions: list[int], backend: str = "auto", res_tensor: Optional[Tensor] = None) -> Tensor:

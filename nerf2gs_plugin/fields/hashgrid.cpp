@@ -5,13 +5,16 @@
 //   table  [L, T, F]  feature table per level; T is a power of two
 //   res    [L]        int32 grid resolution per level (cells per axis)
 //   out    [N, L, F]  trilinearly interpolated features
+//   grad_x [N, 3]     (backward_x only) gradient w.r.t. the positions: the derivative of the
+//                     trilinear weights, zero along an axis where the position was clamped
 // A level is indexed densely when (res + 1)^3 <= T, otherwise through the spatial hash
 // (x * 1) ^ (y * 2654435761) ^ (z * 805459861) mod T. The math is identical to the pure-torch
 // reference in hash_encoding.py; the tests hold the two against each other.
 //
 // Forward parallelises over points. Backward parallelises over levels: every level owns a
 // disjoint slice of the table gradient, so no atomics are needed and the result is
-// deterministic (the summation order per entry is the point order).
+// deterministic (the summation order per entry is the point order). The position gradient
+// (used only when positions require grad: a camera optimizer) parallelises over points.
 
 #include <torch/extension.h>
 #include <omp.h>
@@ -23,6 +26,8 @@ namespace {
 struct Corners {
     uint32_t idx[8];
     float w[8];
+    float fr[3];    // fractional position in the cell per axis
+    bool inside[3]; // the position was not clamped along the axis (its derivative passes)
 };
 
 static inline void level_corners(const float* p, int32_t res, uint32_t T, Corners& c) {
@@ -31,6 +36,7 @@ static inline void level_corners(const float* p, int32_t res, uint32_t T, Corner
     float fr[3];
     for (int d = 0; d < 3; ++d) {
         float v = p[d];
+        c.inside[d] = v >= 0.f && v <= 1.f;
         v = v < 0.f ? 0.f : (v > 1.f ? 1.f : v);
         const float pos = v * s;
         int32_t i = (int32_t)std::floor(pos);
@@ -38,6 +44,7 @@ static inline void level_corners(const float* p, int32_t res, uint32_t T, Corner
         if (i < 0) i = 0;
         ix[d] = i;
         fr[d] = pos - (float)i;
+        c.fr[d] = fr[d];
     }
     const uint64_t side = (uint64_t)res + 1;
     const bool dense = side * side * side <= (uint64_t)T;
@@ -101,6 +108,43 @@ void backward_impl(const float* x, const float* grad_out, const int32_t* res, fl
     }
 }
 
+template <int F>
+void backward_x_impl(const float* x, const float* table, const float* grad_out, const int32_t* res, float* grad_x, int64_t N, int L,
+                     uint32_t T) {
+#pragma omp parallel for schedule(static)
+    for (int64_t n = 0; n < N; ++n) {
+        const float* p = x + 3 * n;
+        double gx[3] = {0.0, 0.0, 0.0};
+        bool inside[3] = {false, false, false};
+        Corners c;
+        for (int l = 0; l < L; ++l) {
+            const float* g = grad_out + (n * L + l) * F;
+            bool any = false;
+            for (int f = 0; f < F; ++f) any |= (g[f] != 0.f);
+            if (!any) continue;
+            level_corners(p, res[l], T, c);
+            for (int d = 0; d < 3; ++d) inside[d] = c.inside[d];
+            const float* tl = table + (int64_t)l * T * F;
+            const float s = (float)res[l];
+            for (int k = 0; k < 8; ++k) {
+                const float* e = tl + (int64_t)c.idx[k] * F;
+                float dot = 0.f;
+                for (int f = 0; f < F; ++f) dot += g[f] * e[f];
+                const float wx = (k & 1) ? c.fr[0] : 1.f - c.fr[0];
+                const float wy = ((k >> 1) & 1) ? c.fr[1] : 1.f - c.fr[1];
+                const float wz = ((k >> 2) & 1) ? c.fr[2] : 1.f - c.fr[2];
+                const float sx = (k & 1) ? 1.f : -1.f;
+                const float sy = ((k >> 1) & 1) ? 1.f : -1.f;
+                const float sz = ((k >> 2) & 1) ? 1.f : -1.f;
+                gx[0] += (double)(dot * s * sx * wy * wz);
+                gx[1] += (double)(dot * s * wx * sy * wz);
+                gx[2] += (double)(dot * s * wx * wy * sz);
+            }
+        }
+        for (int d = 0; d < 3; ++d) grad_x[3 * n + d] = inside[d] ? (float)gx[d] : 0.f;
+    }
+}
+
 void check(const torch::Tensor& x, const torch::Tensor& table, const torch::Tensor& res) {
     TORCH_CHECK(x.device().is_cpu() && table.device().is_cpu() && res.device().is_cpu(), "hashgrid cpu kernel: tensors must be on the CPU");
     TORCH_CHECK(x.dtype() == torch::kFloat32 && table.dtype() == torch::kFloat32, "hashgrid: float32 expected");
@@ -160,7 +204,36 @@ torch::Tensor hashgrid_backward(torch::Tensor x, torch::Tensor grad_out, torch::
     return grad_table;
 }
 
+torch::Tensor hashgrid_backward_x(torch::Tensor x, torch::Tensor table, torch::Tensor grad_out, torch::Tensor res) {
+    check(x, table, res);
+    TORCH_CHECK(grad_out.dim() == 3 && grad_out.size(0) == x.size(0) && grad_out.size(1) == table.size(0) &&
+                grad_out.size(2) == table.size(2), "hashgrid: grad_out must be [N, L, F]");
+    x = x.contiguous();
+    table = table.contiguous();
+    grad_out = grad_out.contiguous().to(torch::kFloat32);
+    res = res.contiguous();
+    const int64_t N = x.size(0);
+    const int L = (int)table.size(0);
+    const uint32_t T = (uint32_t)table.size(1);
+    const int F = (int)table.size(2);
+    auto grad_x = torch::zeros({N, 3}, x.options());
+    const float* xp = x.data_ptr<float>();
+    const float* tp = table.data_ptr<float>();
+    const float* gp = grad_out.data_ptr<float>();
+    const int32_t* rp = res.data_ptr<int32_t>();
+    float* op = grad_x.data_ptr<float>();
+    switch (F) {
+        case 1: backward_x_impl<1>(xp, tp, gp, rp, op, N, L, T); break;
+        case 2: backward_x_impl<2>(xp, tp, gp, rp, op, N, L, T); break;
+        case 4: backward_x_impl<4>(xp, tp, gp, rp, op, N, L, T); break;
+        case 8: backward_x_impl<8>(xp, tp, gp, rp, op, N, L, T); break;
+        default: TORCH_CHECK(false, "hashgrid: features per level must be 1, 2, 4 or 8");
+    }
+    return grad_x;
+}
+
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
     m.def("forward", &hashgrid_forward, "hash-grid encoding forward (CPU)");
     m.def("backward", &hashgrid_backward, "hash-grid encoding backward w.r.t. the table (CPU)");
+    m.def("backward_x", &hashgrid_backward_x, "hash-grid encoding backward w.r.t. the positions (CPU)");
 }

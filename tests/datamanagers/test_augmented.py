@@ -231,3 +231,45 @@ def test_real_only_from_ends_on_the_input_views(tiny_scene, tmp_path):
     assert half[:20] == full[:20]  # the same draws until the switch
     with pytest.raises(ConfigError, match="real-only-from"):
         drawn(0.0)
+
+
+class PoseRecorder(CountingRenderer):
+    """A stand-in reference that records the camera centre of every render."""
+
+    def __init__(self):
+        super().__init__()
+        self.centres = []
+
+    def __call__(self, camera):
+        self.centres.append(camera.centers[0].clone())
+        return super().__call__(camera)
+
+
+@pytest.mark.parametrize("confidence", ["none", "visibility"])
+def test_a_reference_with_refined_poses_renders_the_input_views_from_them(tiny_scene, tmp_path, confidence):
+    """A camera optimizer's reference: composites (and the confidence's depths) are rendered at its
+    refined training poses; the bird's-eye views and the target's cameras stay the dataset's."""
+    dm = _dm(tiny_scene)
+    cams = dm.train_images.cameras
+    shift = torch.tensor([0.01, 0.02, -0.03])
+
+    def refine(c):
+        return c.with_poses(torch.cat([c.camera_to_worlds[:, :, :3], c.camera_to_worlds[:, :, 3:] + shift[:, None]], -1))
+
+    rec = PoseRecorder()
+    aug = AugmentConfig(delta_h=3.0, every_n=2, confidence=confidence)
+    views = AugmentedDataManager(dm, Reference(rec, f"ref:refined-{confidence}", tmp_path, "z", refine), aug).views
+    rendered = torch.stack(rec.centres)
+
+    def was_rendered(c):
+        return bool((rendered - c).norm(dim=-1).min() < 1e-6)
+
+    comp = views.manifest.composited_images
+    assert comp and all(was_rendered(cams.centers[i] + shift) and not was_rendered(cams.centers[i]) for i in comp)
+    if confidence != "none":  # every input view's depth, from its refined pose
+        assert all(was_rendered(cams.centers[i] + shift) for i in range(len(cams)))
+    bev = bev_cameras(cams, dm.train_data.up, dm.train_data.metres_to_world(3.0), aug.theta_pitch, 2, aug.pitch_mode)
+    assert views.extra is not None
+    assert all(was_rendered(c) for c in views.extra.cameras.centers)
+    torch.testing.assert_close(views.extra.cameras.camera_to_worlds, bev[torch.tensor(views.manifest.extra_indices)].camera_to_worlds)
+    assert torch.equal(views.composites.cameras.camera_to_worlds, cams.camera_to_worlds)

@@ -204,3 +204,16 @@ def test_masks_reference_keyed_by_the_capture_not_its_stage_times(tmp_path):
     other = json.loads(json.dumps(meta))
     other["frames"][0].update(fl_y=100.0, cx=56.0, cy=0.0)  # the old export's reading of a SIMPLE_RADIAL camera
     assert ref(other, "c") != a and a.name.startswith("masks-reference-1000-")
+
+
+def test_camera_optimizer_option_reaches_only_the_estimated_streetnerf():
+    from nerf2gs_plugin.registry import get_method
+    from nerf2gs_plugin.utils.config import apply_plain
+
+    opts = br.RealBenchOptions()
+    assert opts.camera_optimizer == "off"
+    off, on = br.real_plan(opts), br.real_plan(opts, "SO3xR3")
+    assert [s.label for s in off] == [s.label for s in on]
+    assert off[1:] == on[1:] and "camera_optimizer" not in str(off[0].overrides)
+    cfg = apply_plain(get_method("streetnerf").config, on[0].overrides)
+    assert cfg.pipeline.model.camera_optimizer.mode == "SO3xR3" and cfg.max_num_iterations == opts.streetnerf_steps

@@ -40,6 +40,15 @@ Losses (sum is minimised; ``M_*`` are the masks, ``W`` the per-image weight):
     pulls the transforms towards the identity so the mean stays a neutral exposure.
 
 Any mask kind the data lacks turns its term off with one warning.
+
+Camera refinement (``camera_optimizer.mode="SO3xR3"``, off by default; ``fields/camera_optimizer.py``):
+a learned SO3xR3 correction per training image moves that image's training rays before rendering,
+with its own optimizer group ``camera_opt`` and nerfstudio's small L2 penalty (``camera_opt_reg``).
+The sparse-point rays are corrected too, by the correction of the camera they were cast from: a
+point ray is the ray of the pixel where the point projects in that image, and its target distance
+is a per-view depth, so it moves with the image like the colour rays (and the ground loss sees the
+corrected rays it renders). Eval and novel cameras are never corrected. The augmentation renders
+its composites from :meth:`StreetNeRFModel.refined_train_cameras` (see ``datamanagers/augmented.py``).
 """
 
 from __future__ import annotations
@@ -57,6 +66,7 @@ from nerf2gs_plugin.engine.losses import masked_mean
 from nerf2gs_plugin.utils.image_metrics import psnr_from_mse
 from nerf2gs_plugin.engine.model import Model, ModelConfig
 from nerf2gs_plugin.fields.appearance import AppearanceTransforms
+from nerf2gs_plugin.fields.camera_optimizer import PARAM_GROUP as CAMERA_OPT_GROUP, CameraOptimizer, CameraOptimizerConfig
 from nerf2gs_plugin.fields.hash_encoding import HashGridSpec
 from nerf2gs_plugin.fields.sky import SkyModel
 from nerf2gs_plugin.fields.street_field import ProposalField, StreetField
@@ -169,6 +179,8 @@ class StreetNeRFModelConfig(ModelConfig):
     """Learned constant background, used only when sky is off."""
     encoding_backend: str = "auto"
     """Hash-grid encoding: auto (our C++ kernel on CPU, else torch), cpu or torch."""
+    camera_optimizer: CameraOptimizerConfig = field(default_factory=CameraOptimizerConfig)
+    """Refinement of the training poses (SfM poses of a real capture); off by default."""
 
 
 class StreetNeRFModel(Model):
@@ -210,6 +222,7 @@ class StreetNeRFModel(Model):
                 self.ground_known.fill_(True)
                 self.ground_from_points = True
         self._setup_point_rays(train_data)
+        self.camera_optimizer = CameraOptimizer(c.camera_optimizer, self.num_train_images) if c.camera_optimizer.enabled else None
         self.step = 0
 
     def _setup_point_rays(self, train_data: DataparserOutputs) -> None:
@@ -249,6 +262,8 @@ class StreetNeRFModel(Model):
         if self.appearance is not None:
             other += list(self.appearance.parameters())
         groups["sky_appearance"] = other
+        if self.camera_optimizer is not None:
+            groups[CAMERA_OPT_GROUP] = list(self.camera_optimizer.parameters())
         return groups
 
     def get_training_callbacks(self, attrs: TrainingCallbackAttributes) -> list[TrainingCallback]:
@@ -313,6 +328,8 @@ class StreetNeRFModel(Model):
     def get_outputs(self, inputs: RayBundle) -> dict[str, Any]:
         if not isinstance(inputs, RayBundle):
             raise TypeError("StreetNeRF is a ray method: get_outputs takes a RayBundle (use render_camera for cameras)")
+        if self.training and self.camera_optimizer is not None:
+            inputs = self.camera_optimizer.apply_to_rays(inputs)
         out = self._render_rays(inputs, inputs.camera_indices if self.training else None)
         out["origins"], out["directions"] = inputs.origins, inputs.directions
         return out
@@ -321,6 +338,8 @@ class StreetNeRFModel(Model):
         metrics = {"psnr": psnr_from_mse(((outputs["rgb"].detach() - batch["rgb"]) ** 2).mean())}
         if self.use_ground and bool(self.ground_known):
             metrics["ground_height"] = self.ground_height.detach().clone()
+        if self.camera_optimizer is not None:
+            metrics.update(self.camera_optimizer.metrics())
         return metrics
 
     def _colour_weight(self, batch: dict[str, Any]) -> Tensor:
@@ -350,6 +369,8 @@ class StreetNeRFModel(Model):
             losses["point_depth"] = c.point_depth_weight * self._point_depth_loss()
         if self.appearance is not None:
             losses["appearance_reg"] = c.appearance_reg_weight * self.appearance.deviation()
+        if self.camera_optimizer is not None and self.training:
+            losses["camera_opt_reg"] = self.camera_optimizer.regulariser()
         return losses
 
     def _point_depth_loss(self) -> Tensor:
@@ -358,6 +379,8 @@ class StreetNeRFModel(Model):
         idx = torch.randint(0, n, (min(self.config.point_rays_per_batch, n),), device=self.pt_t_star.device)
         cams = self.pt_cameras[idx]
         rays = RayBundle(self.pt_origins[idx], self.pt_directions[idx], self.pt_radius[idx], cams)
+        if self.camera_optimizer is not None:  # the ray of a pixel of that image: it moves with the image
+            rays = self.camera_optimizer.apply_to_rays(rays)
         out = self._render_rays(rays, cams)
         return line_of_sight_loss(out["weights"], out["t_mid"], out["accumulation"], self.pt_t_star[idx, None]).mean()
 
@@ -419,6 +442,17 @@ class StreetNeRFModel(Model):
             return result
         finally:
             self.train(was_training)
+
+    @torch.no_grad()
+    def refined_train_cameras(self, cameras: Cameras) -> Optional[Cameras]:
+        """The training cameras (in training-image order) at the poses the camera optimizer learned;
+        None without one (the dataset's poses are the model's)."""
+        if self.camera_optimizer is None:
+            return None
+        if len(cameras) != self.num_train_images:
+            raise ValueError(f"{len(cameras)} cameras given, the model has {self.num_train_images} training images")
+        idx = torch.arange(len(cameras), device=self.camera_optimizer.pose_adjustment.device)
+        return self.camera_optimizer.apply_to_cameras(cameras, idx)
 
     def _nearest_train_image(self, camera: Cameras) -> Optional[int]:
         """The training image whose camera centre is nearest ``camera``'s (None without appearance)."""
