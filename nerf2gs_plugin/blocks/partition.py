@@ -158,7 +158,7 @@ def partition(cfg: PartitionConfig) -> dict[str, Any]:
     parser = _source(Path(cfg.data))
     meta = json.loads(parser.json_path.read_text())
     src_root = parser.json_path.parent
-    _, groups = parser._frames()  # the parser's own split rules (eval_splits, *_filenames, holdout_every)
+    groups = parser.raw_frames()  # the parser's own split rules (eval_splits, *_filenames, holdout_every)
     train_out = parser.parse("train")
     tf = DataparserTransform(train_out.dataparser_transform, train_out.dataparser_scale, train_out.up,
                              train_out.metres_per_unit, train_out.scene_box)

@@ -52,12 +52,8 @@ class MasksConfig:
 def _parser_groups(data: Path):
     """Every split's raw frames (original image paths, sizes, distortion), as the parser lists them."""
     from nerf2gs_plugin.data import dataparser_config
-    from nerf2gs_plugin.data.nerfstudio_parser import NerfstudioDataParserConfig
 
-    cfg = dataparser_config(data)
-    if isinstance(cfg, NerfstudioDataParserConfig):
-        return cfg._frames()[1]
-    return cfg._groups()[0]
+    return dataparser_config(data).raw_frames()
 
 
 def _existing_masks(data: Path, groups) -> list[str]:

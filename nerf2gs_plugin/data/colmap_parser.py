@@ -118,6 +118,11 @@ class ColmapDataParserConfig:
             raise DataError(f"cannot read COLMAP model ({str(e).splitlines()[0]})", model_dir) from None
         return rec, model_dir
 
+    def raw_frames(self) -> dict[str, list[RawFrame]]:
+        """Every split's registered frames as the model lists them (original image paths, intrinsics),
+        before any normalisation: for tools that work on the files themselves."""
+        return self._groups()[0]
+
     def _groups(self):
         rec, model_dir = self._read_model()
         root = Path(self.data)

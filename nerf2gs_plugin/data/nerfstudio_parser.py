@@ -80,6 +80,11 @@ class NerfstudioDataParserConfig:
         _, groups = self._frames()
         return list(groups)
 
+    def raw_frames(self) -> dict[str, list[RawFrame]]:
+        """Every split's frames as the file lists them (original image paths, c2w in the file's frame,
+        intrinsics, masks), before any normalisation: for tools that work on the files themselves."""
+        return self._frames()[1]
+
     def parse(self, split: str = "train") -> DataparserOutputs:
         meta, groups = self._frames()
         path = self.json_path

@@ -64,7 +64,7 @@ def read_frames(data: Path) -> dict[str, list]:
     from nerf2gs_plugin.data import dataparser_config
 
     cfg = dataclasses.replace(dataparser_config(Path(data)), holdout_every=0)
-    return cfg._frames()[1]
+    return cfg.raw_frames()
 
 
 def frame_index(image: Path) -> int:
