@@ -62,7 +62,7 @@ class ColmapDataParserConfig:
     """Metric scale and up from the ground plane under the cameras at this height (m); see data/ground.py."""
 
     def splits(self) -> list[str]:
-        return list(self._groups()[0])
+        return list(self.raw_frames())
 
     def parse(self, split: str = "train") -> DataparserOutputs:
         groups, rec, model_dir = self._groups()

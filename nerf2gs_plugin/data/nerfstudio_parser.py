@@ -77,8 +77,7 @@ class NerfstudioDataParserConfig:
 
     def splits(self) -> list[str]:
         """Split names this dataset has: "train" first."""
-        _, groups = self._frames()
-        return list(groups)
+        return list(self.raw_frames())
 
     def raw_frames(self) -> dict[str, list[RawFrame]]:
         """Every split's frames as the file lists them (original image paths, c2w in the file's frame,

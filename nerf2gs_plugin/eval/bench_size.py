@@ -21,6 +21,7 @@ from nerf2gs_plugin.eval.bench_io import (EVAL_SPLITS, VAL_SPLITS, BenchLog, Ben
                                          planned_steps, progress_log, write_bench_files)
 from nerf2gs_plugin.eval.bench_runs import RunSpec
 from nerf2gs_plugin.utils.plotting import pyplot, save_figure
+from nerf2gs_plugin.data import dataparser_config
 from nerf2gs_plugin.progress import make_progress
 from nerf2gs_plugin.errors import ConfigError
 
@@ -196,7 +197,9 @@ def run(plan: list[RunSpec], data: Path, runs_root: Path, out_dir: Path, scale: 
         bar = BenchProgress(progress, "model-size", [planned_steps(s.method, s.overrides) for s in plan])
         log = progress_log(progress, BenchLog(runs_root, "model_size"))
         runner = BenchRunner(runs_root, log=log, rerun=rerun)
-        val_runner = BenchRunner(runs_root, log=log, splits=VAL_SPLITS)  # the same runs, evaluated on the validation views
+        # the same runs evaluated on the validation views, where the dataset has them (asked once, not per run)
+        has_val = any(s in dataparser_config(data).splits() for s in VAL_SPLITS)
+        val_runner = BenchRunner(runs_root, log=log, splits=VAL_SPLITS) if has_val else None
         for i, spec in enumerate(plan):
             bar.start(i, spec.label)
             ref = done.get(spec.augment_from) if spec.augment_from else None
@@ -207,9 +210,8 @@ def run(plan: list[RunSpec], data: Path, runs_root: Path, out_dir: Path, scale: 
                 if out.result is not None:
                     done[spec.label] = (Path(out.run_dir), Path(out.run_dir).name)
                 if spec.method != "streetnerf":
-                    val = val_runner.run(spec, data, reference=ref).result if out.result is not None else None
-                    has_val = val is not None and any(s in val.get("results", {}) for s in VAL_SPLITS)
-                    rows.append(row_from(spec.label, spec.method, out.result, out.error, val if has_val else None))
+                    val = val_runner.run(spec, data, reference=ref).result if val_runner and out.result is not None else None
+                    rows.append(row_from(spec.label, spec.method, out.result, out.error, val))
             bar.finish(i)
     best = smallest_within(rows)
     title = f"Model size against quality, {Path(data).name} ({scale} scale)"
