@@ -426,6 +426,9 @@ PROSE = [
     ("without ground regularisation -0.5 / -0.4 dB on the road from above (-0.1 / 0.0 on", "-0.5 -0.4 -0.1 0.0",
      lambda: [_abl("ground_reg", s, "psnr_ground") for s in BEV] + [_abl("ground_reg", s) for s in BEV]),
     ("without appearance -0.1 street", "-0.1", lambda: [_abl("appearance", "street")]),
+    ("the \"(consistency confidence)\" row) adds +0.08 / +0.05 / +0.09 dB street / bev_1 / bev_2", "0.08 0.05 0.09",
+     lambda: [_gain(_r(A), "splatfacto", s, variant=" + views from StreetNeRF (consistency confidence)", base=" + views from StreetNeRF")
+              for s in ("street",) + BEV]),
     ("adds -0.02 / +0.06 dB to views from Splatfacto and +0.12 / +0.14 dB to", "-0.02 0.06 0.12 0.14",
      lambda: [_gain(_r(A), "splatfacto", s, variant=v + " + enhancer", base=v)
               for v in (" + views from splatfacto", " + views from StreetNeRF") for s in BEV]),

@@ -96,6 +96,8 @@ class PaperTable:
     scale: Literal["quick", "default"] = "default"
     targets: tuple[str, ...] = ("splatfacto", "scaffold-gs", "2dgs")
     enhancer: bool = True
+    enhancer_prior: Optional[Path] = None
+    """Fine-tune the bench's enhancer from this prior (``ns2gs-enhance pretrain``'s ``.pt``) instead of the identity."""
     confidence: tuple[Literal["visibility", "consistency"], ...] = ()
     """Also a "<target> + NeRF views (<mode> confidence)" row per target and mode, trained with --augment.confidence <mode>."""
     out: Path = RESULTS
@@ -107,7 +109,7 @@ class PaperTable:
         from nerf2gs_plugin.eval.bench_paper import confidence_label, paper_table_plan, run_named_bench
 
         data = ensure_street(self.data, self.runs)
-        enh = bench_enhancer(data, self.runs, self.scale) if self.enhancer else None
+        enh = bench_enhancer(data, self.runs, self.scale, self.enhancer_prior) if self.enhancer else None
         plan = paper_table_plan(self.scale, self.targets, enh, self.confidence)
         compare = [(f"{t} + NeRF views", t) for t in self.targets] + [(f"{t} + NeRF views + enhancer", t) for t in self.targets if enh]
         compare += [(f"{t} + NeRF views{confidence_label(c)}", f"{t} + NeRF views") for t in self.targets for c in self.confidence]
@@ -122,19 +124,24 @@ class Ablation:
     data: Optional[Path] = None
     scale: Literal["quick", "default"] = "default"
     enhancer: bool = True
+    enhancer_prior: Optional[Path] = None
+    """Fine-tune the bench's enhancer from this prior (``ns2gs-enhance pretrain``'s ``.pt``) instead of the identity."""
+    confidence: tuple[Literal["visibility", "consistency"], ...] = ()
+    """Also a "splatfacto + views from StreetNeRF (<mode> confidence)" row per mode (--augment.confidence <mode>)."""
     out: Path = RESULTS
     runs: Path = RUNS
     rerun: bool = False
     """Retrain and re-evaluate every run of the bench even when a finished one with its key exists."""
 
     def main(self) -> None:
-        from nerf2gs_plugin.eval.bench_paper import ablation_plan, run_named_bench
+        from nerf2gs_plugin.eval.bench_paper import ablation_plan, confidence_label, run_named_bench
 
         data = ensure_street(self.data, self.runs)
-        enh = bench_enhancer(data, self.runs, self.scale) if self.enhancer else None
-        plan = ablation_plan(self.scale, enh)
+        enh = bench_enhancer(data, self.runs, self.scale, self.enhancer_prior) if self.enhancer else None
+        plan = ablation_plan(self.scale, enh, self.confidence)
         t = "splatfacto"
         compare = [(f"{t} + views from {t}", t), (f"{t} + views from StreetNeRF", t)]
+        compare += [(f"{t} + views from StreetNeRF{confidence_label(c)}", f"{t} + views from StreetNeRF") for c in self.confidence]
         compare += [(f"StreetNeRF w/o {f}", "StreetNeRF") for f in ("sky", "ground_reg", "transient_mask", "appearance", "point_depth")]
         run_named_bench("ablation", plan, data, self.runs, self.out, f"Ablation, synthetic street ({self.scale} scale)", compare=compare,
                         rerun=self.rerun)
@@ -213,7 +220,7 @@ class ModelSize:
         run(plan, data, self.runs, self.out, self.scale, rerun=self.rerun)
 
 
-def bench_enhancer(data: Path, runs_root: Path, scale: str) -> str:
+def bench_enhancer(data: Path, runs_root: Path, scale: str, prior: Optional[Path] = None) -> str:
     """Train (once) the built-in enhancer on this dataset and the bench's StreetNeRF run (trained
     first, or reused: the plan then reuses it too); returns the --augment.enhancer spec. Without
     the reference's own renders the enhancer learns only synthetic degradations, which made real
@@ -225,7 +232,7 @@ def bench_enhancer(data: Path, runs_root: Path, scale: str) -> str:
 
     dataset = folder_fingerprint(data)
     reference, _ = train_or_reuse(RunSpec("StreetNeRF", "streetnerf", _overrides(scale, "streetnerf")), data, runs_root, dataset)
-    return f"onnx:{ensure_bench_enhancer(data, runs_root, scale, reference=reference)}"
+    return f"onnx:{ensure_bench_enhancer(data, runs_root, scale, reference=reference, init=prior)}"
 
 
 @dataclass

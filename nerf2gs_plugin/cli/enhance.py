@@ -1,6 +1,7 @@
-"""ns2gs-enhance train | apply | eval: the enhancer of additional views.
+"""ns2gs-enhance train | pretrain | apply | eval: the enhancer of additional views.
 
-``train`` fits our built-in enhancer (a small residual U-Net, not Difix) on a dataset's own images
+``pretrain`` makes a prior on generated streets whose truth from above is known (``train --init``
+fine-tunes it on a capture); ``train`` fits our built-in enhancer (a small residual U-Net, not Difix) on a dataset's own images
 and exports it to ONNX; ``apply`` runs any enhancer (built-in or ``onnx:PATH``) on image files;
 ``eval`` measures PSNR before/after enhancement on held-out views: the renders of a reference run
 (``--reference``) or synthetically degraded held-out images.
@@ -16,6 +17,7 @@ from typing import Optional
 import tyro
 
 from nerf2gs_plugin.cli.common import run_cli
+from nerf2gs_plugin.enhance.pretrain import EnhancerPretrainConfig
 from nerf2gs_plugin.enhance.train import EnhancerTrainConfig
 
 
@@ -32,6 +34,20 @@ class Train(EnhancerTrainConfig):
         from nerf2gs_plugin.enhance.train import report_path, train_enhancer
 
         report = train_enhancer(self)
+        for line in report.summary_lines():
+            print(line)
+        print(f"report: {report_path(Path(report.out))}")
+
+
+@dataclass
+class Pretrain(EnhancerPretrainConfig):
+    """Pre-train the built-in enhancer on generated streets (truth from above known); writes OUT (.onnx), its .pt and a report."""
+
+    def main(self) -> None:
+        from nerf2gs_plugin.enhance.pretrain import pretrain_enhancer
+        from nerf2gs_plugin.enhance.train import report_path
+
+        report = pretrain_enhancer(self)
         for line in report.summary_lines():
             print(line)
         print(f"report: {report_path(Path(report.out))}")
@@ -170,7 +186,7 @@ def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: 
 
 
 def main() -> None:
-    cmd = tyro.extras.subcommand_cli_from_dict({"train": Train, "apply": Apply, "eval": Eval}, description=__doc__)
+    cmd = tyro.extras.subcommand_cli_from_dict({"train": Train, "pretrain": Pretrain, "apply": Apply, "eval": Eval}, description=__doc__)
     cmd.main()
 
 

@@ -31,8 +31,9 @@ def bench_enhancer_config(data: Path, out: Path, scale: str) -> EnhancerTrainCon
     return dataclasses.replace(EnhancerTrainConfig(data=Path(data), out=Path(out), progress=True), **SCALES[scale])
 
 
-def ensure_bench_enhancer(data: Path, runs_root: Path, scale: str, reference: Optional[Path] = None) -> Path:
-    """Path of the bench's ``enhancer.onnx`` for this dataset, scale (and reference run), training it when absent."""
+def ensure_bench_enhancer(data: Path, runs_root: Path, scale: str, reference: Optional[Path] = None, init: Optional[Path] = None) -> Path:
+    """Path of the bench's ``enhancer.onnx`` for this dataset, scale (and reference run, and prior
+    ``init`` it is fine-tuned from), training it when absent."""
     from nerf2gs_plugin.data import folder_fingerprint
     from nerf2gs_plugin.engine.checkpoints import file_hash, resolve_checkpoint
 
@@ -42,7 +43,13 @@ def ensure_bench_enhancer(data: Path, runs_root: Path, scale: str, reference: Op
     if reference is not None:
         probe = dataclasses.replace(probe, reference=(Path(reference),))
         ref_hash = file_hash(resolve_checkpoint(Path(reference))[1])
-    settings = {k: v for k, v in dataclasses.asdict(probe).items() if k not in ("data", "out", "progress", "reference")}
+    if init is not None:
+        if not Path(init).is_file():
+            raise ConfigError(f"enhancer prior {init} does not exist (make it with `ns2gs-enhance pretrain`)")
+        probe = dataclasses.replace(probe, init=Path(init))
+    settings = {k: v for k, v in dataclasses.asdict(probe).items() if k not in ("data", "out", "progress", "reference", "init")}
+    if init is not None:  # the prior by content, not by path
+        settings["init"] = file_hash(Path(init))
     from nerf2gs_plugin.eval.code_version import model_code_hash  # the enhancer's training code counts too
 
     doc = {"data": fingerprint, "cfg": settings, "reference": ref_hash, "code": model_code_hash()}

@@ -90,6 +90,9 @@ class EnhancerTrainConfig:
     """At most this many training poses rendered per reference (once, before training), held-out ones aside."""
     eval_splits: tuple[str, ...] = ()
     """Held-out splits for the before/after PSNR in the report (default: all eval splits)."""
+    init: Optional[Path] = None
+    """Start from a prior (``.pt`` written by ``ns2gs-enhance pretrain``) instead of the identity; the
+    held-out selection then compares against the prior (step 0)."""
     seed: int = 0
     threads: int = 0
     """Torch threads; 0 = auto: all cores on an idle machine, 1 on a busy one (OpenMP threads that
@@ -106,8 +109,8 @@ class TrainReport:
     heldout: dict = field(default_factory=dict)  # {"psnr_degraded", "psnr_enhanced", "images", "splits"}
     config: dict = field(default_factory=dict)
     threads: int = 1  # torch threads used for training
-    validation: list = field(default_factory=list)  # [{"step", "psnr", "lpips"}] on held-out training views; step 0 = identity
-    selected_step: Optional[int] = None  # the exported state (0: the identity won)
+    validation: list = field(default_factory=list)  # [{"step", "psnr", "lpips"}] on held-out training views; step 0 = identity (or the --init prior)
+    selected_step: Optional[int] = None  # the exported state (0: the starting state won)
     pairs: dict = field(default_factory=dict)  # {"pose": n, "perturbed": n} real pairs used for training
 
     def summary_lines(self) -> list[str]:
@@ -119,7 +122,8 @@ class TrainReport:
             first = self.validation[0]
             chosen = next((v for v in self.validation if v["step"] == self.selected_step), self.validation[-1])
             lp = lambda v: f", LPIPS {v['lpips']:.4f}" if v["lpips"] is not None else ""  # noqa: E731
-            lines.append(f"held-out training views: identity PSNR {first['psnr']:.2f} dB{lp(first)}; exported step "
+            start = "prior" if self.config.get("init") else "identity"
+            lines.append(f"held-out training views: {start} PSNR {first['psnr']:.2f} dB{lp(first)}; exported step "
                          f"{self.selected_step}: PSNR {chosen['psnr']:.2f} dB{lp(chosen)}")
         if self.heldout:
             h = self.heldout
@@ -183,9 +187,15 @@ class _CropSampler:
             raise DataError(f"images are too small to train on ({smallest} px)")
         self.sizes, self.gen = sizes, gen
 
-    def window(self, i: int) -> tuple[int, int]:
-        h, w = self.sizes[i]
+    def corner(self, h: int, w: int) -> tuple[int, int]:
+        """A random crop's top-left corner inside an ``h`` x ``w`` image."""
         return int(torch.randint(0, h - self.crop + 1, (), generator=self.gen)), int(torch.randint(0, w - self.crop + 1, (), generator=self.gen))
+
+    def window(self, i: int) -> tuple[int, int]:
+        return self.corner(*self.sizes[i])
+
+    def pair_window(self, pair: Pair) -> tuple[int, int]:
+        return self.corner(*pair.render.shape[-2:])
 
     def cut(self, img: Tensor, y: int, x: int) -> Tensor:
         """The crop at (y, x), moved inside ``img`` when it would stick out."""
@@ -326,71 +336,44 @@ def _train(config: EnhancerTrainConfig, gen: torch.Generator) -> TrainReport:
     sizes = [tuple(images[i].shape[-2:]) for i in fit] + [tuple(q.render.shape[-2:]) for q in train_pairs]
     sampler = _CropSampler(config.crop, sizes, gen)
     net = ResidualUNet(config.width, config.condition != "none", WARPED_CHANNELS if warped else 3)
+    if config.init is not None:
+        load_prior(net, config.init)
     lpips_term = _lpips_loss(lpips, config.lpips_weight)
-    opt = torch.optim.Adam(net.parameters(), lr=config.lr)
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=config.lr, total_steps=config.steps, pct_start=0.05)
-    losses, window, history = [], [], []
-    best = None
-    if validate is not None:  # the untrained network is the identity: the baseline to beat
-        history.append({"step": 0} | validate(net))
-        best = (history[-1]["score"], 0, {k: v.clone() for k, v in net.state_dict().items()})
-    every = max(1, config.steps // max(config.checkpoints, 1))
-    log_every = max(1, config.steps // 50)
-    with make_progress(config.progress) as bar:
-        task = bar.add_task("train enhancer", total=config.steps, stats="")
-        for step in range(config.steps):
-            inp, tgt, msk, ref = [], [], [], []
-            for _ in range(config.batch_size):  # builds the batch; per-sample crops, not pixels
-                if train_pairs and float(torch.rand((), generator=gen)) < config.pair_fraction:
-                    q = train_pairs[int(torch.randint(len(train_pairs), (), generator=gen))]
-                    h, w = q.render.shape[-2:]
-                    y = int(torch.randint(0, h - sampler.crop + 1, (), generator=gen))
-                    x = int(torch.randint(0, w - sampler.crop + 1, (), generator=gen))
-                    inp.append(sampler.cut(q.render, y, x))
-                    tgt.append(sampler.cut(q.target, y, x))
-                    msk.append(sampler.cut(q.mask, y, x))
-                    i = q.index
-                    if warped:
-                        ref.append(sampler.cut(q.condition, y, x))
-                else:
-                    k = int(torch.randint(len(fit), (), generator=gen))
-                    i = fit[k]
-                    y, x = sampler.window(k)
-                    clean = sampler.cut(images[i], y, x)
-                    inp.append(degrade(clean[None], gen, config.degradations, config.strength)[0])
-                    tgt.append(clean)
-                    msk.append(torch.ones(1, sampler.crop, sampler.crop))
-                    if warped:  # no depth for a synthetic degradation: no valid warped pixel
-                        ref.append(torch.zeros(WARPED_CHANNELS, sampler.crop, sampler.crop))
-                if config.condition == "view":
-                    ref.append(sampler.cut(images[int(neighbour[i])], y, x))
-            inp_t, tgt_t, msk_t = torch.stack(inp), torch.stack(tgt), torch.stack(msk)
-            out = net(inp_t, torch.stack(ref) if config.condition != "none" else None)
-            loss = ((out - tgt_t).abs() * msk_t).sum() / (msk_t.sum() * 3).clamp_min(1)
-            if lpips_term is not None:
-                loss = loss + lpips_term(out * msk_t + tgt_t * (1 - msk_t), tgt_t)
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            sched.step()
-            window.append(float(loss.detach()))
-            if len(window) == log_every or step == config.steps - 1:
-                losses.append(sum(window) / len(window))
-                window = []
-                bar.update(task, stats=f"loss {losses[-1]:.4f}" + (f" val {history[-1]['psnr']:.2f} dB" if history else ""))
-            if validate is not None and ((step + 1) % every == 0 or step == config.steps - 1):
-                history.append({"step": step + 1} | validate(net))
-                if history[-1]["score"] > best[0]:
-                    best = (history[-1]["score"], step + 1, {k: v.clone() for k, v in net.state_dict().items()})
-            bar.update(task, advance=1)
-    if best is not None:
-        net.load_state_dict(best[2])
+
+    def next_batch() -> tuple[Tensor, Tensor, Tensor, Optional[Tensor]]:
+        inp, tgt, msk, ref = [], [], [], []
+        for _ in range(config.batch_size):  # builds the batch; per-sample crops, not pixels
+            if train_pairs and float(torch.rand((), generator=gen)) < config.pair_fraction:
+                q = train_pairs[int(torch.randint(len(train_pairs), (), generator=gen))]
+                y, x = sampler.pair_window(q)
+                inp.append(sampler.cut(q.render, y, x))
+                tgt.append(sampler.cut(q.target, y, x))
+                msk.append(sampler.cut(q.mask, y, x))
+                i = q.index
+                if warped:
+                    ref.append(sampler.cut(q.condition, y, x))
+            else:
+                k = int(torch.randint(len(fit), (), generator=gen))
+                i = fit[k]
+                y, x = sampler.window(k)
+                clean = sampler.cut(images[i], y, x)
+                inp.append(degrade(clean[None], gen, config.degradations, config.strength)[0])
+                tgt.append(clean)
+                msk.append(torch.ones(1, sampler.crop, sampler.crop))
+                if warped:  # no depth for a synthetic degradation: no valid warped pixel
+                    ref.append(torch.zeros(WARPED_CHANNELS, sampler.crop, sampler.crop))
+            if config.condition == "view":
+                ref.append(sampler.cut(images[int(neighbour[i])], y, x))
+        return torch.stack(inp), torch.stack(tgt), torch.stack(msk), (torch.stack(ref) if config.condition != "none" else None)
+
+    losses, history, best_step = fit_network(net, next_batch, validate, lpips_term, config.steps, config.lr, config.checkpoints,
+                                             config.progress, "train enhancer")
     train_seconds = time.time() - t0
 
     # The U-Net's receptive radius is ~24 px: an overlap of 96 gives tiles a 24 px zero-weight margin.
     meta = {"tile_size": "512", "overlap": "96", "description": "nerf2gs built-in residual U-Net (not Difix)",
             "nerf2gs.steps": str(config.steps), "nerf2gs.width": str(config.width),
-            "nerf2gs.selected_step": str(best[1] if best is not None else config.steps)}
+            "nerf2gs.selected_step": str(best_step if best_step is not None else config.steps)}
     if warped:
         meta["nerf2gs.condition"] = config.condition
     out = Path(config.out)
@@ -415,9 +398,82 @@ def _train(config: EnhancerTrainConfig, gen: torch.Generator) -> TrainReport:
     report = TrainReport(str(out), config.steps, train_seconds, losses, heldout,
                          {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(config).items() if k != "reference"}
                          | {"reference": [str(r) for r in config.reference]}, threads=torch.get_num_threads(),
-                         validation=history, selected_step=best[1] if best is not None else None, pairs=counts)
+                         validation=history, selected_step=best_step, pairs=counts)
     atomic_write_text(report_path(out), json.dumps(asdict(report), indent=1))
     return report
+
+
+
+def fit_network(net: ResidualUNet, next_batch: Callable[[], tuple[Tensor, Tensor, Tensor, Optional[Tensor]]],
+                validate: Optional["_Validator"], lpips_term, steps: int, lr: float, checkpoints: int, progress: bool,
+                label: str) -> tuple[list[float], list[dict], Optional[int]]:
+    """Adam + one-cycle over ``steps`` batches ``(input, target, mask, reference)`` (``[B, C, h, w]``),
+    masked L1 (+ ``lpips_term``). ``validate`` scores the network before training and ``checkpoints``
+    times during it; the best state is loaded back into ``net``. Returns (mean loss per logging window,
+    the validation history, the selected step: 0 = the state it started from; None without ``validate``)."""
+    opt = torch.optim.Adam(net.parameters(), lr=lr)
+    # 5% warm-up; one-cycle divides by (pct_start x steps - 1), zero at exactly 20 steps
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=lr, total_steps=steps, pct_start=0.05 if steps != 20 else 0.1)
+    losses, window, history = [], [], []
+    best = None
+    if validate is not None:  # the starting state (the identity, or a prior): the baseline to beat
+        history.append({"step": 0} | validate(net))
+        best = (history[-1]["score"], 0, {k: v.clone() for k, v in net.state_dict().items()})
+    every = max(1, steps // max(checkpoints, 1))
+    log_every = max(1, steps // 50)
+    with make_progress(progress) as bar:
+        task = bar.add_task(label, total=steps, stats="")
+        for step in range(steps):
+            inp_t, tgt_t, msk_t, ref_t = next_batch()
+            out = net(inp_t, ref_t)
+            loss = ((out - tgt_t).abs() * msk_t).sum() / (msk_t.sum() * 3).clamp_min(1)
+            if lpips_term is not None:
+                loss = loss + lpips_term(out * msk_t + tgt_t * (1 - msk_t), tgt_t)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            sched.step()
+            window.append(float(loss.detach()))
+            if len(window) == log_every or step == steps - 1:
+                losses.append(sum(window) / len(window))
+                window = []
+                bar.update(task, stats=f"loss {losses[-1]:.4f}" + (f" val {history[-1]['psnr']:.2f} dB" if history else ""))
+            if validate is not None and ((step + 1) % every == 0 or step == steps - 1):
+                history.append({"step": step + 1} | validate(net))
+                if history[-1]["score"] > best[0]:
+                    best = (history[-1]["score"], step + 1, {k: v.clone() for k, v in net.state_dict().items()})
+            bar.update(task, advance=1)
+    if best is not None:
+        net.load_state_dict(best[2])
+    return losses, history, best[1] if best is not None else None
+
+
+def save_prior(net: ResidualUNet, path: Path, info: dict) -> None:
+    """The network's weights (``.pt``) for ``--init``: a prior that a capture's own pairs fine-tune."""
+    import io
+
+    buf = io.BytesIO()
+    torch.save({"state": net.state_dict(), "width": net.width, "condition": net.condition,
+                "reference_channels": net.reference_channels, "info": info}, buf)
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def load_prior(net: ResidualUNet, path: Path) -> dict:
+    """Load a prior saved by :func:`save_prior` into ``net`` (same width and inputs); returns its info."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataError("enhancer prior does not exist", path)
+    try:
+        doc = torch.load(path, map_location="cpu", weights_only=True)
+        state = doc["state"]
+    except Exception as e:  # noqa: BLE001 - any unreadable file is the same user error
+        raise DataError(f"not an enhancer prior (expected a file written by `ns2gs-enhance pretrain`): {e}", path) from None
+    if (doc.get("width"), doc.get("condition"), doc.get("reference_channels")) != (net.width, net.condition, net.reference_channels):
+        raise ConfigError(f"enhancer prior {path} has width {doc.get('width')}, condition {doc.get('condition')}, "
+                          f"{doc.get('reference_channels')} reference channels; this network has {net.width}, {net.condition}, "
+                          f"{net.reference_channels} (set --width / --condition to match)")
+    net.load_state_dict(state)
+    return doc.get("info", {})
 
 
 def report_path(model: Path) -> Path:

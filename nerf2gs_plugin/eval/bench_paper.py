@@ -83,7 +83,9 @@ def paper_table_plan(scale: str, targets=TARGETS, enhancer: Optional[str] = None
     return plan
 
 
-def ablation_plan(scale: str, enhancer: Optional[str] = None) -> list[RunSpec]:
+def ablation_plan(scale: str, enhancer: Optional[str] = None, confidence: tuple[str, ...] = ()) -> list[RunSpec]:
+    """Views from Splatfacto itself vs from StreetNeRF (+ enhancer, + ``--augment.confidence`` per mode
+    in ``confidence``), then StreetNeRF without each of its street-specific terms."""
     t = "splatfacto"
     plan = [
         RunSpec("StreetNeRF", "streetnerf", _overrides(scale, "streetnerf")),
@@ -91,6 +93,8 @@ def ablation_plan(scale: str, enhancer: Optional[str] = None) -> list[RunSpec]:
         RunSpec(f"{t} + views from {t}", t, _overrides(scale, t), augment_from=t),
         RunSpec(f"{t} + views from StreetNeRF", t, _overrides(scale, t), augment_from="StreetNeRF"),
     ]
+    plan += [RunSpec(f"{t} + views from StreetNeRF{confidence_label(mode)}", t, _overrides(scale, t), augment_from="StreetNeRF",
+                     augment={"confidence": mode}) for mode in confidence]
     if enhancer:
         plan.insert(3, RunSpec(f"{t} + views from {t} + enhancer", t, _overrides(scale, t), augment_from=t, augment={"enhancer": enhancer}))
         plan.append(RunSpec(f"{t} + views from StreetNeRF + enhancer", t, _overrides(scale, t), augment_from="StreetNeRF", augment={"enhancer": enhancer}))

@@ -349,6 +349,11 @@ def test_quick_scale_rescales_schedules_and_merges_extras(tmp_path):
     cfg = apply_plain(get_method("streetnerf").config, nerf.overrides)
     assert cfg.pipeline.model.sky is False and cfg.max_num_iterations == 1500 and cfg.optimizers["fields"].max_steps == 1500
     assert _overrides("default", "2dgs") == {"steps_per_eval_image": 0}
+    # a confidence row per mode, beside the plain "views from StreetNeRF" row it is compared with
+    conf = [s for s in ablation_plan("quick", confidence=("consistency",)) if s.augment.get("confidence")]
+    assert [(s.label, s.augment_from, s.augment) for s in conf] == [
+        ("splatfacto + views from StreetNeRF (consistency confidence)", "StreetNeRF", {"confidence": "consistency"})]
+    assert not any(s.augment.get("confidence") for s in ablation_plan("quick"))
     res = {"a": _result("a", "splatfacto", 30.0, 18.0, 20.0, 100, 1000, "/a"), "b": _result("b", "streetnerf", 0.2, 20.0, 21.0, 500, 0, "/b")}
     speed_quality_chart(res, tmp_path / "x_speed_quality.png", "t")
     assert (tmp_path / "x_speed_quality.png").read_bytes()[:4] == b"\x89PNG"
