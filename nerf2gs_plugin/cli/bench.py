@@ -97,7 +97,10 @@ class PaperTable:
     targets: tuple[str, ...] = ("splatfacto", "scaffold-gs", "2dgs")
     enhancer: bool = True
     enhancer_prior: Optional[Path] = None
-    """Fine-tune the bench's enhancer from this prior (``ns2gs-enhance pretrain``'s ``.pt``) instead of the identity."""
+    """The enhancer rows use this prior (``ns2gs-enhance pretrain``'s ONNX ``out``) as it is, instead of an
+    enhancer trained on the capture's own pairs (chosen on validation views: benchmarks/results/enhancer_prior)."""
+    enhancer_fine_tune: bool = False
+    """With --enhancer-prior: fine-tune the prior (its ``.pt``) on the capture's pairs first (``train --init``)."""
     confidence: tuple[Literal["visibility", "consistency"], ...] = ()
     """Also a "<target> + NeRF views (<mode> confidence)" row per target and mode, trained with --augment.confidence <mode>."""
     out: Path = RESULTS
@@ -109,7 +112,7 @@ class PaperTable:
         from nerf2gs_plugin.eval.bench_paper import confidence_label, paper_table_plan, run_named_bench
 
         data = ensure_street(self.data, self.runs)
-        enh = bench_enhancer(data, self.runs, self.scale, self.enhancer_prior) if self.enhancer else None
+        enh = bench_enhancer(data, self.runs, self.scale, self.enhancer_prior, self.enhancer_fine_tune) if self.enhancer else None
         plan = paper_table_plan(self.scale, self.targets, enh, self.confidence)
         compare = [(f"{t} + NeRF views", t) for t in self.targets] + [(f"{t} + NeRF views + enhancer", t) for t in self.targets if enh]
         compare += [(f"{t} + NeRF views{confidence_label(c)}", f"{t} + NeRF views") for t in self.targets for c in self.confidence]
@@ -125,7 +128,10 @@ class Ablation:
     scale: Literal["quick", "default"] = "default"
     enhancer: bool = True
     enhancer_prior: Optional[Path] = None
-    """Fine-tune the bench's enhancer from this prior (``ns2gs-enhance pretrain``'s ``.pt``) instead of the identity."""
+    """The enhancer rows use this prior (``ns2gs-enhance pretrain``'s ONNX ``out``) as it is, instead of an
+    enhancer trained on the capture's own pairs (chosen on validation views: benchmarks/results/enhancer_prior)."""
+    enhancer_fine_tune: bool = False
+    """With --enhancer-prior: fine-tune the prior (its ``.pt``) on the capture's pairs first (``train --init``)."""
     confidence: tuple[Literal["visibility", "consistency"], ...] = ()
     """Also a "splatfacto + views from StreetNeRF (<mode> confidence)" row per mode (--augment.confidence <mode>)."""
     out: Path = RESULTS
@@ -137,7 +143,7 @@ class Ablation:
         from nerf2gs_plugin.eval.bench_paper import ablation_plan, confidence_label, run_named_bench
 
         data = ensure_street(self.data, self.runs)
-        enh = bench_enhancer(data, self.runs, self.scale, self.enhancer_prior) if self.enhancer else None
+        enh = bench_enhancer(data, self.runs, self.scale, self.enhancer_prior, self.enhancer_fine_tune) if self.enhancer else None
         plan = ablation_plan(self.scale, enh, self.confidence)
         t = "splatfacto"
         compare = [(f"{t} + views from {t}", t), (f"{t} + views from StreetNeRF", t)]
@@ -220,19 +226,24 @@ class ModelSize:
         run(plan, data, self.runs, self.out, self.scale, rerun=self.rerun)
 
 
-def bench_enhancer(data: Path, runs_root: Path, scale: str, prior: Optional[Path] = None) -> str:
+def bench_enhancer(data: Path, runs_root: Path, scale: str, prior: Optional[Path] = None, fine_tune: bool = False) -> str:
     """Train (once) the built-in enhancer on this dataset and the bench's StreetNeRF run (trained
     first, or reused: the plan then reuses it too); returns the --augment.enhancer spec. Without
     the reference's own renders the enhancer learns only synthetic degradations, which made real
     bird's-eye renders worse (measured once, -0.14 dB; not a committed result)."""
     from nerf2gs_plugin.data import folder_fingerprint
-    from nerf2gs_plugin.enhance.bench import ensure_bench_enhancer
+    from nerf2gs_plugin.enhance.bench import bench_prior, ensure_bench_enhancer
+
+    if prior is not None:
+        prior = bench_prior(prior, runs_root)
+        if not fine_tune:  # the prior as it is: nothing to train on this capture
+            return f"onnx:{prior}"
     from nerf2gs_plugin.eval.bench_paper import _overrides
     from nerf2gs_plugin.eval.bench_runs import RunSpec, train_or_reuse
 
     dataset = folder_fingerprint(data)
     reference, _ = train_or_reuse(RunSpec("StreetNeRF", "streetnerf", _overrides(scale, "streetnerf")), data, runs_root, dataset)
-    return f"onnx:{ensure_bench_enhancer(data, runs_root, scale, reference=reference, init=prior)}"
+    return f"onnx:{ensure_bench_enhancer(data, runs_root, scale, reference=reference, init=prior.with_suffix('.pt') if prior else None)}"
 
 
 @dataclass

@@ -63,3 +63,22 @@ def ensure_bench_enhancer(data: Path, runs_root: Path, scale: str, reference: Op
     for line in report.summary_lines():
         print(f"[bench] {line}")
     return out
+
+
+def bench_prior(prior: Path, runs_root: Path) -> Path:
+    """The prior ONNX (``ns2gs-enhance pretrain``'s ``out``) copied under ``runs_root/enhancer/prior-<content hash>/``,
+    so the bench runs that use it are keyed by its content, not by a path that may be overwritten."""
+    import shutil
+
+    from nerf2gs_plugin.engine.checkpoints import file_hash
+
+    prior = Path(prior)
+    if not prior.is_file():
+        raise ConfigError(f"enhancer prior {prior} does not exist (make it with `ns2gs-enhance pretrain --out {prior}`)")
+    out = Path(runs_root) / "enhancer" / f"prior-{file_hash(prior)[:12]}" / "prior.onnx"
+    if not out.is_file():
+        out.parent.mkdir(parents=True, exist_ok=True)
+        for src, dst in ((prior.with_suffix(".pt"), out.with_suffix(".pt")), (report_path(prior), report_path(out)), (prior, out)):
+            if src.is_file():  # the ONNX last: its presence says the copy is whole
+                shutil.copyfile(src, dst)
+    return out

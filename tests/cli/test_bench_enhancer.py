@@ -25,8 +25,24 @@ def test_bench_enhancer_trains_on_the_bench_reference(tiny_scene, tmp_path, monk
     assert spec == f"onnx:{tmp_path / 'enhancer.onnx'}"
     assert calls["spec"].method == "streetnerf" and calls["spec"].label == "StreetNeRF"
     assert calls["reference"] == tmp_path / "street" / "streetnerf" / "abc" and calls["init"] is None
-    bench_cli.bench_enhancer(tiny_scene, tmp_path, "quick", prior=tmp_path / "prior.pt")  # --enhancer-prior reaches the trainer
-    assert calls["init"] == tmp_path / "prior.pt"
+    # --enhancer-prior: the prior as it is (copied under the runs, keyed by its content; nothing trained) ...
+    prior = tmp_path / "made" / "prior.onnx"
+    prior.parent.mkdir()
+    prior.write_bytes(b"onnx bytes")
+    prior.with_suffix(".pt").write_bytes(b"weights")
+    calls.clear()
+    spec = bench_cli.bench_enhancer(tiny_scene, tmp_path / "runs", "quick", prior=prior)
+    copy = Path(spec.split(":", 1)[1])
+    assert copy.parent.parent == tmp_path / "runs" / "enhancer" and copy.read_bytes() == b"onnx bytes" and not calls
+    # ... or fine-tuned from its weights (--enhancer-fine-tune)
+    bench_cli.bench_enhancer(tiny_scene, tmp_path / "runs", "quick", prior=prior, fine_tune=True)
+    assert calls["init"] == copy.with_suffix(".pt") and calls["init"].read_bytes() == b"weights"
+    import pytest
+
+    from nerf2gs_plugin.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="absent.onnx does not exist"):
+        bench_cli.bench_enhancer(tiny_scene, tmp_path / "runs", "quick", prior=tmp_path / "absent.onnx")
     # the same run the paper table's plan trains (same label, method and overrides)
     from nerf2gs_plugin.eval.bench_paper import paper_table_plan
 
