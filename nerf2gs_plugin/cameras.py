@@ -248,27 +248,33 @@ def look_at(eye: Tensor, target: Tensor, up: Tensor) -> Tensor:
     return torch.stack([right, cam_up, -fwd, eye], dim=-1)
 
 
-def birds_eye_poses(camera_to_worlds: Tensor, up: Tensor, delta_h: float, theta_pitch_deg: float) -> Tensor:
+def _per_view(x: "float | Tensor", like: Tensor) -> "float | Tensor":
+    """A scalar as it is; a ``[N]`` tensor as a ``[N, 1]`` column on ``like``'s device and dtype."""
+    return x.to(like)[:, None] if isinstance(x, Tensor) else x
+
+
+def birds_eye_poses(camera_to_worlds: Tensor, up: Tensor, delta_h: "float | Tensor", theta_pitch_deg: "float | Tensor") -> Tensor:
     """The paper's additional views (Fig. 3): raise each camera by ``delta_h`` along ``up`` and pitch
     it down by ``theta_pitch`` degrees about its own right axis.
 
     ``camera_to_worlds`` is ``[N, 3, 4]`` OpenGL, ``up`` a unit ``[3]`` vector, ``delta_h`` in the
-    units of the poses (convert metres with the dataparser's scale first). Input views are
+    units of the poses (convert metres with the dataparser's scale first); ``delta_h`` and
+    ``theta_pitch_deg`` are one value for all views or a ``[N]`` tensor, one per view. Input views are
     assumed level (0 deg pitch, as a car-mounted camera); a tilted input keeps its tilt and adds
     ``theta_pitch``.
     """
     up = torch.nn.functional.normalize(up.to(camera_to_worlds), dim=0)
     R = camera_to_worlds[:, :, :3]
-    t = camera_to_worlds[:, :, 3] + delta_h * up
+    t = camera_to_worlds[:, :, 3] + _per_view(delta_h, R) * up
     right = R[:, :, 0]
-    a = math.radians(theta_pitch_deg)
+    a = torch.deg2rad(theta_pitch_deg.to(R)) if isinstance(theta_pitch_deg, Tensor) else math.radians(theta_pitch_deg)
     # Rodrigues rotation about each camera's right axis by -a (nose down in OpenGL: -z turns toward -up).
     Rr = _axis_angle(right, -a)
     R_new = Rr @ R
     return torch.cat([R_new, t[:, :, None]], dim=-1)
 
 
-def birds_eye_poses_absolute(camera_to_worlds: Tensor, up: Tensor, delta_h: float, theta_pitch_deg: float) -> Tensor:
+def birds_eye_poses_absolute(camera_to_worlds: Tensor, up: Tensor, delta_h: "float | Tensor", theta_pitch_deg: "float | Tensor") -> Tensor:
     """Bird's-eye views pitched ``theta_pitch`` below the HORIZON of the ground plane (normal ``up``),
     whatever the input camera's own tilt and roll: each camera's forward direction is projected on
     the ground plane, pitched down by ``theta_pitch``, and the view is levelled (no roll). For level
@@ -282,17 +288,24 @@ def birds_eye_poses_absolute(camera_to_worlds: Tensor, up: Tensor, delta_h: floa
     cam_up = R[:, :, 1] - (R[:, :, 1] @ up)[:, None] * up
     weak = flat.norm(dim=-1, keepdim=True) < 1e-4
     flat = torch.nn.functional.normalize(torch.where(weak, cam_up, flat), dim=-1)
-    a = math.radians(theta_pitch_deg)
-    f = math.cos(a) * flat - math.sin(a) * up
+    if isinstance(theta_pitch_deg, Tensor):
+        a = torch.deg2rad(theta_pitch_deg.to(R))[:, None]
+        f = torch.cos(a) * flat - torch.sin(a) * up
+    else:
+        a = math.radians(theta_pitch_deg)
+        f = math.cos(a) * flat - math.sin(a) * up
     right = torch.nn.functional.normalize(torch.cross(f, up.expand_as(f), dim=-1), dim=-1)
     new_up = torch.cross(right, f, dim=-1)
-    t = camera_to_worlds[:, :, 3] + delta_h * up
+    t = camera_to_worlds[:, :, 3] + _per_view(delta_h, R) * up
     return torch.stack([right, new_up, -f, t], dim=-1)
 
 
-def _axis_angle(axis: Tensor, angle: float) -> Tensor:
-    """Rotation matrices ``[N, 3, 3]`` about unit axes ``[N, 3]`` by one angle (radians)."""
+def _axis_angle(axis: Tensor, angle: "float | Tensor") -> Tensor:
+    """Rotation matrices ``[N, 3, 3]`` about unit axes ``[N, 3]`` by one angle or ``[N]`` angles (radians)."""
     axis = torch.nn.functional.normalize(axis, dim=-1)
     Kx = skew(axis).reshape(-1, 3, 3)
     eye = torch.eye(3, dtype=axis.dtype, device=axis.device).expand_as(Kx)
+    if isinstance(angle, Tensor):
+        a = angle.to(axis)[:, None, None]
+        return eye + torch.sin(a) * Kx + (1 - torch.cos(a)) * (Kx @ Kx)
     return eye + math.sin(angle) * Kx + (1 - math.cos(angle)) * (Kx @ Kx)

@@ -65,12 +65,15 @@ class CacheManifest:
         """``[num_extra, 3, 4]`` camera-to-world poses of the bird's-eye views."""
         return torch.tensor(self.extra_camera_to_worlds, dtype=torch.float32).reshape(-1, 3, 4)
 
-    def same_geometry(self, dataset: str, delta_h: float, theta_pitch: float, every_n: int, pitch_mode: str = "absolute") -> bool:
+    def same_geometry(self, dataset: str, delta_h: float, theta_pitch: float, every_n: int, pitch_mode: str = "absolute",
+                      delta_h_spread: float = 0.0, theta_pitch_spread: float = 0.0) -> bool:
         """True when this entry's bird's-eye views are those of a run with these settings."""
         cfg = self.config
         return (self.dataset == dataset and float(cfg.get("delta_h", -1)) == float(delta_h)
                 and float(cfg.get("theta_pitch", -1)) == float(theta_pitch) and int(cfg.get("every_n", 1)) == int(every_n)
-                and cfg.get("pitch_mode", "relative") == pitch_mode)
+                and cfg.get("pitch_mode", "relative") == pitch_mode
+                and float(cfg.get("delta_h_spread", 0.0)) == float(delta_h_spread)
+                and float(cfg.get("theta_pitch_spread", 0.0)) == float(theta_pitch_spread))
 
     def write(self, entry: Path) -> None:
         doc = {k: v for k, v in asdict(self).items() if k != "path"}
@@ -120,6 +123,9 @@ def cache_key(ref_key: str, dataset: str, config: dict[str, Any], bev: Optional[
     relevant = {k: v for k, v in config.items() if k not in UNKEYED_FIELDS}
     if relevant.get("confidence", "none") == "none":  # no confidence maps: the entries of runs before the option
         relevant = {k: v for k, v in relevant.items() if not k.startswith("confidence")}
+    for spread in ("delta_h_spread", "theta_pitch_spread"):  # no spread: the entries of runs before the option
+        if not relevant.get(spread):
+            relevant.pop(spread, None)
     h = hashlib.sha1()
     h.update(json.dumps({"v": CACHE_FORMAT_VERSION, "ref": ref_key, "data": dataset, "cfg": relevant, "enh": enhancer_key}, sort_keys=True).encode())
     for cams in (train, bev):

@@ -94,6 +94,11 @@ class AugmentConfig:
     """Height of the additional views above the input views, in metres."""
     theta_pitch: float = 30.0
     """Downward pitch of the additional views, in degrees."""
+    delta_h_spread: float = 0.0
+    """Each additional view's height drawn uniformly in delta-h +- this (metres; one draw per view, fixed
+    seed): a spread of heights instead of one ring of cameras (0: all at delta-h, the paper's views)."""
+    theta_pitch_spread: float = 0.0
+    """Each additional view's pitch drawn uniformly in theta-pitch +- this (degrees; 0: all at theta-pitch)."""
     pitch_mode: Literal["absolute", "relative"] = "absolute"
     """absolute: theta-pitch below the horizon of the ground plane (the input's tilt and roll removed);
     relative: theta-pitch added to each input camera's own tilt (the paper's Fig. 3 with level cameras)."""
@@ -127,13 +132,23 @@ class AugmentConfig:
 
 
 def bev_cameras(train: Cameras, up: Tensor, delta_h_world: float, theta_pitch: float, every_n: int = 1,
-                pitch_mode: str = "relative") -> Cameras:
-    """The additional-view cameras: input intrinsics, raised and pitched poses."""
+                pitch_mode: str = "relative", delta_h_spread_world: float = 0.0, theta_pitch_spread: float = 0.0) -> Cameras:
+    """The additional-view cameras: input intrinsics, raised and pitched poses (with spreads: each view's
+    height and pitch drawn uniformly around delta-h / theta-pitch, the same draws on every call)."""
     sub = train[torch.arange(0, len(train), max(every_n, 1))]
     if pitch_mode not in ("absolute", "relative"):
         raise ConfigError(f"--augment.pitch-mode must be absolute or relative, got {pitch_mode!r}")
+    if delta_h_spread_world < 0 or not 0 <= theta_pitch_spread < 90:
+        raise ConfigError(f"spreads must be >= 0 (pitch < 90 deg), got {delta_h_spread_world}, {theta_pitch_spread}",
+                          "--augment.delta-h-spread / --augment.theta-pitch-spread")
     poses = birds_eye_poses_absolute if pitch_mode == "absolute" else birds_eye_poses
-    return sub.with_poses(poses(sub.camera_to_worlds, up, delta_h_world, theta_pitch))
+    dh: float | Tensor = delta_h_world
+    pitch: float | Tensor = theta_pitch
+    if delta_h_spread_world > 0 or theta_pitch_spread > 0:
+        u = torch.rand(2, len(sub), generator=torch.Generator().manual_seed(0), dtype=torch.float64) * 2 - 1
+        dh = (delta_h_world + delta_h_spread_world * u[0]).clamp_min(0.0)
+        pitch = (theta_pitch + theta_pitch_spread * u[1]).clamp(0.0, 89.0)
+    return sub.with_poses(poses(sub.camera_to_worlds, up, dh, pitch))
 
 
 def inside_box(centres: Tensor, box: Optional[Tensor]) -> Tensor:
@@ -304,7 +319,11 @@ def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, re
     the training cameras at the poses the reference renders the input views from (its refined
     poses; the ``ref_key``'s checkpoint hash keys them); None: ``train``'s own. The bird's-eye
     cameras and the returned image sets keep ``train``'s poses."""
-    bev = bev_cameras(train.cameras, up, delta_h_world, config.theta_pitch, config.every_n, config.pitch_mode) if config.extra_views else None
+    if config.delta_h_spread and not config.delta_h:
+        raise ConfigError("needs a non-zero --augment.delta-h (the spread is scaled to world units as it is)", "--augment.delta-h-spread")
+    spread_world = delta_h_world * config.delta_h_spread / config.delta_h if config.delta_h else 0.0  # metres -> world units, as delta-h
+    bev = bev_cameras(train.cameras, up, delta_h_world, config.theta_pitch, config.every_n, config.pitch_mode, spread_world,
+                      config.theta_pitch_spread) if config.extra_views else None
     has_transient = "transient" in train.masks and config.composites
     enhancer_key = enhancer.cache_key() if enhancer is not None else "none"
     key = cache_key(ref_key, dataset, asdict(config), bev, train.cameras, enhancer_key)
@@ -470,7 +489,8 @@ def find_cached_extra_views(cache_root: Path, dataset: str, augment: AugmentConf
     """The newest cache entry under a reference run whose bird's-eye views are those of ``augment``
     for ``num_views`` input poses (some may have been dropped: ``extra_indices``), or None."""
     for manifest in cache_manifests(cache_root):
-        same = manifest.same_geometry(dataset, augment.delta_h, augment.theta_pitch, max(int(augment.every_n), 1), augment.pitch_mode)
+        same = manifest.same_geometry(dataset, augment.delta_h, augment.theta_pitch, max(int(augment.every_n), 1), augment.pitch_mode,
+                                      augment.delta_h_spread, augment.theta_pitch_spread)
         if same and manifest.num_extra == len(manifest.extra_indices) and all(0 <= i < num_views for i in manifest.extra_indices):
             return manifest
     return None

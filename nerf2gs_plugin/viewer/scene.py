@@ -137,5 +137,5 @@ def find_extra_views(config, train_data, train_cameras: Cameras, thumb_side: int
         return ExtraViews(sub[torch.tensor(manifest.extra_indices, dtype=torch.long)].with_poses(manifest.extra_poses().to(sub.device)),
                           thumbs, str(manifest.path))
     cams = bev_cameras(train_cameras, train_data.up, train_data.metres_to_world(aug.delta_h), aug.theta_pitch, every_n,
-                       aug.pitch_mode)
+                       aug.pitch_mode, train_data.metres_to_world(aug.delta_h_spread), aug.theta_pitch_spread)
     return ExtraViews(cams, [None] * len(cams), "recomputed from the run's --augment config (no cache manifest found)")
