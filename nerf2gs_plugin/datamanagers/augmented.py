@@ -314,15 +314,14 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
 def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, render_fn: RenderFn, ref_key: str,
                            dataset: str, cache_root: Path, config: AugmentConfig,
                            enhancer: Optional[ViewEnhancer] = None, scene_box: Optional[Tensor] = None,
-                           depth_along: str = "z", render_cameras: Optional[Cameras] = None) -> AugmentedViews:
+                           depth_along: str = "z", render_cameras: Optional[Cameras] = None,
+                           delta_h_spread_world: float = 0.0) -> AugmentedViews:
     """Render (or reuse from the cache) the composites and the additional views. ``render_cameras``:
     the training cameras at the poses the reference renders the input views from (its refined
     poses; the ``ref_key``'s checkpoint hash keys them); None: ``train``'s own. The bird's-eye
-    cameras and the returned image sets keep ``train``'s poses."""
-    if config.delta_h_spread and not config.delta_h:
-        raise ConfigError("needs a non-zero --augment.delta-h (the spread is scaled to world units as it is)", "--augment.delta-h-spread")
-    spread_world = delta_h_world * config.delta_h_spread / config.delta_h if config.delta_h else 0.0  # metres -> world units, as delta-h
-    bev = bev_cameras(train.cameras, up, delta_h_world, config.theta_pitch, config.every_n, config.pitch_mode, spread_world,
+    cameras and the returned image sets keep ``train``'s poses. ``delta_h_spread_world``:
+    ``config.delta_h_spread`` in world units, as ``delta_h_world`` is ``config.delta_h``."""
+    bev = bev_cameras(train.cameras, up, delta_h_world, config.theta_pitch, config.every_n, config.pitch_mode, delta_h_spread_world,
                       config.theta_pitch_spread) if config.extra_views else None
     has_transient = "transient" in train.masks and config.composites
     enhancer_key = enhancer.cache_key() if enhancer is not None else "none"
@@ -403,7 +402,7 @@ class AugmentedDataManager(DataManager):
         self.views: AugmentedViews = render_augmented_views(
             inner.train_images, td.up, td.metres_to_world(augment.delta_h), reference.render, reference.key,
             dataset_fingerprint(td.image_filenames), reference.cache_root, augment, enhancer, td.scene_box, reference.depth_along,
-            refined,
+            refined, td.metres_to_world(augment.delta_h_spread),
         )
         print(f"reference renders: {self.views.render_seconds:.1f} s" + (" (reused from the cache)" if self.views.reused else ""))
         if self.views.composites is not None:

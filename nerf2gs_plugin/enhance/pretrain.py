@@ -19,6 +19,7 @@ name the layouts (the embedded street is seed 0; the benches' second street seed
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import random
 import time
@@ -30,7 +31,7 @@ import torch
 from torch import Tensor
 
 from nerf2gs_plugin.enhance.pairs import Pair
-from nerf2gs_plugin.enhance.train import _CropSampler, _lpips_loss, _Validator, fit_network, save_prior
+from nerf2gs_plugin.enhance.train import _CropSampler, _lpips_loss, _Validator, fit_network, report_path, save_prior, training_threads
 from nerf2gs_plugin.enhance.unet import ResidualUNet, export_onnx
 from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.eval.metrics import LPIPS
@@ -170,8 +171,6 @@ def _cached_pairs(data: Path, run: Path, index: int, progress: bool) -> list[Pai
         doc = torch.load(path, map_location="cpu", weights_only=True)
         return [Pair(r, t, torch.ones(1, *r.shape[-2:]), index, k) for r, t, k in zip(doc["render"], doc["target"], doc["kind"])]
     pairs = street_pairs(data, run, index, progress)
-    import io
-
     buf = io.BytesIO()
     torch.save({"render": [q.render for q in pairs], "target": [q.target for q in pairs], "kind": [q.kind for q in pairs]}, buf)
     atomic_write_bytes(path, buf.getvalue())
@@ -180,8 +179,6 @@ def _cached_pairs(data: Path, run: Path, index: int, progress: bool) -> list[Pai
 
 def pretrain_enhancer(config: EnhancerPretrainConfig, log: Callable[[str], None] = print) -> PretrainReport:
     """Generate, train references, render pairs, fit the U-Net; writes ``out`` (.onnx), its ``.pt`` and a report."""
-    from nerf2gs_plugin.enhance.train import training_threads
-
     if len(config.seeds) < 2:
         raise ConfigError(f"--seeds needs at least 2 streets (one is held out to choose the exported state), got {len(config.seeds)}")
     if len(set(config.seeds)) != len(config.seeds):
@@ -232,7 +229,5 @@ def pretrain_enhancer(config: EnhancerPretrainConfig, log: Callable[[str], None]
     streets = [st | {"pairs": len(p), "held_out": k == len(settings) - 1} for k, (st, p) in enumerate(zip(settings, by_street))]
     report = PretrainReport(str(out), str(weights), time.time() - t0, streets, losses, history, best_step,
                             {k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(config).items()})
-    from nerf2gs_plugin.enhance.train import report_path
-
     atomic_write_text(report_path(out), json.dumps(asdict(report), indent=1))
     return report
