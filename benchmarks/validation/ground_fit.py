@@ -1,5 +1,7 @@
 """The ground-plane fit (``data/ground.py``) on processed captures with known true cameras: the
-plane's angle to the true up and the camera-height scale against the Sim(3) scale.
+plane's angle to the true up, that of the up ``process`` writes (the cameras' upright direction
+where it agrees with the plane, ``data/road_plane.upright_normal``), and the camera-height scale
+against the Sim(3) scale.
 
 Why: on castle-P30 the fit once returned a plane 39 deg off the true up and a scale 87% too small
 (each RANSAC hypothesis's inlier band grew with its own camera height, and the refit was not held
@@ -22,7 +24,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from sfm_speed import read_strecha  # noqa: E402
 
-from nerf2gs_plugin.data.ground import MAX_TILT_DEG, fit_ground_plane  # noqa: E402
+from nerf2gs_plugin.data.ground import MAX_TILT_DEG, estimate_metric_scale, fit_ground_plane  # noqa: E402
 from nerf2gs_plugin.data.ply import read_ply_points  # noqa: E402
 from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
 from nerf2gs_plugin.eval.pose_eval import pose_errors  # noqa: E402
@@ -60,20 +62,22 @@ def measure(data: Path, true: Path, camera_height: float) -> dict:
         row["plane"] = {"to_true_up_deg": angle(plane.normal, up_here), "to_cameras_up_deg": angle(plane.normal, cam_up),
                         "metres_per_unit": mpu, "scale_error_percent": 100.0 * (mpu / pe.scale - 1.0),
                         "inliers": plane.inliers, "candidates": plane.candidates}
+        # the up `process` writes: the cameras' upright direction where it agrees with the plane
+        row["up_to_true_up_deg"] = angle(estimate_metric_scale(xyz, c2w[:, :, 3], cam_up, camera_height, cam_right=c2w[:, :, 0]).up, up_here)
     return row
 
 
 def markdown(doc: dict) -> str:
     lines = ["# The ground-plane fit on captures with true cameras (`data/ground.py`)", "", f"Machine: {doc['machine']}", "",
              __doc__.split("Usage:")[0].strip(), "", f"Tilt limit (`MAX_TILT_DEG`): {doc['max_tilt_deg']:.0f} deg.", "",
-             "| capture | points | plane to true up, deg | cameras' up to true up, deg | metres per unit | Sim(3) metres per unit | scale error % |",
-             "|---|---|---|---|---|---|---|"]
+             "| capture | points | plane to true up, deg | cameras' up to true up, deg | process's up (upright) to true up, deg | metres per unit | Sim(3) metres per unit | scale error % |",
+             "|---|---|---|---|---|---|---|---|"]
     for name, r in doc["captures"].items():
         p = r["plane"]
         if p is None:
-            lines.append(f"| {name} | {r['points']} | no plane | {r['cameras_up_to_true_up_deg']:.1f} | | {r['sim3_metres_per_unit']:.3f} | |")
+            lines.append(f"| {name} | {r['points']} | no plane | {r['cameras_up_to_true_up_deg']:.1f} | | | {r['sim3_metres_per_unit']:.3f} | |")
             continue
-        lines.append(f"| {name} | {r['points']} | {p['to_true_up_deg']:.1f} | {r['cameras_up_to_true_up_deg']:.1f} | "
+        lines.append(f"| {name} | {r['points']} | {p['to_true_up_deg']:.1f} | {r['cameras_up_to_true_up_deg']:.1f} | {r['up_to_true_up_deg']:.1f} | "
                      f"{p['metres_per_unit']:.3f} | {r['sim3_metres_per_unit']:.3f} | {p['scale_error_percent']:+.1f} |")
     lines += ["", "The scale error also holds the error of the assumed camera height (`camera_height_m` in the JSON)."]
     return "\n".join(lines) + "\n"

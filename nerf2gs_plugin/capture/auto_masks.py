@@ -27,10 +27,10 @@ MAX_PLANE_POINTS = 50_000  # RANSAC on a random subset of the rendered surface p
 def ground_plane(train_data, rendered: Iterable[tuple[Tensor, Tensor]]) -> tuple[Tensor, float]:
     """``(up, height)`` of the ground plane ``{x : x . up = height}`` in the normalised world:
     the RANSAC plane of the sparse points below the cameras, else of the rendered surface points
-    (``(points [H, W, 3], acc [H, W])`` per training view, accumulation > 0.5), levelled with the
-    camera path (``data/masks/road_plane.py``)."""
+    (``(points [H, W, 3], acc [H, W])`` per training view, accumulation > 0.5), made upright with the
+    cameras' horizontal axes and path, else levelled with the path (``data/road_plane.py``)."""
     from nerf2gs_plugin.data.ground import MAX_TILT_DEG, fit_ground_plane
-    from nerf2gs_plugin.data.masks.road_plane import level_plane
+    from nerf2gs_plugin.data.road_plane import level_plane
 
     centres = train_data.cameras.centers.double().numpy()
     cam_up = train_data.up.double().numpy()
@@ -49,7 +49,8 @@ def ground_plane(train_data, rendered: Iterable[tuple[Tensor, Tensor]]) -> tuple
         raise ConfigError(f"no ground plane found below the cameras within {MAX_TILT_DEG:.0f} deg of their up "
                           "(neither the sparse points nor the rendered surfaces give one)")
     fitted_on = train_data.points3D_xyz.double().numpy() if used_sparse else pts.double().numpy()
-    normal, offset = level_plane(plane.normal, plane.offset, fitted_on, centres)
+    cam_right = train_data.cameras.camera_to_worlds[:, :3, 0].double().numpy()
+    normal, offset = level_plane(plane.normal, plane.offset, fitted_on, centres, cam_right=cam_right)
     return torch.from_numpy(normal).float(), -float(offset)
 
 

@@ -117,21 +117,32 @@ class MetricScale:
 
 
 def estimate_metric_scale(points: np.ndarray, cam_centres: np.ndarray, cam_up: np.ndarray, camera_height: float = 1.5,
-                          metres_per_unit: Optional[float] = None, where: str = "sparse points") -> MetricScale:
+                          metres_per_unit: Optional[float] = None, where: str = "sparse points",
+                          cam_right: Optional[np.ndarray] = None) -> MetricScale:
     """Up and metres-per-unit from the ground plane (``metres_per_unit`` overrides the scale; the
-    plane still gives up when found). No plane and no override: a DataError naming the flags."""
+    plane still gives up when found). No plane and no override: a DataError naming the flags. Given
+    the cameras' horizontal axes ``cam_right [N, 3]``, up is the cameras' upright direction when it
+    agrees with the plane (:func:`~nerf2gs_plugin.data.road_plane.upright_normal`); the scale is the
+    plane's either way."""
+    from nerf2gs_plugin.data.road_plane import upright_normal
+
     plane = fit_ground_plane(points, cam_centres, cam_up)
+    up = None
+    if plane is not None and cam_right is not None:
+        up = upright_normal(plane.normal, cam_right, cam_centres, min_extent=plane.median_camera_height)
+    if up is None and plane is not None:
+        up = plane.normal
     if metres_per_unit is not None:
         if not metres_per_unit > 0:
             raise DataError(f"--metres-per-unit must be positive, got {metres_per_unit}", where)
-        up = plane.normal if plane is not None else np.asarray(cam_up, dtype=np.float64) / np.linalg.norm(cam_up)
+        up = up if up is not None else np.asarray(cam_up, dtype=np.float64) / np.linalg.norm(cam_up)
         return MetricScale(float(metres_per_unit), up, "override", plane)
     if plane is None:
         raise DataError(f"no ground plane found below the cameras (within {MAX_TILT_DEG:.0f} deg of their up) to set the "
                         "metric scale: pass --metres-per-unit (metres per data unit) instead", where)
     if not camera_height > 0:
         raise DataError(f"--camera-height must be positive, got {camera_height}", where)
-    return MetricScale(float(camera_height / plane.median_camera_height), plane.normal, "camera-height", plane)
+    return MetricScale(float(camera_height / plane.median_camera_height), up, "camera-height", plane)
 
 
 def scale_from_frames(train_c2w, points_xyz, camera_height: float, where) -> tuple[float, "np.ndarray"]:
@@ -141,6 +152,7 @@ def scale_from_frames(train_c2w, points_xyz, camera_height: float, where) -> tup
     if points_xyz is None or len(points_xyz) == 0:
         raise DataError("--camera-height needs sparse points (a COLMAP model or ply_file_path) to find the ground; "
                         "pass --metres-per-unit instead", where)
-    s = estimate_metric_scale(np.asarray(points_xyz), c2w[:, :, 3], c2w[:, :, 1].mean(0), camera_height, where=where)
+    s = estimate_metric_scale(np.asarray(points_xyz), c2w[:, :, 3], c2w[:, :, 1].mean(0), camera_height, where=where,
+                              cam_right=c2w[:, :, 0])
     print(f"metric scale: {s.metres_per_unit:.4g} metres per data unit (camera {camera_height} m above the ground plane)")
     return s.metres_per_unit, s.up

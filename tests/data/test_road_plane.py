@@ -1,10 +1,10 @@
-"""The masks' ground plane levelled with the camera path (``data/masks/road_plane.py``)."""
+"""The masks' ground plane levelled with the camera path (``data/road_plane.py``)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from nerf2gs_plugin.data.masks.road_plane import level_normal, level_plane, path_directions, plane_offset
+from nerf2gs_plugin.data.road_plane import level_normal, level_plane, path_directions, plane_offset, upright_normal
 
 
 def _drive(rng, n_cams: int = 30, n_road: int = 40, n_wall: int = 400):
@@ -53,3 +53,43 @@ def test_plane_offset_finds_the_road_layer_below_the_cameras():
     cams, pts = _drive(rng)
     assert abs(plane_offset(pts, cams, np.array([0.0, 0, 1]))) < 0.05
     assert plane_offset(pts[:3], cams, np.array([0.0, 0, 1])) is None
+
+
+def _angle(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.degrees(np.arccos(np.clip(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)), -1.0, 1.0))))
+
+
+def test_upright_normal_takes_the_roll_from_the_cameras():
+    """A RANSAC normal rolled 4 deg about a straight drive (the path cannot see a roll) is made
+    upright by the cameras' level horizontal axes (each a little noisy); level_plane does the same
+    given them. Cameras rolled on purpose (portrait: x axis vertical) are no evidence: None, and
+    level_plane falls back to levelling with the path."""
+    rng = np.random.default_rng(3)
+    cams, pts = _drive(rng)
+    right = np.array([0.0, -1.0, 0.0]) + rng.normal(0, 0.01, (len(cams), 3))  # driving along +x, up +z
+    rolled = _rot("x", 4.0) @ np.array([0.0, 0, 1])
+    assert _angle(level_normal(rolled, cams, min_extent=3.0), np.array([0.0, 0, 1])) > 3.5
+    up = upright_normal(rolled, right, cams, min_extent=3.0)
+    assert up is not None and _angle(up, np.array([0.0, 0, 1])) < 0.3
+    n, d = level_plane(rolled, 0.0, pts, cams, cam_right=right)
+    assert _angle(n, np.array([0.0, 0, 1])) < 0.3 and abs(np.median(cams @ n + d) - 3.0) < 0.05
+    portrait = np.tile(np.array([0.0, 0.0, 1.0]), (len(cams), 1))
+    assert upright_normal(rolled, portrait, cams, min_extent=3.0) is None
+    n2, _ = level_plane(rolled, 0.0, pts, cams, cam_right=portrait)
+    assert np.allclose(n2, level_normal(rolled, cams, min_extent=3.0))
+    # one camera standing still: its axis alone leaves two directions free
+    assert upright_normal(rolled, right[:1], cams[:1], min_extent=3.0) is None
+
+
+def test_metric_scale_up_from_the_cameras_scale_from_the_plane():
+    """process's up: the upright direction when given the cameras' axes; the metric scale stays the
+    plane's (camera height over the median camera height above it)."""
+    from nerf2gs_plugin.data.ground import estimate_metric_scale
+
+    rng = np.random.default_rng(4)
+    cams, pts = _drive(rng, n_road=400)
+    right = np.array([0.0, -1.0, 0.0]) + rng.normal(0, 0.01, (len(cams), 3))
+    plain = estimate_metric_scale(pts, cams, np.array([0.0, 0, 1]), camera_height=3.0)
+    upright = estimate_metric_scale(pts, cams, np.array([0.0, 0, 1]), camera_height=3.0, cam_right=right)
+    assert upright.metres_per_unit == plain.metres_per_unit
+    assert _angle(upright.up, np.array([0.0, 0, 1])) < 0.3

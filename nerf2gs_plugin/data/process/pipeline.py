@@ -147,7 +147,8 @@ def metric_scale(xyz: np.ndarray, c2w: np.ndarray, opts: ProcessOptions):
     from nerf2gs_plugin.data.ground import estimate_metric_scale
 
     cam_up = c2w[:, :, 1].mean(0)
-    scale = estimate_metric_scale(xyz, c2w[:, :, 3], cam_up, opts.camera_height, opts.metres_per_unit, where="--camera-height")
+    scale = estimate_metric_scale(xyz, c2w[:, :, 3], cam_up, opts.camera_height, opts.metres_per_unit, where="--camera-height",
+                                  cam_right=c2w[:, :, 0])
     if scale.plane is None:
         import warnings
 

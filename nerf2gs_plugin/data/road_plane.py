@@ -46,6 +46,37 @@ def level_normal(normal: np.ndarray, centres: np.ndarray, min_extent: float) -> 
     return out if out @ n > 0 else -out
 
 
+UPRIGHT_MAX_DEG = 10.0
+"""The most the cameras' upright direction may differ from the plane's normal and still replace it:
+beyond, the cameras are rolled on purpose (portrait photos, a tilted mount) and the points decide."""
+
+
+def upright_normal(normal: np.ndarray, cam_right: np.ndarray, centres: np.ndarray, min_extent: float,
+                   max_deg: float = UPRIGHT_MAX_DEG) -> Optional[np.ndarray]:
+    """The direction perpendicular to every camera's horizontal axis (``cam_right [N, 3]``, OpenGL x)
+    and to the camera path (:func:`path_directions`), on ``normal``'s side; None when those leave
+    more than one direction free or the result is more than ``max_deg`` from ``normal``.
+
+    Why: people and cars hold cameras without roll and drive parallel to the road, and hundreds of
+    camera axes pin the up down better than the few sparse points below a forward drive: on the real
+    bench's drive the RANSAC plane sits 4.1 deg off the true up and levelling it with the path alone
+    (:func:`level_normal`) 4.05 (the roll about a straight drive still comes from the points), the
+    upright direction 0.6; on castle-P30 (hand-held, 15k points) 0.66 against the plane's 0.93
+    (``benchmarks/results/ground_fit.md``)."""
+    n = np.asarray(normal, dtype=np.float64)
+    n = n / np.linalg.norm(n)
+    right = np.asarray(cam_right, dtype=np.float64).reshape(-1, 3)
+    right = right / np.linalg.norm(right, axis=1, keepdims=True).clip(1e-12)
+    rows = np.concatenate([right / np.sqrt(max(len(right), 1)), path_directions(centres, min_extent)])
+    if len(rows) < 2:
+        return None
+    _, s, vt = np.linalg.svd(rows, full_matrices=True)
+    if len(s) < 2 or s[1] < 0.1 * s[0]:  # the axes and the path span one direction: two are free
+        return None
+    up = vt[2] if vt[2] @ n > 0 else -vt[2]
+    return up if up @ n >= np.cos(np.radians(max_deg)) else None
+
+
 def plane_offset(points: np.ndarray, centres: np.ndarray, normal: np.ndarray, rel_thresh: float = 0.05,
                  min_inliers: int = 10) -> Optional[float]:
     """Offset ``d`` of the plane ``normal . x + d = 0`` through the densest layer of points below the
@@ -73,15 +104,17 @@ def plane_offset(points: np.ndarray, centres: np.ndarray, normal: np.ndarray, re
 
 
 def level_plane(normal: np.ndarray, offset: float, points: np.ndarray, centres: np.ndarray,
-                rel_thresh: float = 0.05) -> tuple[np.ndarray, float]:
+                rel_thresh: float = 0.05, cam_right: Optional[np.ndarray] = None) -> tuple[np.ndarray, float]:
     """``(normal, offset)`` of a RANSAC ground plane levelled with the camera path (see the module
-    docstring), through the densest layer of points below the cameras along the new normal
-    (:func:`plane_offset`; the old plane's height under the median camera when there is none). The
-    path must spread by at least the camera height to say anything."""
+    docstring) or, given the cameras' horizontal axes ``cam_right``, made upright with them
+    (:func:`upright_normal`), through the densest layer of points below the cameras along the new
+    normal (:func:`plane_offset`; the old plane's height under the median camera when there is none).
+    The path must spread by at least the camera height to say anything."""
     n = np.asarray(normal, dtype=np.float64)
     c = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
     cam_h = float(np.median(c @ n + offset))
-    n2 = level_normal(n, c, min_extent=max(cam_h, 1e-12))
+    up = upright_normal(n, cam_right, c, min_extent=max(cam_h, 1e-12)) if cam_right is not None else None
+    n2 = up if up is not None else level_normal(n, c, min_extent=max(cam_h, 1e-12))
     d2 = plane_offset(points, c, n2, rel_thresh)
     if d2 is None:
         d2 = -float(np.median(c, axis=0) @ n2 - cam_h)
