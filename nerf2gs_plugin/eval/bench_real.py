@@ -187,10 +187,11 @@ def ground_truth_dataset(street: Path, out: Path, n: int) -> Path:
     return out
 
 
-def reference_dir(root: Path, est: Path, steps: int) -> Path:
+def reference_dir(root: Path, est: Path, steps: int, options: str = "") -> Path:
     """The masks' first reference, keyed by the capture it trains on (its mask-less
-    ``transforms.json``: poses, intrinsics, scale): a re-processed capture (other intrinsics, same
-    images) must not reuse a reference trained on the old one."""
+    ``transforms.json``: poses, intrinsics, scale, up) and by ``options`` (anything else it is
+    trained with, e.g. a downscale): a re-processed capture (other intrinsics or up, same images)
+    must not reuse a reference trained on the old one."""
     import hashlib
 
     from nerf2gs_plugin.data.masks.maskless import strip_frame_keys
@@ -198,7 +199,7 @@ def reference_dir(root: Path, est: Path, steps: int) -> Path:
     meta = strip_frame_keys(json.loads((Path(est) / "transforms.json").read_text()))
     for k in ("eval_splits", "process"):  # the eval cameras and the stage times are no part of the capture
         meta.pop(k, None)
-    key = hashlib.sha1(json.dumps(meta, sort_keys=True).encode()).hexdigest()[:10]
+    key = hashlib.sha1((json.dumps(meta, sort_keys=True) + options).encode()).hexdigest()[:10]
     return Path(root) / f"masks-reference-{steps}-{key}"
 
 

@@ -118,7 +118,10 @@ def run_real_photos(opts: RealPhotosOptions, runs_root: Path, out_dir: Path, rer
     report = timed("process", lambda: process_photos(opts, data))
     for line in report.lines():
         log(f"[bench] process: {line}")
-    reference = root / f"masks-reference-{opts.reference_steps}"
+    from nerf2gs_plugin.eval.bench_real import reference_dir
+
+    # keyed by the processed capture: a re-processed one (another up, other intrinsics) trains its own
+    reference = reference_dir(root, data, opts.reference_steps, f"downscale {opts.downscale}")
     done = json.loads((data / "masks" / "masks.json").read_text()) if (data / "masks" / "masks.json").is_file() else {}
     if done.get("reference") != str(reference) or rerun:
         masks = timed("masks", lambda: make_masks(MasksConfig(data=data, reference=reference, reference_steps=opts.reference_steps,

@@ -233,6 +233,12 @@ def test_masks_reference_keyed_by_the_capture_not_its_stage_times(tmp_path):
     other = json.loads(json.dumps(meta))
     other["frames"][0].update(fl_y=100.0, cx=56.0, cy=0.0)  # the old export's reading of a SIMPLE_RADIAL camera
     assert ref(other, "c") != a and a.name.startswith("masks-reference-1000-")
+    turned = json.loads(json.dumps(meta))
+    turned["up"] = [0.0, 0.0, 1.0]  # re-processed with another up: another normalised world
+    assert ref(turned, "d") != a
+    (tmp_path / "e").mkdir()
+    (tmp_path / "e" / "transforms.json").write_text(json.dumps(meta))
+    assert br.reference_dir(tmp_path, tmp_path / "e", 1000, "downscale 4.0") != a  # trained otherwise
 
 
 def test_camera_optimizer_option_reaches_only_the_estimated_streetnerf():
