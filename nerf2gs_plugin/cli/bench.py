@@ -312,13 +312,15 @@ class Real:
     splatfacto_steps: int = 800
     camera_optimizer: Literal["off", "SO3xR3"] = "off"
     """SO3xR3: StreetNeRF refines the estimated training poses (the ground-truth side stays unrefined)."""
+    seed: Optional[int] = None
+    """Training seed of every run (None: each method's own); the capture and its masks stay the same."""
 
     def main(self) -> None:
         from nerf2gs_plugin.eval.bench_real import RealBenchOptions, results_md, run_real_bench
 
         opts = RealBenchOptions(frames=self.frames, reference_steps=self.reference_steps,
                                 streetnerf_steps=self.streetnerf_steps, splatfacto_steps=self.splatfacto_steps,
-                                camera_optimizer=self.camera_optimizer)
+                                camera_optimizer=self.camera_optimizer, seed=self.seed)
         doc = run_real_bench(self.runs, self.out, opts, rerun=self.rerun)
         print(results_md(doc))
         print(f"results: {self.out}/real.md")

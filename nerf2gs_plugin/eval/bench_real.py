@@ -55,6 +55,9 @@ class RealBenchOptions:
     camera_optimizer: Literal["off", "SO3xR3"] = "off"
     """StreetNeRF's pose refinement on the ESTIMATED capture (--pipeline.model.camera-optimizer.mode);
     the ground-truth side keeps the true poses unrefined."""
+    seed: Optional[int] = None
+    """The training seed of every run, both columns (None: each method's own); the capture (SfM,
+    masks) is the same: a second seed measures how much of a gain ratio is the training's noise."""
 
 
 # ----------------------------------------------------------------------------- pure parts
@@ -234,7 +237,8 @@ def real_plan(opts: RealBenchOptions, camera_optimizer: str = "off") -> list:
     from nerf2gs_plugin.eval.bench_runs import RunSpec
 
     def ov(method: str, steps: int) -> dict:
-        return {**step_overrides(method, steps), "steps_per_eval_image": 0}
+        seed = {} if opts.seed is None else {"seed": opts.seed}  # absent by default: the run keys stay the plain bench's
+        return {**step_overrides(method, steps), "steps_per_eval_image": 0, **seed}
 
     street = ov("streetnerf", opts.streetnerf_steps)
     if camera_optimizer != "off":  # absent when off: the run keys stay those of the plain bench

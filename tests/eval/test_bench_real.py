@@ -252,3 +252,16 @@ def test_camera_optimizer_option_reaches_only_the_estimated_streetnerf():
     assert off[1:] == on[1:] and "camera_optimizer" not in str(off[0].overrides)
     cfg = apply_plain(get_method("streetnerf").config, on[0].overrides)
     assert cfg.pipeline.model.camera_optimizer.mode == "SO3xR3" and cfg.max_num_iterations == opts.streetnerf_steps
+
+
+def test_seed_option_reaches_every_run_and_is_absent_by_default():
+    import dataclasses
+
+    from nerf2gs_plugin.registry import get_method
+    from nerf2gs_plugin.utils.config import apply_plain
+
+    plain = br.real_plan(br.RealBenchOptions())
+    assert all("seed" not in s.overrides for s in plain)  # the plain bench's run keys unchanged
+    seeded = br.real_plan(dataclasses.replace(br.RealBenchOptions(), seed=43))
+    for spec in seeded:
+        assert apply_plain(get_method(spec.method).config, spec.overrides).seed == 43
