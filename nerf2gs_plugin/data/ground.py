@@ -127,15 +127,14 @@ def estimate_metric_scale(points: np.ndarray, cam_centres: np.ndarray, cam_up: n
     from nerf2gs_plugin.data.road_plane import upright_normal
 
     plane = fit_ground_plane(points, cam_centres, cam_up)
-    up = None
-    if plane is not None and cam_right is not None:
-        up = upright_normal(plane.normal, cam_right, cam_centres, min_extent=plane.median_camera_height)
-    if up is None and plane is not None:
-        up = plane.normal
+    if plane is None:
+        up = np.asarray(cam_up, dtype=np.float64) / np.linalg.norm(cam_up)
+    else:
+        upright = None if cam_right is None else upright_normal(plane.normal, cam_right, cam_centres, plane.median_camera_height)
+        up = plane.normal if upright is None else upright
     if metres_per_unit is not None:
         if not metres_per_unit > 0:
             raise DataError(f"--metres-per-unit must be positive, got {metres_per_unit}", where)
-        up = up if up is not None else np.asarray(cam_up, dtype=np.float64) / np.linalg.norm(cam_up)
         return MetricScale(float(metres_per_unit), up, "override", plane)
     if plane is None:
         raise DataError(f"no ground plane found below the cameras (within {MAX_TILT_DEG:.0f} deg of their up) to set the "

@@ -30,7 +30,7 @@ from typing import Callable, Literal, Optional
 import numpy as np
 
 from nerf2gs_plugin.data.dataparser_outputs import MASK_KINDS
-from nerf2gs_plugin.eval.pose_eval import LocalAlignment, Sim3, align_poses, capture_report
+from nerf2gs_plugin.eval.pose_eval import LocalAlignment, Sim3, capture_report
 from nerf2gs_plugin.utils.io import atomic_write_text
 
 SPLITS = ("street", "bev_1", "bev_2")
@@ -206,14 +206,14 @@ def reference_dir(root: Path, est: Path, steps: int, options: str = "") -> Path:
     return Path(root) / f"masks-reference-{steps}-{key}"
 
 
-def attach_eval(data: Path, true_groups: dict[str, list], true_train: np.ndarray, est_train: np.ndarray) -> tuple[Sim3, LocalAlignment]:
+def attach_eval(data: Path, true_groups: dict[str, list], true_train: np.ndarray, est_train: np.ndarray) -> LocalAlignment:
     """Write the true eval cameras, mapped into the frame of ``est_train`` (the dataset's training
-    cameras) by the training cameras around each, as the dataset's eval splits. Returns the global
-    estimated -> true Sim(3) and the local true -> estimated mapping used."""
+    cameras) by the training cameras around each, as the dataset's eval splits. Returns the mapping
+    used (its ``global_sim``: the one estimated -> true Sim(3))."""
     local = LocalAlignment.fit(est_train, true_train)
     link_eval_masks(data, true_groups)
     write_eval_splits(data, mapped_eval_frames(true_groups, local))
-    return align_poses(est_train, true_train), local
+    return local
 
 
 def process_capture(video: Path, out: Path, n: int, fov_deg: float, camera_height: float):
@@ -280,7 +280,7 @@ def run_real_bench(runs_root: Path, out_dir: Path, opts: RealBenchOptions = Real
     gt = ground_truth_dataset(street, root / "gt", opts.frames)
     true_groups = read_frames(gt)
     true_train = c2w_array(true_groups["train"])
-    gt_sim, _ = attach_eval(gt, read_frames(street), true_train, true_train)  # identity: the same mapping code path
+    gt_local = attach_eval(gt, read_frames(street), true_train, true_train)  # identity: the same mapping code path
 
     video = timed("video", lambda: write_video(root / "drive.avi", [f.image for f in true_groups["train"]]))
     est = root / "estimated"
@@ -291,7 +291,7 @@ def run_real_bench(runs_root: Path, out_dir: Path, opts: RealBenchOptions = Real
     est_meta = json.loads((est / "transforms.json").read_text())
     capture = capture_report(est_train, true_train[idx], float(est_meta["metres_per_unit"]), np.asarray(est_meta.get("up", [0, 0, 1])),
                              np.asarray(true_meta.get("up", [0, 0, 1])), report.registered, opts.frames)
-    sim, local = attach_eval(est, read_frames(street), true_train[idx], est_train)
+    local = attach_eval(est, read_frames(street), true_train[idx], est_train)
     reference = reference_dir(root, est, opts.reference_steps)
     # the masks are always derived again (a minute of renders): the rules change more often than the capture
     summary = timed("masks", lambda: make_masks(MasksConfig(data=est, reference=reference, reference_steps=opts.reference_steps,
@@ -311,7 +311,7 @@ def run_real_bench(runs_root: Path, out_dir: Path, opts: RealBenchOptions = Real
         "up_error_deg": capture["up_error_deg"],
         "eval_mapping_rotation_deg": local.leave_one_out_rotation_deg(),
         "mask_iou": iou,
-        "alignment": {"scale": sim.s, "gt_identity_scale": gt_sim.s},
+        "alignment": {"scale": local.global_sim.s, "gt_identity_scale": gt_local.global_sim.s},
         "process": {"registered": report.registered, "frames": report.frames, "points": report.points,
                     "metres_per_unit": report.metres_per_unit, "stage_seconds": report.stage_seconds},
         "masks": {"reference_seconds": summary.get("reference_seconds"), "mask_seconds": summary.get("mask_seconds"),

@@ -93,9 +93,8 @@ def pose_errors(est_c2w: np.ndarray, true_c2w: np.ndarray) -> PoseErrors:
     err = np.linalg.norm(aligned[:, :, 3] - true[:, :, 3], axis=1)
     rmse = float(np.sqrt((err**2).mean()))
     length = trajectory_length(true[:, :, 3])
-    rel = np.einsum("nji,njk->nik", aligned[:, :, :3], true[:, :, :3])  # R_a^T R_t
-    cos = np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)
-    return PoseErrors(rmse, 100.0 * rmse / length if length > 0 else float("nan"), float(np.degrees(np.arccos(cos)).mean()), sim.s, sim)
+    rot = float(np.mean([rotation_angle_deg(a, t) for a, t in zip(aligned[:, :, :3], true[:, :, :3])]))
+    return PoseErrors(rmse, 100.0 * rmse / length if length > 0 else float("nan"), rot, sim.s, sim)
 
 
 def _nearest_rotation(M: np.ndarray) -> np.ndarray:
@@ -122,7 +121,7 @@ class LocalAlignment:
     est: np.ndarray  # [N, 3, 4] training cameras in the estimated frame
     true: np.ndarray  # [N, 3, 4] the same cameras in the true frame
     sigma: float  # neighbourhood width, true units
-    scale: float  # estimated units per true unit (the global Sim(3)'s)
+    global_sim: Sim3  # the one estimated -> true Sim(3) (:func:`align_poses`): the capture figures' alignment
 
     @classmethod
     def fit(cls, est_c2w: np.ndarray, true_c2w: np.ndarray, sigma: Optional[float] = None) -> "LocalAlignment":
@@ -131,7 +130,12 @@ class LocalAlignment:
         if sigma is None:
             steps = np.linalg.norm(np.diff(true[:, :, 3], axis=0), axis=1)
             sigma = 2.0 * float(np.median(steps)) if len(steps) else 1.0
-        return cls(est, true, max(float(sigma), 1e-9), 1.0 / align_poses(est, true).s)
+        return cls(est, true, max(float(sigma), 1e-9), align_poses(est, true))
+
+    @property
+    def scale(self) -> float:
+        """Estimated units per true unit (the global Sim(3)'s: the local maps keep it)."""
+        return 1.0 / self.global_sim.s
 
     def weights(self, centre: np.ndarray, skip: Optional[int] = None) -> np.ndarray:
         d = np.linalg.norm(self.true[:, :, 3] - np.asarray(centre, dtype=np.float64), axis=1)

@@ -89,7 +89,8 @@ def test_identity_mapping_reproduces_the_ground_truth_eval_cameras(small_street,
     (ref / "transforms.json").write_text(json.dumps(doc))
     groups = br.read_frames(gt)
     train = br.c2w_array(groups["train"])
-    sim, local = br.attach_eval(gt, br.read_frames(small_street), train, train)
+    local = br.attach_eval(gt, br.read_frames(small_street), train, train)
+    sim = local.global_sim
     assert sim.s == pytest.approx(1.0) and np.allclose(sim.R, np.eye(3))
     assert local.leave_one_out_rotation_deg() == pytest.approx(0.0, abs=1e-5)
     for split in ("street", "bev_1", "bev_2"):
