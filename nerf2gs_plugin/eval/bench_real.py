@@ -198,11 +198,13 @@ def reference_dir(root: Path, est: Path, steps: int, options: str = "") -> Path:
     import hashlib
 
     from nerf2gs_plugin.data.masks.maskless import strip_frame_keys
+    from nerf2gs_plugin.eval.code_version import model_code_hash
 
     meta = strip_frame_keys(json.loads((Path(est) / "transforms.json").read_text()))
     for k in ("eval_splits", "process"):  # the eval cameras and the stage times are no part of the capture
         meta.pop(k, None)
-    key = hashlib.sha1((json.dumps(meta, sort_keys=True) + options).encode()).hexdigest()[:10]
+    # and by the model code that trains it: a changed default must not reuse a reference made before it
+    key = hashlib.sha1((json.dumps(meta, sort_keys=True) + options + model_code_hash()).encode()).hexdigest()[:10]
     return Path(root) / f"masks-reference-{steps}-{key}"
 
 

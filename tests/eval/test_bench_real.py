@@ -242,6 +242,16 @@ def test_masks_reference_keyed_by_the_capture_not_its_stage_times(tmp_path):
     assert br.reference_dir(tmp_path, tmp_path / "e", 1000, "downscale 4.0") != a  # trained otherwise
 
 
+def test_masks_reference_keyed_by_the_model_code(tmp_path, monkeypatch):
+    """A changed model (a new default) trains a new first reference: the old one is stale."""
+    import nerf2gs_plugin.eval.code_version as cv
+
+    (tmp_path / "transforms.json").write_text(json.dumps({"frames": [], "metres_per_unit": 1.0}))
+    a = br.reference_dir(tmp_path, tmp_path, 1000)
+    monkeypatch.setattr(cv, "model_code_hash", lambda root=None: "another model")
+    assert br.reference_dir(tmp_path, tmp_path, 1000) != a
+
+
 def test_camera_optimizer_option_reaches_only_the_estimated_streetnerf():
     from nerf2gs_plugin.registry import get_method
     from nerf2gs_plugin.utils.config import apply_plain
