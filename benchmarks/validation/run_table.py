@@ -1,0 +1,45 @@
+"""A table of finished bench runs, read from their folders: the evidence of a default or a diagnosis
+made from a handful of ``BenchRunner`` runs (each trained with the overrides its ``bench_run.json``
+records), without retraining anything.
+
+Usage: python benchmarks/validation/run_table.py OUT_STEM ROWS.json
+ROWS.json: {"title": ..., "about": ..., "rows": [{"scene": ..., "variant": ..., "run": RUN_DIR,
+"splits": "val" | "test" | "eval"}, ...]}; "val" reads the run's validation evaluation
+(val_street, val_bev), "test" / "eval" its bench evaluation (a photo set's held-out photos, or the
+street / bird's-eye views).
+Produced: benchmarks/results/appearance_reg.{json,md} (rows: benchmarks/validation/appearance_reg_rows.json),
+benchmarks/results/castle_floaters.{json,md} (rows: benchmarks/validation/castle_floaters_rows.json).
+"""
+import json
+import sys
+from pathlib import Path
+
+from nerf2gs_plugin.eval.machine import machine_line
+from nerf2gs_plugin.utils.io import atomic_write_text
+
+
+def results(run: Path, splits: str) -> dict:
+    name = "bench_eval_val_street-val_bev.json" if splits == "val" else "bench_eval.json"
+    return json.loads((run / name).read_text())["results"]
+
+
+def main(out: Path, rows_path: Path) -> None:
+    doc = json.loads(rows_path.read_text())
+    rows = []
+    for r in doc["rows"]:
+        res = results(Path(r["run"]), r["splits"])
+        psnr = {k: round(v["psnr"], 2) for k, v in res.items()}
+        steps = json.loads((Path(r["run"]) / "bench_run.json").read_text())["overrides"].get("max_num_iterations")
+        rows.append({**r, "steps": steps, "psnr": psnr, "mean": round(sum(psnr.values()) / len(psnr), 2)})
+    lines = [f"# {doc['title']}", "", f"Machine: {machine_line()}", "", doc["about"], "",
+             "| scene | variant | steps | PSNR per split | mean |", "|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['scene']} | {r['variant']} | {r['steps']} | " + ", ".join(f"{k} {v:.2f}" for k, v in r["psnr"].items())
+                     + f" | {r['mean']:.2f} |")
+    atomic_write_text(out.with_suffix(".json"), json.dumps({"machine": machine_line(), "title": doc["title"], "rows": rows}, indent=1))
+    atomic_write_text(out.with_suffix(".md"), "\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1]), Path(sys.argv[2]))
