@@ -545,6 +545,13 @@ PROSE = [
     ("the reference breaks FIRST under pose noise, at 2 deg / 20 cm\n(street 4.64 dB below its seeds; 1 deg / 10 cm already costs 2.79)",
      "2 20 4.64 1 10 2.79", lambda: [2, 20, _stab_sn("pose noise 2deg/20cm", "street"), 1, 10, _stab_sn("pose noise 1deg/10cm", "street")]),
     ("fewer views do not break it down to 12% (2.00 dB\nbelow from above there)", "12 2.00", lambda: [12, _stab_sn("views kept 12%", "bev")]),
+    ("masks\ngrown by 12 px break it (street 3.62 dB below; 6 px costs 1.89)", "12 3.62 6 1.89",
+     lambda: [12, _stab_sn("mask dilation 12px", "street"), 6, _stab_sn("mask dilation 6px", "street")]),
+    ("eroded masks (none up to\n12 px, 0.82 below), half or all of the masks dropped (none; 1.16 below with no masks at all) and 8x the\n"
+     "cars (0.70 below", "12 0.82 1.16 8 0.70",
+     lambda: [12, _stab_sn("mask erosion 12px", "street"), _stab_sn("no masks", "street"), 8, _stab_sn("transients 8x", "street")]),
+    ("+-2 stops (street 3.89 dB below) like every splatting method, and +-1 stop costs it 1.60 dB", "2 3.89 1 1.60",
+     lambda: [2, _stab_sn("exposure +-2 stop", "street"), 1, _stab_sn("exposure +-1 stop", "street")]),
     ("7 failures in 45 runs", "7 45", lambda: [sum(s["failures"] for s in _stability()["summary"].values()), len(_stability()["rows"])]),
     ("2DGS and Scaffold-GS at 4 deg / 40 cm (3.18 / 3.97 dB below), Splatfacto not up to it\n  (2.62 dB below there)",
      "4 40 3.18 3.97 2.62", lambda: [4, 40] + [_stab_drop(m, "pose noise 4deg/40cm") for m in ("2dgs", "scaffold-gs", "splatfacto")]),
