@@ -274,6 +274,17 @@ def target_lines(results: dict[str, dict]) -> list[str]:
     return ["Targets of issue 18 point 5 on the held-out photos:", ""] + out if out else []
 
 
+def per_photo_lines(results: dict[str, dict]) -> list[str]:
+    """Each method's PSNR per held-out photo: with four photos one lost view moves the mean by dBs."""
+    out = []
+    for label in LABELS:
+        r = results.get(label)
+        per = None if not r or r.get("failed") else r["results"].get("test", {}).get("psnr_per_image")
+        if per:
+            out.append(f"- {label}: " + " / ".join(f"{v:.2f}" for v in per))
+    return ["PSNR per held-out photo (in name order):", ""] + out if out else []
+
+
 def results_md(doc: dict) -> str:
     from nerf2gs_plugin.eval.machine import machine_line
 
@@ -293,6 +304,8 @@ def results_md(doc: dict) -> str:
         "Held-out photos (PSNR / SSIM / LPIPS, mean over the held-out views):", "",
         held_out_table(doc["results"]), "",
     ]
+    per_photo = per_photo_lines(doc["results"])
+    lines += per_photo + [""] if per_photo else []
     lines += target_lines(doc["results"]) + [""]
     if doc.get("reference_check"):
         lines += [f"Reference check, logged before Splatfacto + NeRF views trained: {doc['reference_check']['line']}", ""]

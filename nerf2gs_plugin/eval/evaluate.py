@@ -96,6 +96,7 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
         for metric, values in rows.items():
             mean, std = _mean_std(values)
             entry[metric], entry[f"{metric}_std"] = mean, std
+        entry["psnr_per_image"] = rows["psnr"]  # in the split's order: a mean over few views hides one lost view
         results[name] = entry
         if render_dir is not None and shown:
             which = "all views" if len(shown) == n_img else f"views 1-{len(shown)} of {n_img}"

@@ -26,6 +26,15 @@ def test_table_rows_and_markdown():
     md = results_md(_doc())
     assert "- StreetNeRF within 0.5 dB of Splatfacto: -2.70 dB (not met)." in md
     assert "from somewhere" in md and "2.70 dB BELOW" in md and "--fov-deg 58.2" in md and "every 8th photo" in md
+    assert "per held-out photo" not in md  # results made before the per-image PSNR: no line
+
+
+def test_per_photo_psnr_lines():
+    doc = _doc()
+    doc["results"][LABELS[1]]["results"]["test"]["psnr_per_image"] = [25.66, 9.62, 26.28, 25.82]
+    md = results_md(doc)
+    assert "PSNR per held-out photo (in name order):" in md and "- splatfacto: 25.66 / 9.62 / 26.28 / 25.82" in md
+    assert "- StreetNeRF:" not in md  # its result has no per-image list
 
 
 def test_overrides_hold_out_the_same_photos_in_every_run():

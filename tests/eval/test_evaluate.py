@@ -70,6 +70,7 @@ def test_evaluate_run_schema_grids_and_lpips(tiny_run, tmp_path):
             lpipss.append(float(lp(pred, batch["image"])))
         assert res["results"][split]["psnr"] == pytest.approx(np.mean(psnrs), abs=1e-3)
         assert res["results"][split]["psnr_std"] == pytest.approx(np.std(psnrs), abs=1e-3)
+        assert res["results"][split]["psnr_per_image"] == pytest.approx(psnrs, abs=1e-3)  # each view, in order
         assert res["results"][split]["lpips"] == pytest.approx(np.mean(lpipss), abs=1e-4)
     assert res["experiment_name"] == Path(run.config.data).name
     for split in ("street", "bev_1"):
