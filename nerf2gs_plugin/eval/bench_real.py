@@ -197,6 +197,7 @@ def reference_dir(root: Path, est: Path, steps: int, options: str = "") -> Path:
     must not reuse a reference trained on the old one."""
     import hashlib
 
+    from nerf2gs_plugin.capture.mask_reference import REFERENCE_OVERRIDES
     from nerf2gs_plugin.data.masks.maskless import strip_frame_keys
     from nerf2gs_plugin.eval.code_version import model_code_hash
 
@@ -204,7 +205,8 @@ def reference_dir(root: Path, est: Path, steps: int, options: str = "") -> Path:
     for k in ("eval_splits", "process"):  # the eval cameras and the stage times are no part of the capture
         meta.pop(k, None)
     # and by the model code that trains it: a changed default must not reuse a reference made before it
-    key = hashlib.sha1((json.dumps(meta, sort_keys=True) + options + model_code_hash()).encode()).hexdigest()[:10]
+    recipe = json.dumps(REFERENCE_OVERRIDES, sort_keys=True)  # what it changes of StreetNeRF (capture/ keys no model)
+    key = hashlib.sha1((json.dumps(meta, sort_keys=True) + options + model_code_hash() + recipe).encode()).hexdigest()[:10]
     return Path(root) / f"masks-reference-{steps}-{key}"
 
 

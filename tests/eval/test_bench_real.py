@@ -249,7 +249,12 @@ def test_masks_reference_keyed_by_the_model_code(tmp_path, monkeypatch):
     (tmp_path / "transforms.json").write_text(json.dumps({"frames": [], "metres_per_unit": 1.0}))
     a = br.reference_dir(tmp_path, tmp_path, 1000)
     monkeypatch.setattr(cv, "model_code_hash", lambda root=None: "another model")
-    assert br.reference_dir(tmp_path, tmp_path, 1000) != a
+    b = br.reference_dir(tmp_path, tmp_path, 1000)
+    assert b != a
+    import nerf2gs_plugin.capture.mask_reference as mr  # and by what the reference changes of StreetNeRF
+
+    monkeypatch.setattr(mr, "REFERENCE_OVERRIDES", {"pipeline": {"model": {"appearance_reg_weight": 0.5}}})
+    assert br.reference_dir(tmp_path, tmp_path, 1000) not in (a, b)
 
 
 def test_camera_optimizer_option_reaches_only_the_estimated_streetnerf():
