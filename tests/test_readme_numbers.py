@@ -127,9 +127,7 @@ def _conf(scene: str) -> dict:
 
 def _stab_sn(variant: str, view: str) -> float:
     """benchmarks/results/stability_streetnerf: how far below its seed mean a StreetNeRF run ended."""
-    d = json.loads((RESULTS / "stability_streetnerf" / "stability.json").read_text())
-    s, r = d["summary"]["streetnerf"], next(r for r in d["rows"] if r["variant"] == variant)
-    return s[f"seed_{view}_mean"] - r[f"{view}_psnr"]
+    return _stab_view("streetnerf", variant, "stability_streetnerf/stability", view)
 
 
 def _app_reg(scene: str, variant: str, steps: int | None = None) -> float:
@@ -154,19 +152,9 @@ def _stab_view(method: str, variant: str, stem: str, view: str) -> float:
     return s[f"seed_{view}_mean"] - r[f"{view}_psnr"]
 
 
-def _stab_street(method: str, variant: str, stem: str) -> float:
-    return _stab_view(method, variant, stem, "street")
-
-
-def _stab_bev(method: str, variant: str, stem: str) -> float:
-    return _stab_view(method, variant, stem, "bev")
-
-
 def _stab_drop(method: str, variant: str, stem: str = "stability") -> float:
     """How far below its unstressed seed mean a stressed run ended (the worse of street and BEV)."""
-    d = _stability(stem)
-    s, r = d["summary"][method], next(r for r in d["rows"] if r["method"] == method and r["variant"] == variant)
-    return max(s["seed_street_mean"] - r["street_psnr"], s["seed_bev_mean"] - r["bev_psnr"])
+    return max(_stab_view(method, variant, stem, view) for view in ("street", "bev"))
 
 
 Q, D, GPU = "paper_table.json", "default/paper_table.json", "gpu/quick.json"
@@ -184,7 +172,7 @@ RP3 = "real_photos_run3.json"  # the run before the appearance change (the castl
 
 
 def _per_photo(label: str) -> list[float]:
-    return _r(RP)[label]["results"]["test"]["psnr_per_image"]
+    return _psnr(_r(RP), label, "test", "psnr_per_image")
 
 
 def _floater_run(variant: str) -> float:
@@ -571,9 +559,9 @@ PROSE = [
     ("fewer views do not break it down to 12% (2.00 dB\nbelow from above there)", "12 2.00", lambda: [12, _stab_sn("views kept 12%", "bev")]),
     ("Splatfacto + NeRF views does not break up to 8x\nthe cars and loses nothing measurable there (street 0.05 dB ABOVE its seeds, BEV 0.22 above), where\n"
      "Splatfacto alone ends 2.03 dB below at 8x", "8 0.05 0.22 2.03 8",
-     lambda: [8, -_stab_street("splatfacto + NeRF views", "transients 8x", "stability_augmented_transients/stability"),
-              -_stab_bev("splatfacto + NeRF views", "transients 8x", "stability_augmented_transients/stability"),
-              _stab_street("splatfacto", "transients 8x", "stability_masks/stability"), 8]),
+     lambda: [8, -_stab_view("splatfacto + NeRF views", "transients 8x", "stability_augmented_transients/stability", "street"),
+              -_stab_view("splatfacto + NeRF views", "transients 8x", "stability_augmented_transients/stability", "bev"),
+              _stab_view("splatfacto", "transients 8x", "stability_masks/stability", "street"), 8]),
     ("masks\ngrown by 12 px break it (street 3.62 dB below; 6 px costs 1.89)", "12 3.62 6 1.89",
      lambda: [12, _stab_sn("mask dilation 12px", "street"), 6, _stab_sn("mask dilation 6px", "street")]),
     ("eroded masks (none up to\n12 px, 0.82 below), half or all of the masks dropped (none; 1.16 below with no masks at all) and 8x the\n"

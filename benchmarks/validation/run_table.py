@@ -14,12 +14,13 @@ import json
 import sys
 from pathlib import Path
 
+from nerf2gs_plugin.eval.bench_io import EVAL_SPLITS, VAL_SPLITS, eval_cache_name
 from nerf2gs_plugin.eval.machine import machine_line
 from nerf2gs_plugin.utils.io import atomic_write_text
 
 
 def results(run: Path, splits: str) -> dict:
-    name = "bench_eval_val_street-val_bev.json" if splits == "val" else "bench_eval.json"
+    name = eval_cache_name(VAL_SPLITS if splits == "val" else EVAL_SPLITS)
     return json.loads((run / name).read_text())["results"]
 
 

@@ -22,6 +22,11 @@ EVAL_SPLITS = ("street", "bev_1", "bev_2")
 VAL_SPLITS = ("val_street", "val_bev")  # the synthetic street's validation views: choose defaults on these
 
 
+def eval_cache_name(splits: tuple[str, ...]) -> str:
+    """The file in a run folder that caches the bench's evaluation of ``splits``."""
+    return "bench_eval.json" if tuple(splits) == EVAL_SPLITS else f"bench_eval_{'-'.join(splits)}.json"
+
+
 class BenchFailed(UserError):
     """Some runs of a bench failed; the results (failed rows included) are written already."""
 
@@ -181,8 +186,7 @@ class BenchRunner:
         """The cached evaluation when its :meth:`eval_key` matches, else a fresh one (labelled)."""
         from nerf2gs_plugin.eval.code_version import device_label
 
-        name = "bench_eval.json" if self.splits == EVAL_SPLITS else f"bench_eval_{'-'.join(self.splits)}.json"
-        eval_path = run_dir / name  # validation and test evaluations cached side by side
+        eval_path = run_dir / eval_cache_name(self.splits)  # validation and test evaluations cached side by side
         want = self.eval_key(key)
         res = json.loads(eval_path.read_text()) if eval_path.is_file() else None
         if res is None or res.get("eval_key") != want:

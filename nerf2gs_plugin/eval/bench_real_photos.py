@@ -257,8 +257,9 @@ def held_out_table(results: dict[str, dict]) -> str:
     return "\n".join(lines)
 
 
-def _test_psnr(r: Optional[dict]) -> Optional[float]:
-    return None if not r or r.get("failed") else r["results"].get("test", {}).get("psnr")
+def _test_psnr(r: Optional[dict], key: str = "psnr"):
+    """A run's held-out-photo PSNR (``key``: "psnr" the mean, "psnr_per_image" the list); None if it failed or has none."""
+    return None if not r or r.get("failed") else r["results"].get("test", {}).get(key)
 
 
 def target_lines(results: dict[str, dict]) -> list[str]:
@@ -278,8 +279,7 @@ def per_photo_lines(results: dict[str, dict]) -> list[str]:
     """Each method's PSNR per held-out photo: with four photos one lost view moves the mean by dBs."""
     out = []
     for label in LABELS:
-        r = results.get(label)
-        per = None if not r or r.get("failed") else r["results"].get("test", {}).get("psnr_per_image")
+        per = _test_psnr(results.get(label), "psnr_per_image")
         if per:
             out.append(f"- {label}: " + " / ".join(f"{v:.2f}" for v in per))
     return ["PSNR per held-out photo (in name order):", ""] + out if out else []
