@@ -52,10 +52,12 @@ def gaussian_optimizers(max_steps: int) -> dict[str, OptimizerConfig]:
 
 def paper_scale(config: TrainerConfig) -> TrainerConfig:
     """The original step counts and schedules (30k steps) for a GPU: the strategies' own defaults
-    (nerfstudio's and gsplat's values, stated once in ``strategy.py``; MCMC's budget raised)."""
+    (nerfstudio's and gsplat's values, stated once in ``strategy.py``; MCMC's budget raised), plus
+    the capture path kept clear as at CPU scale (no nerfstudio setting: a real capture's floaters)."""
     model = dataclasses.replace(
         config.pipeline.model, sh_degree_interval=1000, num_random=50000,
-        strategy=DefaultStrategyConfig(), mcmc=MCMCStrategyConfig(cap_max=1_000_000),
+        strategy=DefaultStrategyConfig(path_clearance_m=config.pipeline.model.strategy.path_clearance_m),
+        mcmc=MCMCStrategyConfig(cap_max=1_000_000),
     )
     return dataclasses.replace(
         config, max_num_iterations=PAPER_STEPS, steps_per_save=2000, steps_per_eval_image=1000,

@@ -20,6 +20,7 @@ from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.engine.callbacks import TrainingCallback, TrainingCallbackAttributes, TrainingCallbackLocation as Loc
 from nerf2gs_plugin.utils.image_metrics import psnr_from_mse
 from nerf2gs_plugin.engine.model import Model
+from nerf2gs_plugin.methods.capture_path import CapturePath, capture_path
 from nerf2gs_plugin.methods.gaussian_utils import knn_mean_distance, logit
 from nerf2gs_plugin.utils.quaternions import normalize_quats, random_quats
 from nerf2gs_plugin.utils.sh import num_sh_bases, rgb_to_sh
@@ -32,6 +33,9 @@ from nerf2gs_plugin.methods.splatfacto.strategy import (
 )
 from nerf2gs_plugin.methods.strategy_base import Strategy
 from nerf2gs_plugin.utils.schedule import scheduled
+
+MAX_SPARSE_ON_PATH = 0.05
+"""More of the sparse points than this within the path clearance: the clearance is switched off."""
 
 
 @dataclass
@@ -49,7 +53,7 @@ class SplatfactoModelConfig(SplatModelConfig):
     """Densification: default (clone / split / prune, settings under strategy) or mcmc (settings under mcmc)."""
     strategy: DefaultStrategyConfig = field(default_factory=lambda: DefaultStrategyConfig(
         warmup_length=300, reset_alpha_every=1000, stop_split_at=1500, stop_screen_size_at=400,
-        max_pause_after_reset=300, max_gaussians=60000, prune_weight_fraction=0.1))
+        max_pause_after_reset=300, max_gaussians=60000, prune_weight_fraction=0.1, path_clearance_m=1.0))
     """The default strategy at CPU scale (paper values in config.py): 60k-Gaussian soft budget, and once
     densification stops the Gaussians carrying the lightest 10% of the training views' blending weight are
     pruned, so the size follows the scene (chosen on validation views: benchmarks/results/size_prune.md)."""
@@ -89,6 +93,7 @@ class SplatfactoModel(Model):
         self.register_buffer("step", torch.zeros((), dtype=torch.long))
         self._meta: Optional[dict[str, Any]] = None
         self._train_cameras: Optional[Callable[[], Cameras]] = None  # set with the training callbacks
+        self._path = self._capture_path(train_data, means if train_data.points3D_xyz is not None else None)
         self._setup_strategy()
 
     def _initial_points(self, data: DataparserOutputs, gen: torch.Generator) -> tuple[Tensor, Tensor]:
@@ -104,6 +109,25 @@ class SplatfactoModel(Model):
         xyz = lo + (hi - lo) * torch.rand(self.config.num_random, 3, generator=gen)
         return xyz, torch.rand(self.config.num_random, 3, generator=gen)
 
+    def _capture_path(self, data: DataparserOutputs, sparse: Optional[Tensor]) -> Optional[tuple[CapturePath, float]]:
+        """The path to keep clear (``strategy.path_clearance_m``) and one metre in world units; None
+        (with a warning) when the sparse points themselves crowd it: then the metric scale is wrong
+        (or the path runs through the scene) and the clearance would cut real content."""
+        metres = self.config.strategy.path_clearance_m
+        if metres <= 0 or len(data.cameras) == 0:
+            return None
+        path, metre = capture_path(data.cameras.camera_to_worlds[:, :3, 3]), data.metres_to_world(1.0)
+        if sparse is not None and sparse.shape[0] > 0:
+            inside = float(path.near(sparse.float(), metres * metre).float().mean())
+            if inside > MAX_SPARSE_ON_PATH:
+                from nerf2gs_plugin.warn import warn
+
+                warn(f"{inside:.0%} of the sparse points lie within {metres:g} m of the camera path",
+                     "not keeping the path clear (is the metric scale right? --metres-per-unit / "
+                     "--pipeline.model.strategy.path-clearance-m)", stacklevel=3)
+                return None
+        return path, metre
+
     def _make_strategy(self) -> Strategy:
         c = self.config
         if c.strategy_type == "mcmc":
@@ -114,6 +138,8 @@ class SplatfactoModel(Model):
         self.strategy = self._make_strategy()
         if isinstance(self.strategy, DefaultStrategy):
             self.strategy.weights_fn = self.training_blend_weights
+            if self._path is not None:
+                self.strategy.clear_path(*self._path)
 
     def get_param_groups(self) -> dict[str, list[nn.Parameter]]:
         groups = {name: [p] for name, p in self.gauss.items()}

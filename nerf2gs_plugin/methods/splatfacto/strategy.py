@@ -27,6 +27,7 @@ from typing import Any, Callable, Optional
 import torch
 from torch import Tensor, nn
 
+from nerf2gs_plugin.methods.capture_path import CapturePath
 from nerf2gs_plugin.methods.gaussian_utils import logit
 from nerf2gs_plugin.methods.strategy_base import Strategy
 from nerf2gs_plugin.utils.quaternions import quat_to_rotmat
@@ -118,6 +119,10 @@ class DefaultStrategyConfig:
     training view once and prune the Gaussians that together carry this fraction of the total
     blending weight (alpha x transmittance summed over all training pixels), lightest first
     (LightGaussian / Taming-3DGS significance): the count left follows the scene and its views."""
+    path_clearance_m: float = 0.0
+    """0 = off (nerfstudio). Else every prune also drops the Gaussians whose centre lies within this
+    many metres of the capture path (the training cameras joined in order, see
+    :mod:`nerf2gs_plugin.methods.capture_path`): space the car or walker occupied, where only floaters sit."""
 
 
 class DefaultStrategy(Strategy):
@@ -133,6 +138,9 @@ class DefaultStrategy(Strategy):
         self.weights_fn: Optional[Callable[[], Optional[Tensor]]] = None
         """Set by the model: each primitive's blending weight summed over the training pixels ``[N]``
         (None when it has no training views to render); read by the weight prune only."""
+        self.path: Optional[CapturePath] = None
+        self.path_radius = 0.0
+        """Set by the model (:meth:`clear_path`): the capture path and its clearance in world units."""
         self.initialize_state()
 
     def initialize_state(self) -> None:
@@ -156,6 +164,10 @@ class DefaultStrategy(Strategy):
         c = self.cfg
         pause = min(self.num_train_images, c.max_pause_after_reset) + c.refine_every
         return min(pause, max(c.reset_alpha_every // 2, 0))
+
+    def clear_path(self, path: Optional[CapturePath], metre: float) -> None:
+        """Keep ``cfg.path_clearance_m`` metres (``metre`` world units each) around ``path`` free."""
+        self.path, self.path_radius = path, self.cfg.path_clearance_m * metre
 
     def _reset_stats(self, n: int, device: torch.device) -> None:
         self.grad_accum = torch.zeros(n, device=device)
@@ -248,6 +260,8 @@ class DefaultStrategy(Strategy):
             cull |= torch.exp(params["scales"]).amax(-1) > c.cull_scale_thresh * self.scene_scale
             if step < c.stop_screen_size_at and self.max_radii is not None and self.max_radii.shape[0] == cull.shape[0]:
                 cull |= self.max_radii > c.cull_screen_size
+        if self.path is not None:
+            cull |= self.path.near(params["means"].detach(), self.path_radius)
         if bool(cull.all()):  # never empty the scene
             cull[torch.sigmoid(params["opacities"]).argmax()] = False
         n = int(cull.sum())
