@@ -56,7 +56,8 @@ class SplatfactoModelConfig(SplatModelConfig):
         max_pause_after_reset=300, max_gaussians=60000, prune_weight_fraction=0.1, path_clearance_m=1.0))
     """The default strategy at CPU scale (paper values in config.py): 60k-Gaussian soft budget, and once
     densification stops the Gaussians carrying the lightest 10% of the training views' blending weight are
-    pruned, so the size follows the scene (chosen on validation views: benchmarks/results/size_prune.md)."""
+    pruned, so the size follows the scene (chosen on validation views: benchmarks/results/size_prune.md);
+    every prune keeps 1 m around the capture path free (benchmarks/results/path_clearance.md)."""
     mcmc: MCMCStrategyConfig = field(default_factory=lambda: MCMCStrategyConfig(
         cap_max=30000, refine_start_iter=300, refine_stop_iter=2500))
     """The MCMC strategy at CPU scale (with --pipeline.model.strategy-type mcmc): 30k-Gaussian hard budget."""
@@ -123,8 +124,8 @@ class SplatfactoModel(Model):
                 from nerf2gs_plugin.warn import warn
 
                 warn(f"{inside:.0%} of the sparse points lie within {metres:g} m of the camera path",
-                     "not keeping the path clear (is the metric scale right? --metres-per-unit / "
-                     "--pipeline.model.strategy.path-clearance-m)", stacklevel=3)
+                     "not keeping the path clear (is the metric scale right? --pipeline.datamanager.metres-per-unit, "
+                     "or --pipeline.model.strategy.path-clearance-m 0 to say so)", stacklevel=3)
                 return None
         return path, metre
 
