@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import os
 import shutil
 import time
 from dataclasses import dataclass, field
@@ -47,6 +48,28 @@ def run_key(dataset: str, spec: RunSpec, reference_key: Optional[str], device: s
     return hashlib.sha1(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:12]
 
 
+def wait_for_other_training(run_dir: Path, log=print) -> None:
+    """Block while another process trains ``run_dir`` (holds its lock): two benches sharing a runs
+    folder then reuse one training instead of the second one failing on the lock."""
+    import fcntl
+
+    from nerf2gs_plugin.engine.run_dir import LOCK_NAME
+
+    lock = Path(run_dir) / LOCK_NAME
+    if not lock.is_file():
+        return
+    fd = os.open(lock, os.O_RDONLY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            log(f"[bench] waiting for another process training {run_dir}")
+            fcntl.flock(fd, fcntl.LOCK_SH)
+        fcntl.flock(fd, fcntl.LOCK_UN)
+    finally:
+        os.close(fd)
+
+
 def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, reference: Optional[tuple[Path, str]] = None,
                    progress: bool = True, log=print, step_hook=None, device: str = "auto",
                    rerun: bool = False) -> tuple[Path, str]:
@@ -65,6 +88,7 @@ def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, ref
     cfg = dataclasses.replace(cfg, data=Path(data), output_dir=Path(runs_root), timestamp=key, progress=progress,
                               device=str(torch_device))
     run_dir = cfg.get_run_dir()
+    wait_for_other_training(run_dir, log)
     if rerun and run_dir.exists():
         log(f"[bench] --rerun: retraining {spec.label} (removing {run_dir})")
         shutil.rmtree(run_dir)

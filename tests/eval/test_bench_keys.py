@@ -170,3 +170,25 @@ def test_bench_regenerates_a_street_of_an_older_generator(tmp_path, monkeypatch)
     (street / "transforms.json").write_text(json.dumps({"synthetic_street": {"generator_version": synthetic_street.GENERATOR_VERSION}}))
     bench.ensure_street(None, tmp_path)
     assert len(made) == 1
+
+
+def test_a_bench_waits_for_another_training_of_the_same_run(tmp_path):
+    """Two benches sharing a runs folder: the second waits for the first's training of a run (and
+    then reuses it) instead of failing on the run directory's lock and caching that as a failure."""
+    import threading
+    import time
+
+    from nerf2gs_plugin.engine.run_dir import RunDirLock
+    from nerf2gs_plugin.eval.bench_runs import wait_for_other_training
+
+    wait_for_other_training(tmp_path / "never-trained")  # no lock file: returns at once
+    lock = RunDirLock(tmp_path / "run")
+    lock.acquire()
+    threading.Timer(0.5, lock.release).start()
+    said: list[str] = []
+    t0 = time.monotonic()
+    wait_for_other_training(tmp_path / "run", log=said.append)
+    assert time.monotonic() - t0 >= 0.4
+    assert said and "waiting for another process" in said[0]
+    wait_for_other_training(tmp_path / "run", log=said.append)  # free now: no wait, nothing said
+    assert len(said) == 1
