@@ -130,17 +130,22 @@ def _stab_sn(variant: str, view: str) -> float:
     return _stab_view("streetnerf", variant, "stability_streetnerf/stability", view)
 
 
+def _table_row(stem: str, variant: str, scene: str = "", steps: int | None = None, exact: bool = False) -> dict:
+    """The first row of a ``benchmarks/validation/run_table.py`` result (benchmarks/results/<stem>.json)
+    whose scene starts with ``scene`` and whose variant is ``variant`` (``exact``) or starts with it."""
+    rows = json.loads((RESULTS / f"{stem}.json").read_text())["rows"]
+    return next(r for r in rows if r["scene"].startswith(scene) and (r["variant"] == variant if exact else r["variant"].startswith(variant))
+                and (steps is None or r["steps"] == steps))
+
+
 def _app_reg(scene: str, variant: str, steps: int | None = None) -> float:
     """benchmarks/results/appearance_reg.json: a row's mean PSNR over its splits."""
-    rows = json.loads((RESULTS / "appearance_reg.json").read_text())["rows"]
-    return next(r["mean"] for r in rows if r["scene"].startswith(scene) and r["variant"].startswith(variant)
-                and (steps is None or r["steps"] == steps))
+    return _table_row("appearance_reg", variant, scene, steps)["mean"]
 
 
 def _clear(scene: str, variant: str, view: int | None = None) -> float:
     """benchmarks/results/path_clearance.json: a row's mean PSNR, or one held-out photo's."""
-    rows = json.loads((RESULTS / "path_clearance.json").read_text())["rows"]
-    row = next(r for r in rows if r["scene"].startswith(scene) and r["variant"] == variant)
+    row = _table_row("path_clearance", variant, scene, exact=True)
     return row["mean"] if view is None else row["psnr_per_view"]["test"][view]
 
 
@@ -187,7 +192,7 @@ def _per_photo(label: str, stem: str = RP) -> list[float]:
 
 
 def _floater_run(variant: str) -> float:
-    return next(r["mean"] for r in json.loads((RESULTS / "castle_floaters.json").read_text())["rows"] if r["variant"].startswith(variant))
+    return _table_row("castle_floaters", variant)["mean"]
 
 
 def _rp_check(stem: str = RP) -> dict:

@@ -10,6 +10,7 @@ checkpoint. ``rerun=True`` retrains even when a finished run with the key exists
 from __future__ import annotations
 
 import dataclasses
+import fcntl
 import hashlib
 import json
 import os
@@ -20,6 +21,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 from nerf2gs_plugin.engine.checkpoints import list_checkpoints, load_checkpoint
+from nerf2gs_plugin.engine.run_dir import LOCK_NAME
 from nerf2gs_plugin.utils.config import apply_plain, to_plain
 from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.engine.trainer import Trainer
@@ -51,10 +53,6 @@ def run_key(dataset: str, spec: RunSpec, reference_key: Optional[str], device: s
 def wait_for_other_training(run_dir: Path, log=print) -> None:
     """Block while another process trains ``run_dir`` (holds its lock): two benches sharing a runs
     folder then reuse one training instead of the second one failing on the lock."""
-    import fcntl
-
-    from nerf2gs_plugin.engine.run_dir import LOCK_NAME
-
     lock = Path(run_dir) / LOCK_NAME
     if not lock.is_file():
         return
