@@ -375,6 +375,25 @@ def test_ground_median_ignores_floater_speckle():
     assert not (smooth & wall & (wall_z > 1.0)).any()
 
 
+def test_ground_where_the_reference_left_the_road_see_through():
+    """A short reference leaves the grey road near the camera empty (accumulation 0): with
+    ``empty_is_ground`` those downward rays are ground; the sky above the horizon, also empty, is not."""
+    up, origin, dirs, road, wall, depth = _street_scene()
+    acc = (road | wall).float()
+    g = torch.Generator().manual_seed(1)
+    holes = (torch.rand(depth.shape, generator=g) < 0.5) & road & (torch.arange(depth.shape[0])[:, None] > depth.shape[0] * 0.7)
+    blobs = fr.box_vote(holes, 5, 0.3) & road  # see-through patches, wider than the median window
+    acc2 = torch.where(blobs, torch.zeros_like(acc), acc)
+    d2 = torch.where(blobs, torch.full_like(depth, 0.5), depth)  # what an empty ray's depth says: nothing
+    off = fr.ground_from_render(origin, dirs, d2, acc2, up, 0.0, tol=0.3, smooth_px=3)
+    on = fr.ground_from_render(origin, dirs, d2, acc2, up, 0.0, tol=0.3, smooth_px=3, empty_is_ground=True)
+    assert blobs.sum() > 50 and not (off & blobs).all()
+    assert mask_iou(on, road) > 0.95 > mask_iou(off, road)
+    sky = acc == 0
+    assert not (on & sky).any()  # empty, but above the horizon
+    assert not (on & wall & ((origin[2] + depth * dirs[..., 2]) > 1.0)).any()
+
+
 def test_transient_opening_drops_thin_strokes_keeps_blobs():
     res = torch.zeros(60, 80)
     res[:, 10:12] = 1.0  # a pole the reference blurs: a 2-px stroke of high residual

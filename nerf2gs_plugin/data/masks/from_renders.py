@@ -15,6 +15,8 @@ ground plane is ``{x : x . up = height}``.
     median over a window: floater speckle) is below ``tol`` (a kerb of 15 cm stays ground; below
     the plane counts as on it: a too-long depth), the ray points down, and, where normals are
     given, the normal is within ``max_normal_deg`` of up (too noisy on a short reference's depth);
+    optionally a downward ray the reference sees nothing along is ground too (a short reference
+    leaves the grey road near the camera see-through; nothing it saw stands there);
   * transient: the photometric residual against the multi-view consistent reference (after a
     per-image affine colour fit, as the reference renders the mean appearance), thresholded at a
     robust level (median + k * 1.4826 MAD over the dataset, RobustNeRF-style trimmed statistics),
@@ -93,15 +95,17 @@ def median_filter(x: Tensor, size: int) -> Tensor:
 
 def ground_from_render(origin: Tensor, directions: Tensor, depth: Tensor, acc: Tensor, up: Tensor, height: float, tol: float,
                        acc_min: float = 0.5, normals: Optional[Tensor] = None, max_normal_deg: float = 30.0,
-                       smooth_px: int = 0) -> Tensor:
+                       smooth_px: int = 0, empty_is_ground: bool = False) -> Tensor:
     """Rendered surface within ``tol`` of the plane (heights in world units), seen by a downward
     ray with a solid render (see the module docstring). ``smooth_px``: the heights (and the
     accumulation) are ``smooth_px``-wide medians first, so a floater's speckle in front of the road
-    or a see-through hole in a facade does not flip a pixel."""
+    or a see-through hole in a facade does not flip a pixel. ``empty_is_ground``: a downward ray
+    whose (median) accumulation is below ``acc_min`` counts as ground as well."""
     h = median_filter(surface_points(origin, directions, depth) @ up - height, smooth_px)
     acc = median_filter(acc, smooth_px)
-    g = (h < tol) & ((directions @ up) < 0) & (acc >= acc_min)  # one-sided: nothing is below the road, a surface
-    # rendered below the plane is a depth error on the road
+    solid = acc >= acc_min
+    # one-sided: nothing is below the road, a surface rendered below the plane is a depth error on the road
+    g = ((h < tol) & solid | (~solid if empty_is_ground else torch.zeros_like(solid))) & ((directions @ up) < 0)
     if normals is not None:
         g &= (normals @ up).abs() > math.cos(math.radians(max_normal_deg))
     return g
