@@ -125,6 +125,11 @@ class AugmentConfig:
     """visibility, consistency: a training view observes a point when their depths agree within this fraction."""
     confidence_color_tol: float = 0.1
     """consistency: mean absolute RGB difference at which an observation counts exp(-1)."""
+    appearance: Literal["mean", "nearest"] = "mean"
+    """How a reference with an appearance model (StreetNeRF's per-photo colour transforms) colours what
+    it renders: mean: every view in the mean of the photos' transforms; nearest: each view in the
+    transform of the training photo nearest it (an input view its own, a view from above the photo it
+    was raised from), so the target sees the colours of the photos around each view."""
     real_only_from: float = 0.9
     """Fraction of the run after which only the input views (composites) are sampled: 0.9 gives the last
     10% of the steps to the target's own street evidence (1.0: the additional views to the end; 0.9 was

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
+import inspect
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Optional
@@ -90,9 +92,10 @@ def find_dataset(recorded: Path, run_dir: Path) -> Path:
     return recorded
 
 
-def load_reference(reference: Path, datamanager, device: torch.device | str) -> Reference:
+def load_reference(reference: Path, datamanager, device: torch.device | str, appearance: str = "mean") -> Reference:
     """A reference run (directory or .ckpt) for the augmentation of ``datamanager``'s dataset: it must
-    have been trained on the same images and its method must render whole cameras."""
+    have been trained on the same images and its method must render whole cameras. ``appearance``:
+    ``--augment.appearance``, for a model whose ``render_camera`` takes one (else it has none to choose)."""
     run_dir, ckpt_file = resolve_checkpoint(reference)
     ckpt = load_checkpoint(ckpt_file, map_location="cpu")
     ours = dataset_fingerprint(datamanager.train_data.image_filenames)
@@ -103,7 +106,10 @@ def load_reference(reference: Path, datamanager, device: torch.device | str) -> 
     ref = load_run(ckpt_file, device=device, data=datamanager.data)
     if not hasattr(ref.model, "render_camera") or getattr(type(ref.model).render_camera, "__isabstractmethod__", False):
         raise CheckpointError(f"method '{ref.config.method_name}' cannot render cameras (no render_camera)", ckpt_file)
-    return Reference(ref.model.render_camera, f"{ref.config.method_name}:{ref.checkpoint_hash}", run_dir, ref.model.depth_along,
+    render = ref.model.render_camera
+    if "appearance" in inspect.signature(render).parameters:
+        render = functools.partial(render, appearance=appearance)
+    return Reference(render, f"{ref.config.method_name}:{ref.checkpoint_hash}", run_dir, ref.model.depth_along,
                      getattr(ref.model, "refined_train_cameras", None))
 
 
@@ -120,5 +126,5 @@ def augmented_datamanager(inner: DataManager, reference: Path, augment: AugmentC
     """The factory the Trainer and ``ns2gs-data export-augmented`` call: ``inner`` wrapped in an
     AugmentedDataManager fed by the reference run at ``reference`` (``total_steps``: the run's length,
     for ``--augment.real-only-from``)."""
-    return AugmentedDataManager(inner, load_reference(reference, inner, device), augment, build_enhancer(augment.enhancer),
+    return AugmentedDataManager(inner, load_reference(reference, inner, device, augment.appearance), augment, build_enhancer(augment.enhancer),
                                 total_steps)

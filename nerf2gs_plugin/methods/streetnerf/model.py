@@ -422,8 +422,10 @@ class StreetNeRFModel(Model):
             self.ground_known.fill_(True)
 
     @torch.no_grad()
-    def render_camera(self, camera: Cameras) -> dict[str, Tensor]:
-        """Whole image for one camera in ``eval_chunk``-ray chunks; deterministic (no jitter)."""
+    def render_camera(self, camera: Cameras, appearance: Optional[str] = None) -> dict[str, Tensor]:
+        """Whole image for one camera in ``eval_chunk``-ray chunks; deterministic (no jitter).
+        ``appearance``: how a camera that is no training photo is coloured ("mean", "identity",
+        "nearest"); None: ``config.eval_appearance``."""
         was_training = self.training
         self.eval()
         try:
@@ -432,8 +434,9 @@ class StreetNeRFModel(Model):
             rays = camera.generate_rays(0)
             keys = ("rgb", "depth", "accumulation")
             chunks: dict[str, list[Tensor]] = {k: [] for k in keys}
-            nearest = self._nearest_train_image(camera) if self.config.eval_appearance == "nearest" else None
-            novel = "identity" if self.config.eval_appearance == "identity" else "mean"
+            mode = appearance or self.config.eval_appearance
+            nearest = self._nearest_train_image(camera) if mode == "nearest" else None
+            novel = "identity" if mode == "identity" else "mean"
             for i in range(0, len(rays), self.config.eval_chunk):
                 chunk = rays[i : i + self.config.eval_chunk]
                 idx = None if nearest is None else torch.full((len(chunk),), nearest, dtype=torch.long, device=self.device)

@@ -253,6 +253,10 @@ def test_eval_appearance_modes(tiny_scene):
         torch.testing.assert_close(render("nearest", cam), apply(T[near], raw), atol=1e-5, rtol=0)
     assert not torch.allclose(render("nearest", train_cam), render("mean", train_cam), atol=1e-3)
     model.config.eval_appearance = "mean"
+    # the per-call choice (--augment.appearance) wins over the config's
+    for mode in ("nearest", "identity"):
+        torch.testing.assert_close(model.render_camera(novel, appearance=mode)["rgb"], render(mode, novel), atol=0, rtol=0)
+    model.config.eval_appearance = "mean"
 
 
 def test_camera_optimizer_pulls_a_perturbed_camera_back(trained, tiny_scene):
