@@ -1,6 +1,6 @@
 """SfM time and pose accuracy of ``ns2gs-data process images`` under several matching settings.
 
-    python benchmarks/sfm_speed.py --images DIR --work /tmp/sfm_speed [--gt-cameras DIR] [--fov-deg F] \
+    python benchmarks/sfm_speed.py --images DIR --work /tmp/sfm_speed [--gt-cameras DIR | --gt-transforms JSON] [--fov-deg F] \
         [--variant exhaustive --variant sequential ...] --out benchmarks/results/real_photos_sfm
 
 Each variant runs the whole ``process images`` (fresh folder: features included) and records its
@@ -67,12 +67,19 @@ def matched_pairs(work: Path) -> int:
         return int(d.num_matched_image_pairs())
 
 
+def read_transforms(path: Path, names: list[str]) -> np.ndarray:
+    """OpenGL camera-to-world [N, 3, 4] of ``names`` from a nerfstudio ``transforms.json`` (matched by file name)."""
+    frames = {Path(f["file_path"]).name: f["transform_matrix"] for f in json.loads(Path(path).read_text())["frames"]}
+    return np.stack([np.array(frames[n], dtype=np.float64)[:3] for n in names])
+
+
 def pose_figures(row: dict, gt: Path) -> dict:
+    """Against Strecha ``.camera`` files (a folder) or a ``transforms.json`` with the true poses."""
     from nerf2gs_plugin.eval.pose_eval import pose_errors
 
     names = sorted(row["poses"])
     est = np.array([np.array(row["poses"][n])[:3] for n in names])
-    pe = pose_errors(est, read_strecha(gt, names))
+    pe = pose_errors(est, read_transforms(gt, names) if Path(gt).is_file() else read_strecha(gt, names))
     return {"ate_percent": round(pe.ate_percent, 3), "ate_m": round(pe.ate_rmse, 3), "rotation_error_deg": round(pe.rotation_deg_mean, 3),
             "sim3_metres_per_unit": round(pe.scale, 4), "scale_error_percent": round(100.0 * (row["metres_per_unit"] / pe.scale - 1), 1),
             "scale_source": row["scale_source"]}
@@ -106,7 +113,8 @@ def main() -> None:
     ap.add_argument("--images", type=Path, required=True)
     ap.add_argument("--work", type=Path, required=True)
     ap.add_argument("--out", type=Path, required=True, help="results path without extension")
-    ap.add_argument("--gt-cameras", type=Path)
+    ap.add_argument("--gt-cameras", type=Path, help="folder of Strecha .camera files")
+    ap.add_argument("--gt-transforms", type=Path, help="or a transforms.json with the true poses (by file name)")
     ap.add_argument("--fov-deg", type=float)
     ap.add_argument("--camera-height", type=float, default=1.6)
     ap.add_argument("--threads", type=int, default=2)
@@ -134,8 +142,8 @@ def main() -> None:
     for name in a.variant or list(VARIANTS):
         row = run_variant(a.images, a.work / name.replace(" ", "_").replace(",", ""), VARIANTS[name], a.fov_deg, a.camera_height, a.threads,
                           a.metres_per_unit)
-        if a.gt_cameras:
-            row["pose"] = pose_figures(row, a.gt_cameras)
+        if a.gt_cameras or a.gt_transforms:
+            row["pose"] = pose_figures(row, a.gt_cameras or a.gt_transforms)
         row.pop("poses")
         row["matched_pairs"] = matched_pairs(a.work / name.replace(" ", "_").replace(",", ""))
         doc["variants"][name] = row

@@ -141,3 +141,33 @@ def test_export_intrinsics_of_every_undistorted_model(model, params):
         cam.params = params[:4] + [0.1, 0, 0, 0]
         with pytest.raises(DataError, match="distortion"):
             pinhole_params(cam)
+
+
+def test_mapping_retries_loosen_the_initialisation_before_moving_the_pair(tmp_path, monkeypatch):
+    """A forward drive of closely spaced frames never reaches COLMAP's 16 deg initial triangulation
+    angle: the second run keeps COLMAP's own pair choice under looser thresholds, only later runs
+    start from pairs at other points of the capture; when none registers, one clear error."""
+    import pycolmap
+
+    from nerf2gs_plugin.data.process.sfm import SfmOptions, reconstruct
+
+    db = tmp_path / "database.db"
+    with pycolmap.Database.open(str(db)) as d:
+        cam = d.write_camera(pycolmap.Camera.create_from_model_name(1, "SIMPLE_PINHOLE", 100.0, 64, 48))
+        for i in range(12):
+            d.write_image(pycolmap.Image(name=f"f{i:03d}.png", camera_id=cam))
+    runs = []
+
+    def fake_mapping(database, image_dir, out, options=None, **kw):
+        runs.append((options.init_image_id1, options.init_image_id2, options.mapper.init_min_tri_angle,
+                     options.mapper.init_max_forward_motion))
+        return {}
+
+    monkeypatch.setattr(pycolmap, "incremental_mapping", fake_mapping)
+    with pytest.raises(DataError, match="0 of 12 images registered"):
+        reconstruct(db, tmp_path, tmp_path / "sparse", 12, SfmOptions(), matches_changed=True)
+    assert len(runs) == SfmOptions().mapping_attempts == 4
+    default_pair = runs[0][:2]
+    assert runs[0][2] == 16.0 and runs[1][2] == runs[2][2] == 8.0 and runs[1][3] == 0.99
+    assert runs[1][:2] == default_pair  # COLMAP still chooses the pair
+    assert runs[2][:2] != default_pair and runs[3][:2] not in (default_pair, runs[2][:2])  # then pairs at other points
