@@ -10,7 +10,9 @@ as given), so a floater copied from the reference's views from above tells itsel
 
 Usage: python benchmarks/validation/near_camera_floaters.py OUT_STEM RUN SPLIT VIEW DELTA_H THETA_PITCH EVERY_N
 Produced benchmarks/results/near_camera_floaters.{json,md} with the castle-P30 run of 2026-11-24
-(/work/data/benchruns/data/splatfacto/044c3f225834 test 1 3 30 2).
+(/work/data/benchruns/data/splatfacto/044c3f225834 test 1 3 30 2); near_camera_floaters_castle_val.{json,md}
+with plain Splatfacto on castle-P30's validation photos (augment_appearance.md; the view 3 of its "test" split,
+photo 0028; the last three arguments only place the views from above it reports weights in).
 """
 import json
 import sys
@@ -21,6 +23,7 @@ import torch
 torch.set_num_threads(1)
 from nerf2gs_plugin.datamanagers.augmented import bev_cameras  # noqa: E402
 from nerf2gs_plugin.engine.reference import load_run  # noqa: E402
+from nerf2gs_plugin.methods.capture_path import capture_path  # noqa: E402
 from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
 from nerf2gs_plugin.utils.image_metrics import psnr_from_mse  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
@@ -48,6 +51,7 @@ train = dm.all_train_cameras
 metre = dm.train_data.metres_to_world(1.0)
 bev = bev_cameras(train, dm.train_data.up, dm.train_data.metres_to_world(delta_h), pitch, every_n, "absolute")
 w_real, w_bev = model.blend_weights(train), model.blend_weights(bev)
+to_path = capture_path(train.camera_to_worlds[:, :3, 3]).distance(g["means"].detach()) / metre  # what the path clearance measures
 rows = []
 for dist in (0.02, 0.05, 0.1, 0.2):
     near = (ahead > 0) & (ahead < dist) & (rel[:, :2].norm(dim=-1) < ahead * 1.5 + 3 * reach)
@@ -56,7 +60,8 @@ for dist in (0.02, 0.05, 0.1, 0.2):
     muted = view_psnr()
     g["opacities"].data.copy_(saved)
     rows.append({"within_world": dist, "within_m": dist / metre, "gaussians": int(near.sum()), "psnr_muted": muted,
-                 "weight_real": [round(float(v), 1) for v in w_real[near]], "weight_bev": [round(float(v), 1) for v in w_bev[near]]})
+                 "weight_real": [round(float(v), 1) for v in w_real[near]], "weight_bev": [round(float(v), 1) for v in w_bev[near]],
+                 "to_path_m": [round(float(v), 2) for v in to_path[near]]})
 centres = train.camera_to_worlds[:, :3, 3]
 doc = {"machine": machine_line(), "run": str(run_dir), "split": split, "view": view, "psnr": view_psnr(),
        "camera_to_nearest_training_camera_m": float(torch.cdist(c2w[None, :, 3], centres).min()) / metre,
@@ -65,9 +70,10 @@ atomic_write_text(out.with_suffix(".json"), json.dumps(doc, indent=1))
 md = [f"# Floaters in front of held-out view {view} ({split}) of `{run_dir}`", "", f"Machine: {doc['machine']}. Produced by "
       "`benchmarks/validation/near_camera_floaters.py`.", "",
       f"The view scores {doc['psnr']:.2f} dB; its camera stands {doc['camera_to_nearest_training_camera_m']:.1f} m from the nearest "
-      "training camera.", "", "| Gaussians within (world / m) ahead | count | view PSNR with them muted | their weight in the real views | in the views from above |",
-      "|---|---|---|---|---|"]
+      "training camera.", "", "| Gaussians within (world / m) ahead | count | view PSNR with them muted | their weight in the real views | in the views from above | metres from the capture path |",
+      "|---|---|---|---|---|---|"]
 md += [f"| {r['within_world']} / {r['within_m']:.2f} | {r['gaussians']} | {r['psnr_muted']:.2f} | {min(r['weight_real'], default=0):.0f}-"
-       f"{max(r['weight_real'], default=0):.0f} | {min(r['weight_bev'], default=0):.0f}-{max(r['weight_bev'], default=0):.0f} |" for r in rows]
+       f"{max(r['weight_real'], default=0):.0f} | {min(r['weight_bev'], default=0):.0f}-{max(r['weight_bev'], default=0):.0f} | "
+       f"{min(r['to_path_m'], default=0):.1f}-{max(r['to_path_m'], default=0):.1f} |" for r in rows]
 atomic_write_text(out.with_suffix(".md"), "\n".join(md) + "\n")
 print("\n".join(md))
