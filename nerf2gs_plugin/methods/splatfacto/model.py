@@ -58,6 +58,11 @@ class SplatfactoModelConfig(SplatModelConfig):
     densification stops the Gaussians carrying the lightest 10% of the training views' blending weight are
     pruned, so the size follows the scene (chosen on validation views: benchmarks/results/size_prune.md);
     every prune keeps 1 m around the capture path free (benchmarks/results/path_clearance.md)."""
+    depth_loss_weight: float = 0.0
+    """Sparse-point depth (off at 0): weight of ``mean_p A_p * min(|D_p - z_p| / z_p, 1)`` over the sparse
+    points a training view sees (``methods/point_visibility.py``), D the rendered expected depth and A the
+    accumulation at the point's pixel, z the point's depth: gsplat's ``depth_loss`` in the bounded form of
+    StreetNeRF's point depth. A Gaussian that floats in front of a surface the SfM saw pulls D short of z."""
     mcmc: MCMCStrategyConfig = field(default_factory=lambda: MCMCStrategyConfig(
         cap_max=30000, refine_start_iter=300, refine_stop_iter=2500))
     """The MCMC strategy at CPU scale (with --pipeline.model.strategy-type mcmc): 30k-Gaussian hard budget."""
@@ -95,6 +100,7 @@ class SplatfactoModel(Model):
         self._meta: Optional[dict[str, Any]] = None
         self._train_cameras: Optional[Callable[[], Cameras]] = None  # set with the training callbacks
         self._path = self._capture_path(train_data, means if train_data.points3D_xyz is not None else None)
+        self._depth_targets = self._sparse_depth_targets(train_data) if cfg.depth_loss_weight > 0 else None
         self._setup_strategy()
 
     def _initial_points(self, data: DataparserOutputs, gen: torch.Generator) -> tuple[Tensor, Tensor]:
@@ -128,6 +134,28 @@ class SplatfactoModel(Model):
                      "or --pipeline.model.strategy.path-clearance-m 0 to say so)", stacklevel=3)
                 return None
         return path, metre
+
+    def _sparse_depth_targets(self, data: DataparserOutputs) -> Optional[list[tuple[Tensor, Tensor, Tensor]]]:
+        """Per training view: (v [K], u [K] pixel rows / columns, z [K] camera-axis depth) of the sparse
+        points it sees; rebuilt from the data, never in checkpoints. None (with a warning) without points."""
+        from nerf2gs_plugin.methods.point_visibility import visible_point_rays
+        from nerf2gs_plugin.warn import warn
+
+        if data.points3D_xyz is None or len(data.points3D_xyz) == 0:
+            warn("the dataset has no sparse points", "Splatfacto trains without its depth loss", stacklevel=4)
+            return None
+        pr = visible_point_rays(data.cameras, data.points3D_xyz)
+        forward = -data.cameras.camera_to_worlds[:, :3, 2]  # OpenGL: the camera looks along -z
+        z = pr.t_star * (pr.rays.directions * forward[pr.camera_indices]).sum(-1)
+        return [(pr.coords[sel, 1], pr.coords[sel, 0], z[sel]) for sel in (pr.camera_indices == i for i in range(len(data.cameras)))]
+
+    def _depth_loss(self, outputs: dict[str, Tensor], image_idx: int) -> Optional[Tensor]:
+        """See ``depth_loss_weight``; None for a view without targets (an augmented view from above)."""
+        if self._depth_targets is None or image_idx >= len(self._depth_targets) or len(self._depth_targets[image_idx][2]) == 0:
+            return None
+        v, u, z = (t.to(outputs["depth"].device) for t in self._depth_targets[image_idx])
+        d, a = outputs["depth"][v, u, 0], outputs["accumulation"][v, u, 0]
+        return self.config.depth_loss_weight * (a * ((d - z).abs() / z).clamp(max=1.0)).mean()
 
     def _make_strategy(self) -> Strategy:
         c = self.config
@@ -228,6 +256,9 @@ class SplatfactoModel(Model):
         c = self.config
         sky_bg = outputs.get("background") if c.background == "random" else None
         losses = image_loss(outputs, batch, c.ssim_lambda, c.mask_transients, c.sky_alpha_weight, sky_bg)
+        depth = self._depth_loss(outputs, int(batch["image_idx"])) if self.training and "image_idx" in batch else None
+        if depth is not None:
+            losses["depth_loss"] = depth
         if c.strategy_type == "mcmc":
             g = self.gauss
             losses["opacity_reg"] = c.mcmc.opacity_reg * torch.sigmoid(g["opacities"]).abs().mean()

@@ -71,7 +71,8 @@ from nerf2gs_plugin.fields.hash_encoding import HashGridSpec
 from nerf2gs_plugin.fields.sky import SkyModel
 from nerf2gs_plugin.fields.street_field import ProposalField, StreetField
 from nerf2gs_plugin.warn import warn
-from nerf2gs_plugin.methods.streetnerf.point_depth import line_of_sight_loss, visible_point_rays
+from nerf2gs_plugin.methods.point_visibility import visible_point_rays
+from nerf2gs_plugin.methods.streetnerf.point_depth import line_of_sight_loss
 from nerf2gs_plugin.methods.streetnerf.sampling import (
     distortion_loss,
     interlevel_loss,

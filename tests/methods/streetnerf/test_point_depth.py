@@ -10,7 +10,8 @@ import torch
 
 from nerf2gs_plugin.cameras import Cameras
 from nerf2gs_plugin.data import parse_dataset
-from nerf2gs_plugin.methods.streetnerf.point_depth import line_of_sight_loss, visible_point_rays
+from nerf2gs_plugin.methods.point_visibility import visible_point_rays
+from nerf2gs_plugin.methods.streetnerf.point_depth import line_of_sight_loss
 
 from test_streetnerf import make_trainer, small_model_config
 
