@@ -50,6 +50,9 @@ class TwoDGSModelConfig(SplatfactoModelConfig):
     """Step from which the depth distortion loss is on (2DGS: 3000 of 30000)."""
     normals_frame: Literal["camera", "world"] = "camera"
     """Frame of the rasterizer's rendered normals (converted to world for the viewer)."""
+    depth_loss_weight: float = 0.0
+    """Splatfacto's sparse-point depth loss: off for 2DGS (its depth output is the median by default;
+    not measured)."""
 
 
 class SurfelStrategy(DefaultStrategy):

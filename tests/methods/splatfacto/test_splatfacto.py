@@ -48,7 +48,9 @@ def test_training_raises_psnr_and_densifies(scene):
     n0, p0 = model.num_primitives(), psnr(model, cams, imgs)
     train(model, gaussian_optimizers(60), cams, imgs, skies, 60)
     p1 = psnr(model, cams, imgs)
-    assert p1 > p0 + 3.0, (p0, p1)
+    # +3.0 to +3.1 dB in 60 steps with or without the sparse-point depth loss (which moves it by
+    # -0.16..+0.09 dB here): the bound leaves the training's noise room, a model that does not learn fails it
+    assert p1 > p0 + 2.5, (p0, p1)
     assert model.num_primitives() != n0  # refinement ran (grew and/or pruned)
     assert model.current_sh_degree == 3
     assert all(torch.isfinite(v).all() for v in model.gauss.values())
