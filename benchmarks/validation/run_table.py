@@ -11,7 +11,8 @@ Produced: benchmarks/results/appearance_reg.{json,md} (rows: benchmarks/validati
 benchmarks/results/castle_floaters.{json,md} (rows: benchmarks/validation/castle_floaters_rows.json),
 benchmarks/results/path_clearance.{json,md} (rows: benchmarks/validation/path_clearance_rows.json),
 benchmarks/results/castle_confidence.{json,md} (rows: benchmarks/validation/castle_confidence_rows.json),
-benchmarks/results/augment_appearance.{json,md} (rows: benchmarks/validation/augment_appearance_rows.json).
+benchmarks/results/augment_appearance.{json,md} (rows: benchmarks/validation/augment_appearance_rows.json),
+benchmarks/results/depth_loss.{json,md} (rows: benchmarks/validation/depth_loss_rows.json).
 """
 import json
 import sys

@@ -63,10 +63,10 @@ class SplatfactoModelConfig(SplatModelConfig):
     points a training view sees (``methods/point_visibility.py``), D the rendered expected depth and A the
     accumulation at the point's pixel (a weight only, no gradient), z the point's depth: gsplat's ``depth_loss`` in the bounded form of
     StreetNeRF's point depth. A Gaussian that floats in front of a surface the SfM saw pulls D short of z.
-    0.1 chosen on validation views (benchmarks/results/depth_loss.md): castle-P30's validation photos
-    24.02 -> 25.04 dB over two seeds (the veil of near-camera Gaussians over one photo gone), the
-    streets' val views -0.04 / +0.06 dB; 0.2 cost the embedded street 0.43 dB (its points carry 3 cm
-    of noise). Not measured at the paper scale (the same value there)."""
+    0.1 chosen on validation views, two seeds each (benchmarks/results/depth_loss.md): the streets' val views
+    21.43 -> 21.58 and 20.98 -> 21.37 dB, castle-P30's validation photos 24.02 -> 25.36 (the veil of
+    near-camera Gaussians over one photo gone); 0.2 gave castle 25.05 (one seed). Not measured at the paper
+    scale (the same value there)."""
     mcmc: MCMCStrategyConfig = field(default_factory=lambda: MCMCStrategyConfig(
         cap_max=30000, refine_start_iter=300, refine_stop_iter=2500))
     """The MCMC strategy at CPU scale (with --pipeline.model.strategy-type mcmc): 30k-Gaussian hard budget."""
