@@ -119,12 +119,9 @@ def test_merged_run_renders_like_a_whole_scene_run(street, parts, runs, tmp_path
     gaps = {s: whole[s]["psnr"] - ours["results"][s]["psnr"] for s in whole}
     assert set(gaps) == {"street", "bev_1", "bev_2"}
     # 200 steps on 40x64 images: the gap moves by ~0.1 dB between CPUs (0.56 on bev_1 on an Intel Xeon,
-    # under 0.5 on an AMD EPYC); a broken merge (wrong frame, a block dropped) costs several dB
+    # under 0.5 on an AMD EPYC); a merge in the wrong frame costs several dB, a dropped block fails the
+    # primitive accounting below
     assert all(g < 0.75 for g in gaps.values()), gaps
-    # and the merge is worth more than either block alone (each misses the other's half of the street)
-    mean = lambda res: sum(res[s]["psnr"] for s in gaps) / len(gaps)  # noqa: E731
-    singles = [mean(evaluate_run(load_run(runs[b]), fps_repeats=1)["results"]) for b in ("block_0_0", "block_1_0")]
-    assert mean(ours["results"]) > max(singles), (mean(ours["results"]), singles)
     # each block's primitives lie inside its own cell (not only the expanded one), in the merged frame
     doc = read_partition(parts)
     state = load_checkpoint(resolve_checkpoint(merged)[1])["model"]

@@ -59,9 +59,9 @@ class SplatfactoModelConfig(SplatModelConfig):
     pruned, so the size follows the scene (chosen on validation views: benchmarks/results/size_prune.md);
     every prune keeps 1 m around the capture path free (benchmarks/results/path_clearance.md)."""
     depth_loss_weight: float = 0.1
-    """Sparse-point depth (0: off): weight of ``mean_p A_p * min(|D_p - z_p| / z_p, 1)`` over the sparse
-    points a training view sees (``methods/point_visibility.py``), D the rendered expected depth and A the
-    accumulation at the point's pixel (a weight only, no gradient), z the point's depth: gsplat's ``depth_loss`` in the bounded form of
+    """Sparse-point depth (0: off): weight of mean_p A_p * min(|D_p - z_p| / z_p, 1) over the sparse
+    points a training view sees (methods/point_visibility.py), D the rendered expected depth and A the
+    accumulation at the point's pixel (a weight only, no gradient), z the point's depth: gsplat's depth_loss in the bounded form of
     StreetNeRF's point depth. A Gaussian that floats in front of a surface the SfM saw pulls D short of z.
     0.1 chosen on validation views, two seeds each (benchmarks/results/depth_loss.md): the streets' val views
     21.43 -> 21.58 and 20.98 -> 21.37 dB, castle-P30's validation photos 24.02 -> 25.36 (the veil of
