@@ -70,6 +70,9 @@ def matched_pairs(work: Path) -> int:
 def read_transforms(path: Path, names: list[str]) -> np.ndarray:
     """OpenGL camera-to-world [N, 3, 4] of ``names`` from a nerfstudio ``transforms.json`` (matched by file name)."""
     frames = {Path(f["file_path"]).name: f["transform_matrix"] for f in json.loads(Path(path).read_text())["frames"]}
+    missing = [n for n in names if n not in frames]
+    if missing:
+        raise SystemExit(f"{path}: no true pose for {len(missing)} registered photo(s), e.g. {missing[0]}")
     return np.stack([np.array(frames[n], dtype=np.float64)[:3] for n in names])
 
 

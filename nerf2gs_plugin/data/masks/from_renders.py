@@ -105,7 +105,10 @@ def ground_from_render(origin: Tensor, directions: Tensor, depth: Tensor, acc: T
     acc = median_filter(acc, smooth_px)
     solid = acc >= acc_min
     # one-sided: nothing is below the road, a surface rendered below the plane is a depth error on the road
-    g = ((h < tol) & solid | (~solid if empty_is_ground else torch.zeros_like(solid))) & ((directions @ up) < 0)
+    g = (h < tol) & solid
+    if empty_is_ground:
+        g |= ~solid
+    g &= (directions @ up) < 0
     if normals is not None:
         g &= (normals @ up).abs() > math.cos(math.radians(max_normal_deg))
     return g

@@ -157,7 +157,10 @@ class SplatfactoModel(Model):
         """See ``depth_loss_weight``; None for a view without targets (an augmented view from above)."""
         if self._depth_targets is None or image_idx >= len(self._depth_targets) or len(self._depth_targets[image_idx][2]) == 0:
             return None
-        v, u, z = (t.to(outputs["depth"].device) for t in self._depth_targets[image_idx])
+        dev = outputs["depth"].device
+        if self._depth_targets[image_idx][2].device != dev:  # built on the CPU at setup: moved once, not every step
+            self._depth_targets = [tuple(t.to(dev) for t in view) for view in self._depth_targets]
+        v, u, z = self._depth_targets[image_idx]
         d, a = outputs["depth"][v, u, 0], outputs["accumulation"][v, u, 0]
         # the accumulation only weights (detached): transparency must not be a way out of the loss
         return self.config.depth_loss_weight * (a.detach() * ((d - z).abs() / z).clamp(max=1.0)).mean()
