@@ -314,6 +314,8 @@ def run_real_bench(runs_root: Path, out_dir: Path, opts: RealBenchOptions = Real
         "rotation_error_deg": capture["rotation_error_deg"],
         "up_error_deg": capture["up_error_deg"],
         "eval_mapping_rotation_deg": local.leave_one_out_rotation_deg(),
+        "scale_check_ratio": est_meta.get("process", {}).get("capture_check", {}).get("ratio"),
+        "path_jump_ratio": (est_meta.get("process", {}).get("capture_check", {}).get("path_jump") or {}).get("ratio"),
         "mask_iou": iou,
         "alignment": {"scale": local.global_sim.s, "gt_identity_scale": gt_local.global_sim.s},
         "process": {"registered": report.registered, "frames": report.frames, "points": report.points,
@@ -341,6 +343,7 @@ def _f(v: Optional[float], fmt: str = "{:.2f}") -> str:
 
 
 def results_md(doc: dict) -> str:
+    from nerf2gs_plugin.data.process.scale_check import MAX_HEIGHT_JUMP, MAX_STEP_JUMP
     from nerf2gs_plugin.eval.bench_paper import markdown_table, target_groups
     from nerf2gs_plugin.eval.machine import machine_line
 
@@ -365,6 +368,10 @@ def results_md(doc: dict) -> str:
         f"| up_error_deg | {_f(doc['up_error_deg'], '{:.3f}')} | |",
         f"| eval_mapping_rotation_deg | {_f(doc.get('eval_mapping_rotation_deg'), '{:.3f}')} | |",
     ]
+    if doc.get("scale_check_ratio") is not None:  # process's scale check: the largest jump of the camera's height above its road
+        lines.append(f"| scale_check_ratio | {_f(doc['scale_check_ratio'], '{:.2f}')} | <= {MAX_HEIGHT_JUMP:g} |")
+    if doc.get("path_jump_ratio") is not None:  # and the largest step of the ordered path against the steps around it
+        lines.append(f"| path_jump_ratio | {_f(doc['path_jump_ratio'], '{:.2f}')} | <= {MAX_STEP_JUMP:g} |")
     for k in MASK_KINDS:
         lines.append(f"| mask_iou.{k} | {_f(doc['mask_iou'].get(k), '{:.3f}')} | {'>= 0.8' if k != 'transient' else ''} |")
     for s in ("bev_1", "bev_2"):

@@ -103,6 +103,8 @@ def test_process_video_end_to_end(tmp_path, make_config):
     main(args)
     est = json.loads((out / "transforms.json").read_text())
     assert est["process"]["registered"] == len(est["frames"]) >= 28
+    check = est["process"]["capture_check"]  # one drive: one scale, no jump along its path
+    assert check["consistent"] and check["measured"] >= 20 and check["path_jump"]["ratio"] < 2.0
     assert all(f["fl_x"] == f["fl_y"] and (f["cx"], f["cy"]) == (100, 56) for f in est["frames"])  # the FOV's focal, centred
     for d in (2, 4, 8):
         assert len(list((out / f"images_{d}").iterdir())) == len(est["frames"])

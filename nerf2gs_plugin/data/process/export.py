@@ -64,6 +64,16 @@ def points_arrays(rec) -> tuple[np.ndarray, np.ndarray]:
             np.array([p.color for p in pts.values()], dtype=np.uint8).reshape(-1, 3))
 
 
+def observed_points(rec, names: list[str]) -> list[np.ndarray]:
+    """Per image of ``names``: the ``[K, 3]`` sparse points it observes (its tracks), as the scale check reads them."""
+    by_name = {im.name: im for im in rec.images.values()}
+    out = []
+    for n in names:
+        ids = [p.point3D_id for p in by_name[n].points2D if p.has_point3D()]
+        out.append(np.array([rec.points3D[i].xyz for i in ids], dtype=np.float64).reshape(-1, 3))
+    return out
+
+
 def write_downscaled(root: Path, names: list[str], progress=None) -> None:
     """``images_{2,4,8}/`` copies of ``images/`` (skipped per file when already there)."""
     task = progress.add_task("downscaled copies", total=len(names) * len(DOWNSCALES), stats="") if progress else None

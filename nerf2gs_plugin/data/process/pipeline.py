@@ -53,6 +53,8 @@ class ProcessReport:
     scale_source: str
     stage_seconds: dict[str, float]
     dropped_blurry: int = 0
+    check: str = ""
+    """The capture check's line (:func:`check_reconstruction`)."""
 
     def lines(self) -> list[str]:
         t = ", ".join(f"{k} {v:.1f} s" for k, v in self.stage_seconds.items())
@@ -61,6 +63,7 @@ class ProcessReport:
             f"{self.points} sparse points, matching {self.matching}"
             + (f"; {self.dropped_blurry} blurry frames dropped" if self.dropped_blurry else ""),
             f"metric scale: {self.metres_per_unit:.4g} metres per SfM unit ({self.scale_source}); stored in transforms.json",
+            *([self.check] if self.check else []),
             f"time per stage: {t}",
             f"dataset: {self.out} (train with: ns2gs-train streetnerf --data {self.out})",
         ]
@@ -127,17 +130,20 @@ def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=Non
         reg_names, c2w, _ = export.camera_arrays(rec)
         xyz, _ = export.points_arrays(rec)
         scale = metric_scale(xyz, c2w, opts)
+        check = check_reconstruction(rec, reg_names, c2w, scale.up, ordered=method == "sequential")
+        check_line = check.pop("line")
         export.write_downscaled(root, reg_names, progress)
         times["export"] = time.perf_counter() - t
         extra = {"process": {"source": "video" if is_video else "images", "frames": len(names), "registered": mapped.registered,
-                             "matching": method, "camera_height_m": opts.camera_height, "scale_source": scale.source}}
+                             "matching": method, "camera_height_m": opts.camera_height, "scale_source": scale.source,
+                             "capture_check": check}}
         if scale.plane is not None:
             extra["ground_plane"] = scale.plane.to_json()
         export.write_transforms(root, rec, scale.metres_per_unit, scale.up, extra)
         # beside, not in, transforms.json: runs fingerprint the files they read, and times change every run
         atomic_write_text(work / TIMES_FILE, json.dumps({k: round(v, 2) for k, v in times.items()}, indent=1))
     return ProcessReport(root, len(names), mapped.registered, mapped.points, method, scale.metres_per_unit, scale.source, times,
-                         fr.dropped_blurry)
+                         fr.dropped_blurry, check_line)
 
 
 def metric_scale(xyz: np.ndarray, c2w: np.ndarray, opts: ProcessOptions):
@@ -154,6 +160,26 @@ def metric_scale(xyz: np.ndarray, c2w: np.ndarray, opts: ProcessOptions):
 
         warnings.warn("no ground plane below the cameras: up is the cameras' mean up instead", stacklevel=2)
     return scale
+
+
+def check_reconstruction(rec, names: list[str], c2w: np.ndarray, up: np.ndarray, ordered: bool = False) -> dict:
+    """The reconstruction's consistency along the capture (:mod:`~nerf2gs_plugin.data.process.scale_check`):
+    the camera's height above its road (one scale) and, for an ordered capture, its path (no jump). Each
+    failure is a warning: the data is written, but one stretch of it is misplaced. Returns the JSON
+    record, with the report's ``line``."""
+    from nerf2gs_plugin.data.process import export
+    from nerf2gs_plugin.data.process.scale_check import local_camera_heights, path_jump, scale_jump
+    from nerf2gs_plugin.warn import warn
+
+    height = scale_jump(local_camera_heights(c2w[:, :3, 3], export.observed_points(rec, names), up), names)
+    jump = path_jump(c2w[:, :3, 3], names) if ordered else None
+    bad = [check for check in (height, jump) if check is not None and not check.consistent]
+    for check in bad:
+        warn(*check.problem(), stacklevel=2)
+    line = ("capture check FAILED: " + "; ".join(c.summary for c in bad) + " (warnings above)" if bad else
+            "capture check: " + ", ".join(c.summary for c in (height, jump) if c is not None))
+    doc = {**height.to_json(), "path_jump": jump.to_json() if jump is not None else None, "consistent": not bad}
+    return {**doc, "line": line}
 
 
 def exif_focal_for(sources: list[Path], frame_dir: Path, names: list[str]) -> Optional[float]:
