@@ -16,7 +16,7 @@ import pycolmap
 
 from nerf2gs_plugin.data.process import export
 from nerf2gs_plugin.data.process.pipeline import check_reconstruction
-from nerf2gs_plugin.data.process.scale_check import MAX_HEIGHT_JUMP, MAX_STEP_JUMP, local_camera_heights
+from nerf2gs_plugin.data.process.scale_check import MAX_HEIGHT_JUMP, MAX_STEP_JUMP, MAX_STEP_JUMP_PHOTOS, local_camera_heights
 from nerf2gs_plugin.eval.machine import machine_info, machine_line
 from nerf2gs_plugin.eval.pose_eval import pose_errors
 from nerf2gs_plugin.utils.io import atomic_write_text
@@ -32,7 +32,7 @@ for arg in sys.argv[2:]:
     meta = json.loads((data / "transforms.json").read_text())
     up = np.asarray(meta["up"])
     heights = local_camera_heights(c2w[:, :3, 3], export.observed_points(rec, names), up)
-    check = check_reconstruction(rec, names, c2w, up, ordered=meta["process"]["matching"] == "sequential")
+    check = check_reconstruction(rec, names, c2w, up, ordered=meta["process"]["source"] == "video" or meta["process"]["matching"] == "sequential")
     line = check.pop("line")
     row = {"label": label, "data": str(data), "matching": meta["process"]["matching"], **check,
            "height_ratio_percentiles_5_50_95": [float(v) for v in np.nanpercentile(heights / np.nanmedian(heights), [5, 50, 95])]}
@@ -47,14 +47,16 @@ for arg in sys.argv[2:]:
     rows.append(row)
     print(label, line, sep="\n  ", flush=True)
 
-doc = {"machine": machine_info(), "max_height_ratio": MAX_HEIGHT_JUMP, "max_step_ratio": MAX_STEP_JUMP, "rows": rows}
+doc = {"machine": machine_info(), "max_height_ratio": MAX_HEIGHT_JUMP, "max_step_ratio": MAX_STEP_JUMP,
+       "max_step_ratio_photos": MAX_STEP_JUMP_PHOTOS, "rows": rows}
 md = ["# Scale check of `ns2gs-data process`: one scale along the capture?", "",
       f"Machine: {machine_line(doc['machine'])}", "",
       "Each camera's height above the road it sees (90th percentile of the drops to the sparse points it observes "
       "below it, SfM units); the change point of their logs along the capture (least absolute deviations from each "
-      f"stretch's median); flagged when the two stretches' medians differ by more than {MAX_HEIGHT_JUMP:g}x. Ordered "
-      "captures (sequential matching) also: the largest step between consecutive frames over the median of the 5 steps "
-      f"on each side, flagged above {MAX_STEP_JUMP:g}x. ATE (% of the trajectory) after a Sim(3) to the true poses, for the "
+      f"stretch's median); flagged when the two stretches' medians differ by more than {MAX_HEIGHT_JUMP:g}x. The path: "
+      "the largest step between consecutive frames (name order) over the median of the 5 steps on each side, flagged "
+      f"above {MAX_STEP_JUMP:g}x for a video or sequentially matched photos, above {MAX_STEP_JUMP_PHOTOS:g}x for a photo set matched "
+      "exhaustively. ATE (% of the trajectory) after a Sim(3) to the true poses, for the "
       "whole capture and each stretch (split at the path jump when flagged, else at the height split).", "",
       "| capture | matching | frames | height ratio | height split at | path jump (steps) | jump between | flagged | height / median (5th, 50th, 95th pct) | ATE % whole / before / from split | Sim(3) scale before / from split |",
       "|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -62,10 +64,10 @@ for r in rows:
     ate, sc = r.get("ate_percent", {}), r.get("sim3_scale", {})
     f = lambda d, k, fmt: fmt.format(d[k]) if k in d else "n/a"  # noqa: E731
     pj = r["path_jump"]
-    jump = f"{pj['ratio']:.2f}x" if pj else "n/a (unordered)"
+    jump = f"{pj['ratio']:.2f}x (of {pj['max_ratio']:g}x)"
     md.append(f"| {r['label']} | {r['matching']} | {r['frames']} | {r['ratio']:.2f} | {r['first_name'] or '-'} | "
               f"{jump} | "
-              f"{' / '.join(pj['names']) if pj else '-'} | {'no' if r['consistent'] else '**yes**'} | "
+              f"{' / '.join(pj['names'])} | {'no' if r['consistent'] else '**yes**'} | "
               f"{', '.join(f'{v:.2f}' for v in r['height_ratio_percentiles_5_50_95'])} | "
               f"{f(ate, 'whole', '{:.3f}')} / {f(ate, 'before split', '{:.3f}')} / {f(ate, 'from split', '{:.3f}')} | "
               f"{f(sc, 'before split', '{:.4g}')} / {f(sc, 'from split', '{:.4g}')} |")

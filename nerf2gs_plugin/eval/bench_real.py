@@ -371,7 +371,7 @@ def results_md(doc: dict) -> str:
     if doc.get("scale_check_ratio") is not None:  # process's scale check: the largest jump of the camera's height above its road
         lines.append(f"| scale_check_ratio | {_f(doc['scale_check_ratio'], '{:.2f}')} | <= {MAX_HEIGHT_JUMP:g} |")
     if doc.get("path_jump_ratio") is not None:  # and the largest step of the ordered path against the steps around it
-        lines.append(f"| path_jump_ratio | {_f(doc['path_jump_ratio'], '{:.2f}')} | <= {MAX_STEP_JUMP:g} |")
+        lines.append(f"| path_jump_ratio | {_f(doc['path_jump_ratio'], '{:.2f}')} | <= {MAX_STEP_JUMP:g} |")  # a video: the ordered bound
     for k in MASK_KINDS:
         lines.append(f"| mask_iou.{k} | {_f(doc['mask_iou'].get(k), '{:.3f}')} | {'>= 0.8' if k != 'transient' else ''} |")
     for s in ("bev_1", "bev_2"):

@@ -5,7 +5,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from nerf2gs_plugin.data.process.scale_check import MAX_HEIGHT_JUMP, local_camera_heights, path_jump, scale_jump
+from nerf2gs_plugin.data.process.scale_check import (MAX_HEIGHT_JUMP, MAX_STEP_JUMP_PHOTOS, local_camera_heights, path_jump,
+                                                     scale_jump)
 
 
 def _street(n: int, height: float, spacing: float, x0: float = 0.0, seed: int = 0):
@@ -72,6 +73,7 @@ def test_a_jump_along_an_ordered_path_is_found():
     stop = np.concatenate([np.arange(20) * 0.5, np.full(15, 9.5), 9.5 + np.arange(1, 21) * 0.5])  # a car at a red light
     assert path_jump(np.stack([stop, np.zeros(55), np.zeros(55)], 1)).consistent
     assert path_jump(np.zeros((3, 3))) is None
+    assert path_jump(centres, max_ratio=MAX_STEP_JUMP_PHOTOS).consistent  # a photo set may jump 6x (a walker's photos)
 
 
 def test_check_reconstruction_reads_a_reconstruction_and_warns(recwarn):
@@ -95,7 +97,9 @@ def test_check_reconstruction_reads_a_reconstruction_and_warns(recwarn):
     c2w[:, :3, 3] = centres
     names = [f"frame_{i:03d}.jpg" for i in range(20)]
     check = check_reconstruction(rec, names, c2w, np.array([0.0, 0.0, 1.0]))
-    assert not check["consistent"] and check["split"] == 10 and check["path_jump"] is None  # unordered: no path check
+    # a photo set (exhaustive matching): its path is held to the looser photo-set bound (the 0.01 -> 0.9 step is 8.9x)
+    assert not check["consistent"] and check["split"] == 10 and check["path_jump"]["consistent"]
+    assert check["path_jump"]["max_ratio"] == MAX_STEP_JUMP_PHOTOS
     assert any("changes scale along the capture" in str(w.message) and "frame_010.jpg" in str(w.message) for w in recwarn)
     ordered = check_reconstruction(rec, names, c2w, np.array([0.0, 0.0, 1.0]), ordered=True)
     assert ordered["path_jump"]["index"] == 9 and not ordered["path_jump"]["consistent"]  # 0.01-unit steps, then 0.25

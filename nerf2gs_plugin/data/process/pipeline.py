@@ -130,7 +130,7 @@ def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=Non
         reg_names, c2w, _ = export.camera_arrays(rec)
         xyz, _ = export.points_arrays(rec)
         scale = metric_scale(xyz, c2w, opts)
-        check = check_reconstruction(rec, reg_names, c2w, scale.up, ordered=method == "sequential")
+        check = check_reconstruction(rec, reg_names, c2w, scale.up, ordered=is_video or method == "sequential")
         check_line = check.pop("line")
         export.write_downscaled(root, reg_names, progress)
         times["export"] = time.perf_counter() - t
@@ -164,15 +164,17 @@ def metric_scale(xyz: np.ndarray, c2w: np.ndarray, opts: ProcessOptions):
 
 def check_reconstruction(rec, names: list[str], c2w: np.ndarray, up: np.ndarray, ordered: bool = False) -> dict:
     """The reconstruction's consistency along the capture (:mod:`~nerf2gs_plugin.data.process.scale_check`):
-    the camera's height above its road (one scale) and, for an ordered capture, its path (no jump). Each
-    failure is a warning: the data is written, but one stretch of it is misplaced. Returns the JSON
-    record, with the report's ``line``."""
+    the camera's height above its road (one scale) and its path in name order (no jump; ``ordered``: a
+    video or sequentially matched photos, held to ``MAX_STEP_JUMP``, else a photo set, to
+    ``MAX_STEP_JUMP_PHOTOS``). Each failure is a warning: the data is written, but one stretch of
+    it is misplaced. Returns the JSON record, with the report's ``line``."""
     from nerf2gs_plugin.data.process import export
-    from nerf2gs_plugin.data.process.scale_check import local_camera_heights, path_jump, scale_jump
+    from nerf2gs_plugin.data.process.scale_check import (MAX_STEP_JUMP, MAX_STEP_JUMP_PHOTOS, local_camera_heights, path_jump,
+                                                         scale_jump)
     from nerf2gs_plugin.warn import warn
 
     height = scale_jump(local_camera_heights(c2w[:, :3, 3], export.observed_points(rec, names), up), names)
-    jump = path_jump(c2w[:, :3, 3], names) if ordered else None
+    jump = path_jump(c2w[:, :3, 3], names, MAX_STEP_JUMP if ordered else MAX_STEP_JUMP_PHOTOS)
     bad = [check for check in (height, jump) if check is not None and not check.consistent]
     for check in bad:
         warn(*check.problem(), stacklevel=2)

@@ -15,8 +15,8 @@ the camera is its height above the road. Scale-free: only ratios of heights are 
 
 A join can also keep the scale and misplace the second stretch along the path (the forward drive's
 120 frames once came out as two halves 13% apart in scale and 5 frame spacings apart along the
-street, ATE 14% where each half had 0.03%): in an ordered capture (sequential matching) the camera's
-step from one frame to the next then jumps. :func:`path_jump` finds the largest step against the
+street, ATE 14% where each half had 0.03%): the camera's step from one frame to the next (in name
+order) then jumps. :func:`path_jump` finds the largest step against the
 steps around it.
 """
 
@@ -30,16 +30,20 @@ import numpy as np
 MAX_HEIGHT_JUMP = 4.0
 """The largest ratio between the median local camera heights of two stretches of one capture that is
 still one scale. A mount's height above its road moves by well under 2x (slopes, kerbs, a walker's
-stride); on five good captures the largest ratio measured was 1.14, at a wrong join 25x
-(benchmarks/results/scale_check.md)."""
+stride); on four good captures the largest ratio measured was 1.10, at a wrong join 25x (and 1.14 at
+a join that kept the scale: the path check's case; benchmarks/results/scale_check.md)."""
 DROP_PERCENTILE = 90.0
 """The percentile of a camera's drops to the points below it taken as its height: the road is the
 lowest surface it sees, most points lie above it (facades, cars)."""
 MAX_STEP_JUMP = 4.0
-"""The largest step between consecutive frames of an ordered capture, over the median of the steps
-around it, that is still one path: a video's frames come at one rate, and a blurry frame dropped
-doubles one step (measured: 1.2x at most on three good ordered captures, 6.2x and 18.8x at wrong joins).
-Unordered photo sets are not checked: a walker's photos jump (castle-P30: 5.7x between its first two)."""
+"""The largest step between consecutive frames of an ordered capture (a video, or photos matched
+sequentially), over the median of the steps around it, that is still one path: a video's frames come
+at one rate, and a blurry frame dropped doubles one step (measured: 1.40x at most on two good ordered
+captures, 6.2x and 18.8x at wrong joins)."""
+MAX_STEP_JUMP_PHOTOS = 10.0
+"""The same for a photo set matched exhaustively (its name order may not be a path): a walker's photos
+jump (castle-P30: 5.7x between its first two), a wrong join more (the down-and-back drive matched
+exhaustively: 55x at the join of its passes, 20x where a frame of the first pass was misplaced)."""
 STEP_WINDOW = 5
 """Steps on each side a step is compared with."""
 MIN_POINTS_BELOW = 10
@@ -141,10 +145,11 @@ class PathJump:
     index: int
     """The step from frame ``index`` to frame ``index + 1`` (capture order)."""
     names: tuple[str, str] = ("", "")
+    max_ratio: float = MAX_STEP_JUMP
 
     @property
     def consistent(self) -> bool:
-        return self.ratio <= MAX_STEP_JUMP
+        return self.ratio <= self.max_ratio
 
     @property
     def summary(self) -> str:
@@ -160,13 +165,13 @@ class PathJump:
                 "path broken): try --matching exhaustive, more frames (--fps / --num-frames), or process the stretches separately")
 
     def to_json(self) -> dict:
-        return {**asdict(self), "consistent": self.consistent, "max_ratio": MAX_STEP_JUMP}
+        return {**asdict(self), "consistent": self.consistent}
 
 
-def path_jump(centres: np.ndarray, names: Optional[Sequence[str]] = None) -> Optional[PathJump]:
+def path_jump(centres: np.ndarray, names: Optional[Sequence[str]] = None, max_ratio: float = MAX_STEP_JUMP) -> Optional[PathJump]:
     """The step of the path ``centres [N, 3]`` (capture order) largest against the median of the
-    :data:`STEP_WINDOW` steps on each side; None for fewer than 4 frames. A standing camera (steps ~0
-    around it) is skipped: any motion would be a jump there."""
+    :data:`STEP_WINDOW` steps on each side, flagged above ``max_ratio``; None for fewer than 4 frames.
+    A standing camera (steps ~0 around it) is skipped: any motion would be a jump there."""
     c = np.asarray(centres, dtype=np.float64)
     if len(c) < 4:
         return None
@@ -180,4 +185,4 @@ def path_jump(centres: np.ndarray, names: Optional[Sequence[str]] = None) -> Opt
         if med > floor:
             ratio[i] = steps[i] / med
     i = int(ratio.argmax())
-    return PathJump(float(ratio[i]), i, (names[i], names[i + 1]) if names is not None else ("", ""))
+    return PathJump(float(ratio[i]), i, (names[i], names[i + 1]) if names is not None else ("", ""), max_ratio)
