@@ -293,6 +293,7 @@ def _scale_check(label: str) -> dict:
 
 
 DAB, DAB_EXH, FWD_EARLY = "street drive down and back", "the same, exhaustive matching", "street forward pass, 120 frames (stand-in, an earlier"
+DAB_KEPT = "street drive down and back as process keeps it"
 GOOD_CAPTURES = ("street forward pass, 120 frames (sfm_speed_120's sequential", "street forward pass, 120 frames (sfm_speed_120's exhaustive",
                  "castle-P30", "ns2gs-bench real's drive")
 NO_DEPTH, DEPTH_01 = "splatfacto, no depth loss", "splatfacto, depth loss 0.1 (default)"
@@ -905,8 +906,11 @@ PROSE = [
               _scale_check(DAB_EXH)["path_jump"]["ratio"],
               100 * (_scale_check(FWD_EARLY)["sim3_scale"]["before split"] / _scale_check(FWD_EARLY)["sim3_scale"]["from split"] - 1),
               _scale_check(FWD_EARLY)["ate_percent"]["whole"], _scale_check(FWD_EARLY)["ratio"], _scale_check(FWD_EARLY)["path_jump"]["ratio"]]),
+    ("sequential down-and-back drive keeps its first pass (60 of 120 frames, one cut): ATE 0.04%, scale +1.8%",
+     "60 120 0.04 1.8", lambda: [_scale_check(DAB_KEPT)["frames"], _scale_check(DAB)["frames"], _scale_check(DAB_KEPT)["ate_percent"]["whole"],
+                                 _scale_check(DAB_KEPT)["scale_error_percent"]]),
     ("stay within 1.10x in height and 1.40x in path\nsteps (castle-P30 5.73x against its 10x)", "1.10 1.40 5.73 10",
-     lambda: [max(_scale_check(g)["ratio"] for g in GOOD_CAPTURES),
+     lambda: [max(_scale_check(g)["ratio"] for g in GOOD_CAPTURES),  # the kept stretch of the down-and-back drive is a good capture too
               max(_scale_check(g)["path_jump"]["ratio"] for g in GOOD_CAPTURES if g != "castle-P30"),
               _scale_check("castle-P30")["path_jump"]["ratio"], _scale_check("castle-P30")["path_jump"]["max_ratio"]]),
     ("Splatfacto + NeRF views on the streets'\n  validation views (one seed): 22.52 -> 22.73 and 22.41 -> 22.52", "22.52 22.73 22.41 22.52",

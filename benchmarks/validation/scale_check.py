@@ -44,6 +44,7 @@ for arg in sys.argv[2:]:
         parts = {"whole": slice(None), "before split": slice(0, k), "from split": slice(k, None)}
         row["ate_percent"] = {p: float(pose_errors(c2w[s], T[s]).ate_percent) for p, s in parts.items() if len(names[s]) >= 3}
         row["sim3_scale"] = {p: float(pose_errors(c2w[s], T[s]).scale) for p, s in parts.items() if len(names[s]) >= 3}
+        row["scale_error_percent"] = 100.0 * (float(meta["metres_per_unit"]) / row["sim3_scale"]["whole"] - 1.0)
     rows.append(row)
     print(label, line, sep="\n  ", flush=True)
 
@@ -57,9 +58,10 @@ md = ["# Scale check of `ns2gs-data process`: one scale along the capture?", "",
       "the largest step between consecutive frames (name order) over the median of the 5 steps on each side, flagged "
       f"above {MAX_STEP_JUMP:g}x for a video or sequentially matched photos, above {MAX_STEP_JUMP_PHOTOS:g}x for a photo set matched "
       "exhaustively. ATE (% of the trajectory) after a Sim(3) to the true poses, for the "
-      "whole capture and each stretch (split at the path jump when flagged, else at the height split).", "",
-      "| capture | matching | frames | height ratio | height split at | path jump (steps) | jump between | flagged | height / median (5th, 50th, 95th pct) | ATE % whole / before / from split | Sim(3) scale before / from split |",
-      "|---|---|---|---|---|---|---|---|---|---|---|"]
+      "whole capture and each stretch (split at the path jump when flagged, else at the height split); the metric scale "
+      "`process` set from the camera height against the whole capture's Sim(3) scale.", "",
+      "| capture | matching | frames | height ratio | height split at | path jump (steps) | jump between | flagged | height / median (5th, 50th, 95th pct) | ATE % whole / before / from split | Sim(3) scale before / from split | metric scale error % |",
+      "|---|---|---|---|---|---|---|---|---|---|---|---|"]
 for r in rows:
     ate, sc = r.get("ate_percent", {}), r.get("sim3_scale", {})
     f = lambda d, k, fmt: fmt.format(d[k]) if k in d else "n/a"  # noqa: E731
@@ -70,7 +72,7 @@ for r in rows:
               f"{' / '.join(pj['names'])} | {'no' if r['consistent'] else '**yes**'} | "
               f"{', '.join(f'{v:.2f}' for v in r['height_ratio_percentiles_5_50_95'])} | "
               f"{f(ate, 'whole', '{:.3f}')} / {f(ate, 'before split', '{:.3f}')} / {f(ate, 'from split', '{:.3f}')} | "
-              f"{f(sc, 'before split', '{:.4g}')} / {f(sc, 'from split', '{:.4g}')} |")
+              f"{f(sc, 'before split', '{:.4g}')} / {f(sc, 'from split', '{:.4g}')} | {f(r, 'scale_error_percent', '{:+.1f}')} |")
 atomic_write_text(out.with_suffix(".json"), json.dumps(doc, indent=1))
 atomic_write_text(out.with_suffix(".md"), "\n".join(md) + "\n")
 print("\n".join(md))

@@ -83,7 +83,7 @@ def test_images_too_few(tmp_path):
 
 
 @pytest.mark.slow
-def test_process_video_end_to_end(tmp_path, make_config):
+def test_process_video_end_to_end(tmp_path, make_config, monkeypatch):
     """A 30-frame 200x112 drive (1.6 m apart) (the street's forward pass) -> all registered, poses within 1% ATE
     of the truth, a scale from the 3 m camera height (loose: at 200x112 px SIFT finds ~15 points on the
     road, so the plane is weakly supported; the 5% check is on synthetic points), parsers
@@ -122,6 +122,24 @@ def test_process_video_end_to_end(tmp_path, make_config):
     # the times of a re-run live beside transforms.json: the data a run reads (its fingerprint) is unchanged
     assert set(json.loads((out / "colmap" / "stage_seconds.json").read_text())) >= {"features", "matching", "mapping"}
     assert folder_fingerprint(out) == print_before
+    # a broken join (forced: every step of the path counts as a jump) keeps the longest consistent stretch, in every output
+    import pycolmap
+    from nerf2gs_plugin.data.process import scale_check
+
+    from nerf2gs_plugin.data.process import pipeline
+
+    monkeypatch.setattr(scale_check, "MAX_STEP_JUMP", 1.0)
+    monkeypatch.setattr(pipeline, "MAX_CUTS", 1)  # one cut: the longer side (at least half) is kept
+    main(args + ["--min-registered-fraction", "0.3"])
+    cut = json.loads((out / "transforms.json").read_text())
+    kept = [Path(f["file_path"]).name for f in cut["frames"]]
+    assert cut["process"]["kept"] == len(kept) < cut["process"]["registered"] and cut["process"]["capture_check"]["dropped"]
+    assert sorted(p.name for p in (out / "images").iterdir()) == sorted(kept) == sorted(p.name for p in (out / "images_4").iterdir())
+    assert sorted(im.name for im in pycolmap.Reconstruction(str(out / "sparse" / "0")).images.values() if im.has_pose) == sorted(kept)
+    assert not set(cut["process"]["capture_check"]["dropped"]) & set(kept)
+    main(args + ["--broken-join", "keep"])  # the warning only: every frame stays
+    assert len(json.loads((out / "transforms.json").read_text())["frames"]) == cut["process"]["registered"]
+    monkeypatch.undo()
     main(args[:6] + ["28"] + args[7:] + ["--metres-per-unit", "1.0"])  # other frames: stale features and matches are not mixed in
     est = json.loads((out / "transforms.json").read_text())
     assert est["process"]["frames"] == len(list((out / "colmap" / "frames").iterdir())) <= 28

@@ -107,3 +107,11 @@ def test_check_reconstruction_reads_a_reconstruction_and_warns(recwarn):
     assert ordered["line"].endswith("x between frame_009.jpg and frame_010.jpg (warnings above)")
     one = check_reconstruction(rec, names[:10], c2w[:10], np.array([0.0, 0.0, 1.0]), ordered=True)
     assert one["consistent"] and one["line"].startswith("capture check: one scale (camera height above the road within")
+
+
+def test_a_broken_capture_whose_longest_stretch_is_short_is_an_error(tmp_path):
+    from nerf2gs_plugin.data.process.pipeline import _keep_only
+    from nerf2gs_plugin.errors import DataError
+
+    with pytest.raises(DataError, match=r"longest consistent stretch holds only 12 of 30 frames.*--broken-join keep"):
+        _keep_only(tmp_path, None, ["frame_000012.jpg"], 12, 30, 0.5)

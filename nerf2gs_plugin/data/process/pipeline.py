@@ -39,6 +39,10 @@ class ProcessOptions:
     """Frames larger than this (longest side, px) are shrunk before the SfM (0: keep)."""
     min_registered_fraction: float = 0.5
     """Fewer registered frames than this fraction is an error."""
+    broken_join: Literal["drop", "keep"] = "drop"
+    """A reconstruction the capture check finds broken (SfM joined two stretches of the capture at different
+    scales or in the wrong place): drop keeps the longest consistent stretch (up to 3 cuts) and drops the
+    other frames, as COLMAP keeps its largest model; keep keeps every frame (the warning only)."""
     progress: bool = True
 
 
@@ -127,14 +131,24 @@ def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=Non
         import pycolmap
 
         rec = pycolmap.Reconstruction(str(root / "sparse" / "0"))
-        reg_names, c2w, _ = export.camera_arrays(rec)
-        xyz, _ = export.points_arrays(rec)
-        scale = metric_scale(xyz, c2w, opts)
-        check = check_reconstruction(rec, reg_names, c2w, scale.up, ordered=is_video or method == "sequential")
-        check_line = check.pop("line")
+        dropped: list[str] = []
+        for cut in range(MAX_CUTS + 1):
+            reg_names, c2w, _ = export.camera_arrays(rec)
+            xyz, _ = export.points_arrays(rec)
+            scale = metric_scale(xyz, c2w, opts)
+            check = check_reconstruction(rec, reg_names, c2w, scale.up, ordered=is_video or method == "sequential")
+            if check["consistent"] or opts.broken_join == "keep" or cut == MAX_CUTS:
+                break
+            dropped += drop_shorter_stretch(rec, reg_names, check)
+        if dropped:
+            _keep_only(root, rec, dropped, len(reg_names), len(names), opts.min_registered_fraction)
+        check["dropped"] = sorted(dropped)
+        check_line = check.pop("line") + (f"; kept the longest consistent stretch, {len(reg_names)} frames ({len(dropped)} dropped)"
+                                          if dropped else "")
         export.write_downscaled(root, reg_names, progress)
         times["export"] = time.perf_counter() - t
         extra = {"process": {"source": "video" if is_video else "images", "frames": len(names), "registered": mapped.registered,
+                             "kept": len(reg_names),
                              "matching": method, "camera_height_m": opts.camera_height, "scale_source": scale.source,
                              "capture_check": check}}
         if scale.plane is not None:
@@ -160,6 +174,48 @@ def metric_scale(xyz: np.ndarray, c2w: np.ndarray, opts: ProcessOptions):
 
         warnings.warn("no ground plane below the cameras: up is the cameras' mean up instead", stacklevel=2)
     return scale
+
+
+MAX_CUTS = 3
+"""At most this many cuts of a broken reconstruction (``--broken-join drop``) before it is kept as it is."""
+
+
+def drop_shorter_stretch(rec, names: list[str], check: dict) -> list[str]:
+    """Deregister, from the pycolmap reconstruction ``rec``, the frames on the shorter side of the failed
+    check's split (the path jump's when it failed, else the height split) with their observations (a
+    point seen only there goes with them). Returns their names."""
+    jump = check.get("path_jump")
+    at = jump["index"] + 1 if jump is not None and not jump["consistent"] else check["split"]
+    drop = set(names[at:] if at >= len(names) - at else names[:at])
+    for im in list(rec.images.values()):
+        if im.name in drop and im.has_pose:
+            for idx, p in enumerate(im.points2D):
+                if p.has_point3D():
+                    rec.delete_observation(im.image_id, idx)
+            rec.deregister_frame(im.frame_id)
+    return sorted(drop)
+
+
+def _keep_only(root: Path, rec, dropped: list[str], kept: int, frames: int, min_fraction: float) -> None:
+    """Write the cut reconstruction over ``root/sparse/0`` (temp folder, then renamed) and remove the
+    dropped frames' images; an error when what is left is fewer than ``min_fraction`` of the frames."""
+    from nerf2gs_plugin.warn import warn
+
+    if kept < min_fraction * frames:
+        raise DataError(f"the reconstruction is broken (see the capture check above) and its longest consistent stretch holds only "
+                        f"{kept} of {frames} frames (fewer than {min_fraction:.0%}): process the stretches separately, or pass "
+                        "--broken-join keep to keep every frame", root)
+    tmp = root / "sparse" / "0.tmp"
+    shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir(parents=True)
+    rec.write(str(tmp))
+    shutil.rmtree(root / "sparse" / "0")
+    os.replace(tmp, root / "sparse" / "0")
+    for n in dropped:
+        (root / "images" / n).unlink(missing_ok=True)
+    names = sorted(dropped)
+    warn(f"kept the longest consistent stretch of the broken reconstruction: {kept} of {frames} frames",
+         f"dropped {len(names)} ({names[0]} .. {names[-1]}); --broken-join keep keeps them", stacklevel=3)
 
 
 def check_reconstruction(rec, names: list[str], c2w: np.ndarray, up: np.ndarray, ordered: bool = False) -> dict:
