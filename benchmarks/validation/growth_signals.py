@@ -22,20 +22,14 @@ import torch
 torch.set_num_threads(1)
 from nerf2gs_plugin.engine.trainer import Trainer  # noqa: E402
 from nerf2gs_plugin.eval.bench_paper import _overrides  # noqa: E402
-from nerf2gs_plugin.eval.bench_size import _nested  # noqa: E402
+from nerf2gs_plugin.eval.bench_size import model_overrides  # noqa: E402
 from nerf2gs_plugin.methods.splatfacto import strategy as S  # noqa: E402
 from nerf2gs_plugin.registry import get_method  # noqa: E402
 from nerf2gs_plugin.utils.config import apply_plain  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
 data, out, label = Path(sys.argv[1]), Path(sys.argv[2]), sys.argv[3]
-extra: dict = {}
-for item in sys.argv[4:]:
-    field, value = item.split("=", 1)
-    model = extra.setdefault("pipeline", {}).setdefault("model", {})
-    nested = _nested(field, json.loads(value))
-    key = next(iter(nested))
-    model[key] = {**model.get(key, {}), **nested[key]} if isinstance(nested[key], dict) else nested[key]
+extra = model_overrides(sys.argv[4:])
 cfg = apply_plain(get_method("splatfacto").config, _overrides("quick", "splatfacto", extra), where="growth_signals")
 cfg = dataclasses.replace(cfg, data=data, output_dir=Path(tempfile.mkdtemp()), timestamp=f"{data.name}-{label}", progress=False)
 trainer = Trainer(cfg)

@@ -13,19 +13,13 @@ torch.set_num_threads(1)
 from nerf2gs_plugin.utils.config import apply_plain
 from nerf2gs_plugin.engine.trainer import Trainer
 from nerf2gs_plugin.eval.bench_paper import _overrides
-from nerf2gs_plugin.eval.bench_size import _nested
+from nerf2gs_plugin.eval.bench_size import model_overrides
 from nerf2gs_plugin.registry import get_method
 from nerf2gs_plugin.engine.reference import load_run
 from nerf2gs_plugin.eval.evaluate import evaluate_run
 
 method, label, data, out_dir = sys.argv[1], sys.argv[2], Path(sys.argv[3]), Path(sys.argv[4])
-extra: dict = {}
-for item in sys.argv[5:]:
-    field, value = item.split("=", 1)
-    model = extra.setdefault("pipeline", {}).setdefault("model", {})
-    nested = _nested(field, json.loads(value))
-    key = next(iter(nested))
-    model[key] = {**model.get(key, {}), **nested[key]} if isinstance(nested[key], dict) else nested[key]
+extra = model_overrides(sys.argv[5:])
 cfg = apply_plain(get_method(method).config, _overrides("quick", method, extra), where="size_prune")
 name = f"{data.name}-{method}-{label}"
 cfg = dataclasses.replace(cfg, data=data, output_dir=out_dir / "runs", timestamp=name, progress=False)

@@ -57,6 +57,20 @@ def _nested(dotted: str, value: Any) -> dict:
     return out
 
 
+def model_overrides(items: list[str]) -> dict:
+    """``["strategy.max_gaussians=8000", ...]`` (values as JSON) -> the plain overrides of the model config
+    (``{"pipeline": {"model": {...}}}``), nested fields of one config merged."""
+    import json
+
+    model: dict = {}
+    for item in items:
+        field, value = item.split("=", 1)
+        nested = _nested(field, json.loads(value))
+        key = next(iter(nested))
+        model[key] = {**model.get(key, {}), **nested[key]} if isinstance(nested[key], dict) else nested[key]
+    return {"pipeline": {"model": model}} if model else {}
+
+
 def size_plan(scale: str, methods=tuple(SWEEPS), augment: bool = False) -> list[RunSpec]:
     """The default run, then one run per swept value that differs from the default."""
     from nerf2gs_plugin.eval.bench_paper import _overrides

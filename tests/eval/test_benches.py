@@ -408,3 +408,11 @@ def test_raster_bench_writes_tables_on_a_tiny_scale(tmp_path, monkeypatch):
     md = (tmp_path / "raster.md").read_text()
     assert "cpu fwd+bwd (s)" in md and "## 2DGS surfels" in md
     assert (tmp_path / "raster.png").stat().st_size > 1000
+
+
+def test_model_overrides_merge_nested_fields():
+    from nerf2gs_plugin.eval.bench_size import model_overrides
+
+    assert model_overrides([]) == {}
+    assert model_overrides(["strategy.max_gaussians=8000", "strategy.prune_weight_fraction=0.2", "depth_loss_weight=0"]) == {
+        "pipeline": {"model": {"strategy": {"max_gaussians": 8000, "prune_weight_fraction": 0.2}, "depth_loss_weight": 0}}}
