@@ -131,20 +131,8 @@ def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=Non
         import pycolmap
 
         rec = pycolmap.Reconstruction(str(root / "sparse" / "0"))
-        dropped: list[str] = []
-        for cut in range(MAX_CUTS + 1):
-            reg_names, c2w, _ = export.camera_arrays(rec)
-            xyz, _ = export.points_arrays(rec)
-            scale = metric_scale(xyz, c2w, opts)
-            check = check_reconstruction(rec, reg_names, c2w, scale.up, ordered=is_video or method == "sequential")
-            if check["consistent"] or opts.broken_join == "keep" or cut == MAX_CUTS:
-                break
-            dropped += drop_shorter_stretch(rec, reg_names, check)
-        if dropped:
-            _keep_only(root, rec, dropped, len(reg_names), len(names), opts.min_registered_fraction)
-        check["dropped"] = sorted(dropped)
-        check_line = check.pop("line") + (f"; kept the longest consistent stretch, {len(reg_names)} frames ({len(dropped)} dropped)"
-                                          if dropped else "")
+        reg_names, c2w, scale, check = checked_reconstruction(root, rec, opts, is_video or method == "sequential", len(names))
+        check_line = check.pop("line")
         export.write_downscaled(root, reg_names, progress)
         times["export"] = time.perf_counter() - t
         extra = {"process": {"source": "video" if is_video else "images", "frames": len(names), "registered": mapped.registered,
@@ -174,6 +162,27 @@ def metric_scale(xyz: np.ndarray, c2w: np.ndarray, opts: ProcessOptions):
 
         warnings.warn("no ground plane below the cameras: up is the cameras' mean up instead", stacklevel=2)
     return scale
+
+
+def checked_reconstruction(root: Path, rec, opts: ProcessOptions, ordered: bool, frames: int):
+    """(names, c2w, metric scale, capture check) of the undistorted model ``rec`` (in ``root/sparse/0``),
+    after ``--broken-join drop`` kept its longest consistent stretch (written back over ``root``)."""
+    from nerf2gs_plugin.data.process import export
+
+    dropped: list[str] = []
+    for cut in range(MAX_CUTS + 1):
+        names, c2w, _ = export.camera_arrays(rec)
+        xyz, _ = export.points_arrays(rec)
+        scale = metric_scale(xyz, c2w, opts)
+        check = check_reconstruction(rec, names, c2w, scale.up, ordered=ordered)
+        if check["consistent"] or opts.broken_join == "keep" or cut == MAX_CUTS:
+            break
+        dropped += drop_shorter_stretch(rec, names, check)
+    if dropped:
+        _keep_only(root, rec, dropped, len(names), frames, opts.min_registered_fraction)
+        check["line"] += f"; kept the longest consistent stretch, {len(names)} frames ({len(dropped)} dropped)"
+    check["dropped"] = sorted(dropped)
+    return names, c2w, scale, check
 
 
 MAX_CUTS = 3
