@@ -164,6 +164,10 @@ def metric_scale(xyz: np.ndarray, c2w: np.ndarray, opts: ProcessOptions):
     return scale
 
 
+MAX_CUTS = 3
+"""At most this many cuts of a broken reconstruction (``--broken-join drop``) before it is kept as it is."""
+
+
 def checked_reconstruction(root: Path, rec, opts: ProcessOptions, ordered: bool, frames: int):
     """(names, c2w, metric scale, capture check) of the undistorted model ``rec`` (in ``root/sparse/0``),
     after ``--broken-join drop`` kept its longest consistent stretch (written back over ``root``)."""
@@ -183,10 +187,6 @@ def checked_reconstruction(root: Path, rec, opts: ProcessOptions, ordered: bool,
         check["line"] += f"; kept the longest consistent stretch, {len(names)} frames ({len(dropped)} dropped)"
     check["dropped"] = sorted(dropped)
     return names, c2w, scale, check
-
-
-MAX_CUTS = 3
-"""At most this many cuts of a broken reconstruction (``--broken-join drop``) before it is kept as it is."""
 
 
 def drop_shorter_stretch(rec, names: list[str], check: dict) -> list[str]:
@@ -231,8 +231,8 @@ def check_reconstruction(rec, names: list[str], c2w: np.ndarray, up: np.ndarray,
     """The reconstruction's consistency along the capture (:mod:`~nerf2gs_plugin.data.process.scale_check`):
     the camera's height above its road (one scale) and its path in name order (no jump; ``ordered``: a
     video or sequentially matched photos, held to ``MAX_STEP_JUMP``, else a photo set, to
-    ``MAX_STEP_JUMP_PHOTOS``). Each failure is a warning: the data is written, but one stretch of
-    it is misplaced. Returns the JSON record, with the report's ``line``."""
+    ``MAX_STEP_JUMP_PHOTOS``). Each failure is a warning (what to do about it is
+    :func:`checked_reconstruction`'s). Returns the JSON record, with the report's ``line``."""
     from nerf2gs_plugin.data.process import export
     from nerf2gs_plugin.data.process.scale_check import (MAX_STEP_JUMP, MAX_STEP_JUMP_PHOTOS, local_camera_heights, path_jump,
                                                          scale_jump)

@@ -105,13 +105,6 @@ class ScaleCheck:
             return f"one scale (camera height above the road within {self.ratio:.1f}x along the capture)"
         return f"scale {self.ratio:.1f}x apart from {self.first_name or f'frame {self.split}'} on"
 
-    def line(self) -> str:
-        if self.split == 0:
-            return f"scale check: too few cameras with points below them ({self.measured} of {self.frames}) to compare"
-        if self.consistent:
-            return f"scale check: one scale along the capture (camera height above the road within {self.ratio:.1f}x)"
-        return "; ".join(self.problem())
-
     def to_json(self) -> dict:
         return {**asdict(self), "consistent": self.consistent, "max_ratio": MAX_HEIGHT_JUMP}
 
@@ -152,14 +145,18 @@ class PathJump:
         return self.ratio <= self.max_ratio
 
     @property
+    def _frames(self) -> tuple[str, str]:
+        return self.names if self.names[0] else (f"frame {self.index}", f"frame {self.index + 1}")
+
+    @property
     def summary(self) -> str:
         if self.consistent:
             return f"one path (largest step {self.ratio:.1f}x the steps around it)"
-        a, b = self.names if self.names[0] else (f"frame {self.index}", f"frame {self.index + 1}")
+        a, b = self._frames
         return f"path jump {self.ratio:.1f}x between {a} and {b}"
 
     def problem(self) -> tuple[str, str]:
-        a, b = self.names if self.names[0] else (f"frame {self.index}", f"frame {self.index + 1}")
+        a, b = self._frames
         return (f"the camera path jumps between {a} and {b}: {self.ratio:.1f}x the step between the frames around them",
                 "a gap in the capture, or SfM joined two stretches of it in the wrong place (every frame registered, the "
                 "path broken): try --matching exhaustive, more frames (--fps / --num-frames), or process the stretches separately")
