@@ -9,6 +9,7 @@ The SH degree used for rendering rises by one every ``sh_degree_interval`` steps
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, Callable, Literal, Optional
 
@@ -38,6 +39,13 @@ MAX_SPARSE_ON_PATH = 0.05
 """More of the sparse points than this within the path clearance: the clearance is switched off."""
 
 
+def cpu_scale_strategy(**changes: Any) -> DefaultStrategyConfig:
+    """The densify / prune schedule at CPU scale, shared by Splatfacto and 2DGS (``changes``: their own fields)."""
+    return dataclasses.replace(DefaultStrategyConfig(
+        warmup_length=300, reset_alpha_every=1000, stop_split_at=1500, stop_screen_size_at=400, max_pause_after_reset=300,
+        max_gaussians=60000, prune_weight_fraction=0.1, path_clearance_m=1.0), **changes)
+
+
 @dataclass
 class SplatfactoModelConfig(SplatModelConfig):
     """Defaults are the CPU scale (the step counts and the paper-scale values are in methods/splatfacto/config.py)."""
@@ -51,13 +59,15 @@ class SplatfactoModelConfig(SplatModelConfig):
     """Opacity of the initial Gaussians."""
     strategy_type: Literal["default", "mcmc"] = "default"
     """Densification: default (clone / split / prune, settings under strategy) or mcmc (settings under mcmc)."""
-    strategy: DefaultStrategyConfig = field(default_factory=lambda: DefaultStrategyConfig(
-        warmup_length=300, reset_alpha_every=1000, stop_split_at=1500, stop_screen_size_at=400,
-        max_pause_after_reset=300, max_gaussians=60000, prune_weight_fraction=0.1, path_clearance_m=1.0))
-    """The default strategy at CPU scale (paper values in config.py): 60k-Gaussian soft budget, and once
-    densification stops the Gaussians carrying the lightest 10% of the training views' blending weight are
-    pruned, so the size follows the scene (chosen on validation views: benchmarks/results/size_prune.md);
-    every prune keeps 1 m around the capture path free (benchmarks/results/path_clearance.md)."""
+    strategy: DefaultStrategyConfig = field(default_factory=lambda: cpu_scale_strategy(pixel_steps_per_gaussian=54000.0))
+    """The default strategy at CPU scale (paper values in config.py). Its soft budget is read from the views:
+    their pixels x the densification steps (stop-split-at - warmup-length) / 54,000, at most 60k: ~8k Gaussians
+    for the synthetic street's 60 views of 200x112 px at the quick scale (320 densification steps), ~30k at the
+    default 1200 (where growth stops below it), twice that with a view from above for each input view. Once
+    densification stops, the Gaussians carrying the lightest 10% of the training views' blending weight are
+    pruned (benchmarks/results/size_prune.md), and every prune keeps 1 m around the capture path free
+    (benchmarks/results/path_clearance.md). Budget chosen on the validation views of both synthetic streets,
+    with and without views from above, at both scales (benchmarks/results/model_size*.md)."""
     depth_loss_weight: float = 0.1
     """Sparse-point depth (0: off): weight of mean_p A_p * min(|D_p - z_p| / z_p, 1) over the sparse
     points a training view sees (methods/point_visibility.py), D the rendered expected depth and A the
@@ -175,6 +185,7 @@ class SplatfactoModel(Model):
         self.strategy = self._make_strategy()
         if isinstance(self.strategy, DefaultStrategy):
             self.strategy.weights_fn = self.training_blend_weights
+            self.strategy.pixels_fn = self.training_pixels
             if self._path is not None:
                 self.strategy.clear_path(*self._path)
 
@@ -245,6 +256,13 @@ class SplatfactoModel(Model):
         """:meth:`blend_weights` over every training view (real and extra), or None before the
         training callbacks named them (the strategy's weight prune then does nothing)."""
         return None if self._train_cameras is None else self.blend_weights(self._train_cameras())
+
+    def training_pixels(self) -> Optional[int]:
+        """Pixels in every training view (real and extra), or None before the training callbacks named them."""
+        if self._train_cameras is None:
+            return None
+        cams = self._train_cameras()
+        return int((cams.width.long() * cams.height.long()).sum())
 
     def get_outputs(self, inputs: Cameras) -> dict[str, Tensor]:
         return self._render(inputs, training=self.training)

@@ -114,6 +114,11 @@ class DefaultStrategyConfig:
     """Cap on nerfstudio's pause after an opacity reset (num_images + refine_every steps)."""
     max_gaussians: int = 0
     """Soft budget of Gaussians (0 = unlimited, as nerfstudio)."""
+    pixel_steps_per_gaussian: float = 0.0
+    """0 = off (nerfstudio). Else the soft budget is the pixel count of the training views (every real and
+    extra view at its training resolution) times the densification window (stop-split-at - warmup-length
+    steps) over this (the smaller of the two when max-gaussians is set too): a capture with more or larger
+    views, or a longer densification, makes room for more Gaussians, a constant does not."""
     prune_weight_fraction: float = 0.0
     """0 = off (nerfstudio). Else, at the first refinement at or after stop-split-at, render every
     training view once and prune the Gaussians that together carry this fraction of the total
@@ -138,6 +143,10 @@ class DefaultStrategy(Strategy):
         self.weights_fn: Optional[Callable[[], Optional[Tensor]]] = None
         """Set by the model: each primitive's blending weight summed over the training pixels ``[N]``
         (None when it has no training views to render); read by the weight prune only."""
+        self.pixels_fn: Optional[Callable[[], Optional[int]]] = None
+        """Set by the model: the training views' pixel count (None before training names the views); read by
+        :attr:`budget` once."""
+        self._pixel_budget: Optional[int] = None
         self.path: Optional[CapturePath] = None
         self.path_radius = 0.0
         """Set by the model (:meth:`clear_path`): the capture path and its clearance in world units."""
@@ -164,6 +173,22 @@ class DefaultStrategy(Strategy):
         c = self.cfg
         pause = min(self.num_train_images, c.max_pause_after_reset) + c.refine_every
         return min(pause, max(c.reset_alpha_every // 2, 0))
+
+    @property
+    def budget(self) -> int:
+        """The soft budget in force (0 = none): ``max_gaussians``, or the training pixels times the
+        densification window over ``pixel_steps_per_gaussian`` (the smaller when both are set;
+        ``max_gaussians`` until the pixels are known)."""
+        c = self.cfg
+        if c.pixel_steps_per_gaussian <= 0:
+            return c.max_gaussians
+        if self._pixel_budget is None:
+            pixels = self.pixels_fn() if self.pixels_fn is not None else None
+            if pixels is None:
+                return c.max_gaussians
+            window = max(c.stop_split_at - c.warmup_length, 1)
+            self._pixel_budget = max(int(pixels * window / c.pixel_steps_per_gaussian), 1)
+        return min(self._pixel_budget, c.max_gaussians) if c.max_gaussians > 0 else self._pixel_budget
 
     def clear_path(self, path: Optional[CapturePath], metre: float) -> None:
         """Keep ``cfg.path_clearance_m`` metres (``metre`` world units each) around ``path`` free."""
@@ -231,8 +256,9 @@ class DefaultStrategy(Strategy):
         split = high & ~small
         if step < c.stop_screen_size_at:
             split |= self.max_radii > c.split_screen_size
-        if c.max_gaussians > 0:  # soft budget: only the highest-gradient candidates, then nothing
-            room = max(c.max_gaussians - n, 0)
+        budget = self.budget
+        if budget > 0:  # soft budget: only the highest-gradient candidates, then nothing
+            room = max(budget - n, 0)
             clone, split = _limit(clone, split, avg, room, c.n_split_samples)
         n_clone, n_split = int(clone.sum()), int(split.sum())
         if n_clone:
