@@ -116,6 +116,10 @@ class Cameras:
             height=(self.height.float() * factor).round().long(),
         )
 
+    def pixel_count(self) -> int:
+        """Pixels in all these views together (what a densification budget read from the views counts)."""
+        return int((self.width.long() * self.height.long()).sum())
+
     @property
     def is_distorted(self) -> bool:
         return bool((self.distortion_params.abs() > 0).any())

@@ -7,7 +7,8 @@ Splatfacto and 2DGS sweep ``strategy.pixel_steps_per_gaussian`` (the soft budget
 views: training pixels x densification steps over it; 0 = the fixed ``max_gaussians``),
 ``strategy.densify_grad_thresh`` and ``strategy.prune_weight_fraction`` (the blending-weight prune
 after densification), and run nerfstudio's recipe (neither budget nor prune) beside them; Scaffold-GS
-sweeps ``max_anchors`` and ``grow_threshold``. The band and the picks are chosen on the validation
+sweeps ``pixel_steps_per_anchor`` (its budget read from the views), ``max_anchors`` (a cap below the
+initial anchors: no growth) and ``grow_threshold``. The band and the picks are chosen on the validation
 views (val_street, val_bev) where the dataset has them, the test views (street, bev_1, bev_2)
 otherwise; both are reported. With ``augment`` every run trains on StreetNeRF's views (the StreetNeRF
 run is shared with the paper table when the scale matches).
@@ -36,16 +37,19 @@ SIZE_TARGET = 1.5
 UNBOUNDED = {"pixel_steps_per_gaussian": 0.0, "prune_weight_fraction": 0.0}
 """nerfstudio's densification at this project's CPU schedule: no budget read from the views, no weight prune."""
 SWEEPS: dict[str, list[tuple[str, tuple, tuple]]] = {
-    "splatfacto": [("strategy.pixel_steps_per_gaussian", (0.0, 27000.0, 108000.0, 216000.0), (27000.0, 108000.0, 216000.0, 432000.0)),
-                   ("strategy.densify_grad_thresh", (0.0016,), (0.0016,)),
-                   ("strategy.prune_weight_fraction", (0.0, 0.2), (0.0, 0.2)),
-                   ("strategy", (UNBOUNDED,), (UNBOUNDED,))],
-    "2dgs": [("strategy.pixel_steps_per_gaussian", (0.0, 18000.0, 72000.0, 144000.0), (18000.0, 72000.0, 144000.0, 288000.0)),
-             ("strategy.densify_grad_thresh", (0.0016,), (0.0016,)),
-             ("strategy.prune_weight_fraction", (0.0, 0.2), (0.0, 0.2)),
-             ("strategy", (UNBOUNDED,), (UNBOUNDED,))],
-    "scaffold-gs": [("max_anchors", (1000, 5000, 20000), (2000, 5000, 10000, 20000)),
-                    ("grow_threshold", (0.0008,), (0.0001, 0.0008))],
+    # default scale (3000 steps, CPU time): budgets below the default's only (growth stops under it there),
+    # the unpruned model, and a lighter prune
+    "splatfacto": [("strategy.pixel_steps_per_gaussian", (0.0, 27000.0, 108000.0, 216000.0), (108000.0, 216000.0)),
+                   ("strategy.densify_grad_thresh", (0.0016,), ()),
+                   ("strategy.prune_weight_fraction", (0.0, 0.2), (0.0, 0.05)),
+                   ("strategy", (UNBOUNDED,), ())],
+    "2dgs": [("strategy.pixel_steps_per_gaussian", (0.0, 18000.0, 72000.0, 144000.0), (72000.0, 144000.0)),
+             ("strategy.densify_grad_thresh", (0.0016,), ()),
+             ("strategy.prune_weight_fraction", (0.0, 0.2), (0.0, 0.05)),
+             ("strategy", (UNBOUNDED,), ())],
+    "scaffold-gs": [("pixel_steps_per_anchor", (0.0, 48000.0, 192000.0), (192000.0, 384000.0)),
+                    ("max_anchors", (1000,), (2000,)),
+                    ("grow_threshold", (0.0008,), ())],
 }
 
 

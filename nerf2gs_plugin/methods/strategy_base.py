@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from contextlib import contextmanager
-from typing import Any, ClassVar, Iterator, Optional
+from typing import Any, Callable, ClassVar, Iterator, Optional
 
 import torch
 from torch import Tensor, nn
@@ -99,3 +99,31 @@ class Strategy(ABC):
                 value = self._stat(path)
                 if op == "sum" and value is not None:
                     value.zero_()
+
+
+class ViewsBudget:
+    """A soft budget of primitives read from the training views: their pixels (every real and extra view
+    at its training resolution) x the steps the strategy grows for, over ``pixel_steps_per_primitive``,
+    at most ``cap``. More or larger views, or a longer growing phase, make room for more primitives: the
+    model follows the capture and the schedule, not a constant. ``pixel_steps_per_primitive`` <= 0: the
+    fixed ``cap`` (0 = unlimited). The model sets :attr:`pixels_fn` when training names its views; the
+    budget is read once, on first use after that."""
+
+    def __init__(self, pixel_steps_per_primitive: float, growing_steps: int, cap: int) -> None:
+        self.pixel_steps_per_primitive = pixel_steps_per_primitive
+        self.growing_steps = max(int(growing_steps), 1)
+        self.cap = cap
+        self.pixels_fn: Optional[Callable[[], Optional[int]]] = None
+        self._from_views: Optional[int] = None
+
+    @property
+    def value(self) -> int:
+        """The budget in force (0 = none); ``cap`` until the views are known."""
+        if self.pixel_steps_per_primitive <= 0:
+            return self.cap
+        if self._from_views is None:
+            pixels = self.pixels_fn() if self.pixels_fn is not None else None
+            if pixels is None:
+                return self.cap
+            self._from_views = max(int(pixels * self.growing_steps / self.pixel_steps_per_primitive), 1)
+        return min(self._from_views, self.cap) if self.cap > 0 else self._from_views

@@ -17,7 +17,7 @@ import torch
 from torch import Tensor
 
 from nerf2gs_plugin.methods.splatfacto.strategy import append_rows, keep_rows
-from nerf2gs_plugin.methods.strategy_base import Strategy
+from nerf2gs_plugin.methods.strategy_base import Strategy, ViewsBudget
 
 
 def voxelize(points: Tensor, voxel: float) -> Tensor:
@@ -87,13 +87,15 @@ class AnchorStats:
 
 
 @torch.no_grad()
-def grow_anchors(c: Any, st: AnchorStats, a: Any, voxel: float, optimizers: Any) -> int:
+def grow_anchors(c: Any, st: AnchorStats, a: Any, voxel: float, optimizers: Any, max_anchors: Optional[int] = None) -> int:
     """New anchors where neural Gaussians have large average gradients, level by level: level
     ``i`` uses threshold ``t * (h/2)^i`` and voxel ``v * f / h^i`` (h = hierarchy factor, f = init
     factor), keeps each candidate with probability ``1 - 0.5^(i+1)``, and adds only voxels that
     hold no anchor yet. New anchors take the max feature of their candidates. ``c``: the model
-    config (its growing settings), ``a``: the anchor ParameterDict, ``voxel``: the base voxel size."""
+    config (its growing settings), ``a``: the anchor ParameterDict, ``voxel``: the base voxel size,
+    ``max_anchors``: the budget in force (``c.max_anchors`` when None; 0 = none)."""
     k = c.n_offsets
+    cap = c.max_anchors if max_anchors is None else max_anchors
     m0 = a["anchors"].shape[0]
     grads = st.grad_accum / st.denom.clamp_min(1)
     seen = st.denom > c.update_interval * c.success_threshold * 0.5
@@ -101,7 +103,7 @@ def grow_anchors(c: Any, st: AnchorStats, a: Any, voxel: float, optimizers: Any)
     feats = a["anchor_feat"].detach().repeat_interleave(k, dim=0)
     added = 0
     for level in range(c.update_depth):
-        room = c.max_anchors - a["anchors"].shape[0] if c.max_anchors > 0 else None
+        room = cap - a["anchors"].shape[0] if cap > 0 else None
         if room is not None and room <= 0:
             break
         thr = c.grow_threshold * (c.update_hierarchy_factor // 2) ** level
@@ -169,6 +171,9 @@ class AnchorStrategy(Strategy):
     def __init__(self, config: Any, voxel: float) -> None:
         self.config = config  # the model config: its anchor growing / pruning settings
         self.voxel = voxel
+        self.views_budget = ViewsBudget(getattr(config, "pixel_steps_per_anchor", 0.0), config.update_until - config.update_from,
+                                        config.max_anchors)
+        """Its ``pixels_fn`` is set by the model: the training views' pixel count."""
         self.initialize_state()
 
     def initialize_state(self) -> None:
@@ -196,6 +201,6 @@ class AnchorStrategy(Strategy):
         k = self.config.n_offsets
         if self.stats.denom is None or self.stats.denom.shape[0] != params["anchors"].shape[0] * k:
             return {"grown": 0, "pruned": 0}
-        grown = grow_anchors(self.config, self.stats, params, self.voxel, optimizers)
+        grown = grow_anchors(self.config, self.stats, params, self.voxel, optimizers, self.views_budget.value)
         pruned = prune_anchors(self.config, self.stats, params, optimizers)
         return {"grown": grown, "pruned": pruned}

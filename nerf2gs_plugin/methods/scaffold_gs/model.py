@@ -12,7 +12,7 @@ several voxel levels) and are pruned when their accumulated opacity is low (:mod
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 import torch
 from torch import Tensor, nn
@@ -73,6 +73,12 @@ class ScaffoldGSModelConfig(SplatModelConfig):
     """Prune anchors whose neural Gaussians' mean opacity is below this."""
     max_anchors: int = 20000
     """Soft budget on anchors for a CPU (0 = unlimited)."""
+    pixel_steps_per_anchor: float = 96000.0
+    """0 = off (the fixed max-anchors). Else the anchors' soft budget is the pixel count of the training views
+    (real and extra, at training resolution) x the growing steps (update-until - update-from) over this, at
+    most max-anchors: ~5k anchors for the synthetic street's 60 views of 200x112 px at the quick scale, ~19k
+    at the default one, twice that with a view from above for each input view (as Splatfacto's
+    pixel-steps-per-gaussian; chosen on validation views: benchmarks/results/model_size*.md)."""
 
 
 class ScaffoldGSModel(Model):
@@ -110,8 +116,18 @@ class ScaffoldGSModel(Model):
         self.register_buffer("train_c2w", train_data.cameras.camera_to_worlds.clone(), persistent=False)
         self.background = Background(c.background, c.sky_sh_degree)
         self.register_buffer("step", torch.zeros((), dtype=torch.long))
-        self.strategy = AnchorStrategy(c, float(self.voxel))  # the buffer's (float32) value, as after a reload
+        self._train_cameras: Optional[Callable[[], Cameras]] = None  # set with the training callbacks
+        self.strategy = self._make_strategy()
         self._last: Optional[dict[str, Any]] = None
+
+    def _make_strategy(self) -> AnchorStrategy:
+        strategy = AnchorStrategy(self.config, float(self.voxel))  # the buffer's (float32) value, as after a reload
+        strategy.views_budget.pixels_fn = self.training_pixels
+        return strategy
+
+    def training_pixels(self) -> Optional[int]:
+        """Pixels in every training view (real and extra), or None before the training callbacks named them."""
+        return None if self._train_cameras is None else self._train_cameras().pixel_count()
 
     def get_param_groups(self) -> dict[str, list[nn.Parameter]]:
         groups = {name: [p] for name, p in self.anchor.items()}
@@ -234,6 +250,9 @@ class ScaffoldGSModel(Model):
     def get_training_callbacks(self, attrs: TrainingCallbackAttributes) -> list[TrainingCallback]:
         optimizers = attrs.optimizers
 
+        if getattr(attrs.pipeline, "datamanager", None) is not None:
+            self._train_cameras = lambda: attrs.pipeline.datamanager.all_train_cameras
+
         def before(step: int) -> None:
             self.step.fill_(step)
 
@@ -265,7 +284,7 @@ class ScaffoldGSModel(Model):
                 old = self.anchor[name]
                 self.anchor[name] = nn.Parameter(torch.zeros(saved.shape, dtype=saved.dtype, device=old.device), requires_grad=old.requires_grad)
         self.load_state_dict(state)
-        self.strategy = AnchorStrategy(self.config, float(self.voxel))
+        self.strategy = self._make_strategy()
 
     export_needs_cameras = True
 

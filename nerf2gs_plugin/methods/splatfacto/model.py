@@ -185,7 +185,7 @@ class SplatfactoModel(Model):
         self.strategy = self._make_strategy()
         if isinstance(self.strategy, DefaultStrategy):
             self.strategy.weights_fn = self.training_blend_weights
-            self.strategy.pixels_fn = self.training_pixels
+            self.strategy.views_budget.pixels_fn = self.training_pixels
             if self._path is not None:
                 self.strategy.clear_path(*self._path)
 
@@ -259,10 +259,7 @@ class SplatfactoModel(Model):
 
     def training_pixels(self) -> Optional[int]:
         """Pixels in every training view (real and extra), or None before the training callbacks named them."""
-        if self._train_cameras is None:
-            return None
-        cams = self._train_cameras()
-        return int((cams.width.long() * cams.height.long()).sum())
+        return None if self._train_cameras is None else self._train_cameras().pixel_count()
 
     def get_outputs(self, inputs: Cameras) -> dict[str, Tensor]:
         return self._render(inputs, training=self.training)

@@ -29,7 +29,7 @@ from torch import Tensor, nn
 
 from nerf2gs_plugin.methods.capture_path import CapturePath
 from nerf2gs_plugin.methods.gaussian_utils import logit
-from nerf2gs_plugin.methods.strategy_base import Strategy
+from nerf2gs_plugin.methods.strategy_base import Strategy, ViewsBudget
 from nerf2gs_plugin.utils.quaternions import quat_to_rotmat
 from nerf2gs_plugin.utils.schedule import scheduled
 
@@ -143,10 +143,8 @@ class DefaultStrategy(Strategy):
         self.weights_fn: Optional[Callable[[], Optional[Tensor]]] = None
         """Set by the model: each primitive's blending weight summed over the training pixels ``[N]``
         (None when it has no training views to render); read by the weight prune only."""
-        self.pixels_fn: Optional[Callable[[], Optional[int]]] = None
-        """Set by the model: the training views' pixel count (None before training names the views); read by
-        :attr:`budget` once."""
-        self._pixel_budget: Optional[int] = None
+        self.views_budget = ViewsBudget(cfg.pixel_steps_per_gaussian, cfg.stop_split_at - cfg.warmup_length, cfg.max_gaussians)
+        """Its ``pixels_fn`` is set by the model: the training views' pixel count."""
         self.path: Optional[CapturePath] = None
         self.path_radius = 0.0
         """Set by the model (:meth:`clear_path`): the capture path and its clearance in world units."""
@@ -176,19 +174,9 @@ class DefaultStrategy(Strategy):
 
     @property
     def budget(self) -> int:
-        """The soft budget in force (0 = none): ``max_gaussians``, or the training pixels times the
-        densification window over ``pixel_steps_per_gaussian`` (the smaller when both are set;
-        ``max_gaussians`` until the pixels are known)."""
-        c = self.cfg
-        if c.pixel_steps_per_gaussian <= 0:
-            return c.max_gaussians
-        if self._pixel_budget is None:
-            pixels = self.pixels_fn() if self.pixels_fn is not None else None
-            if pixels is None:
-                return c.max_gaussians
-            window = max(c.stop_split_at - c.warmup_length, 1)
-            self._pixel_budget = max(int(pixels * window / c.pixel_steps_per_gaussian), 1)
-        return min(self._pixel_budget, c.max_gaussians) if c.max_gaussians > 0 else self._pixel_budget
+        """The soft budget in force (0 = none): ``max_gaussians``, or the views' pixels x the densification
+        window over ``pixel_steps_per_gaussian`` (the smaller when both are set)."""
+        return self.views_budget.value
 
     def clear_path(self, path: Optional[CapturePath], metre: float) -> None:
         """Keep ``cfg.path_clearance_m`` metres (``metre`` world units each) around ``path`` free."""

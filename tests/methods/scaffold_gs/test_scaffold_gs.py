@@ -88,9 +88,9 @@ def test_visible_anchors_culls_behind_and_outside_the_frustum(scene):
     assert n in vis and n + 1 not in vis and n + 2 not in vis
 
 
-def _fresh_with_optimizers(scene):
+def _fresh_with_optimizers(scene, **cfg):
     cams, _, _ = scene
-    model = _cfg().setup(train_data=make_train_data(cams))
+    model = _cfg(**cfg).setup(train_data=make_train_data(cams))
     opts = Optimizers(scaffold_optimizers(10), model.get_param_groups())
     model.stats.reset(model.num_primitives(), model.config.n_offsets, torch.device("cpu"))
     return model, opts
@@ -157,3 +157,33 @@ def test_with_steps_rescales_anchor_schedule():
     m = quick.pipeline.model
     assert (m.start_stat, m.update_from, m.update_until, m.update_interval) == (25, 75, 750, 50)
     assert quick.optimizers["offsets"].max_steps == 1500 and quick.optimizers["anchors"].max_steps == 30000
+
+
+@needs_rasterizer
+def test_growth_stops_at_the_budget_read_from_the_views(scene):
+    """``pixel_steps_per_anchor``: the views' pixels x the growing steps over it caps the anchors; the
+    model reads the views from the training callbacks, also after a checkpoint reload."""
+    from types import SimpleNamespace
+
+    from nerf2gs_plugin.engine.callbacks import TrainingCallbackAttributes
+
+    cams = scene[0]
+    torch.manual_seed(0)
+    m0 = _cfg().setup(train_data=make_train_data(cams)).num_primitives()
+    pixels, steps = cams.pixel_count(), 100 - 10  # update_until - update_from
+    assert pixels == 6 * 40 * 24
+    model, opts = _fresh_with_optimizers(scene, pixel_steps_per_anchor=pixels * steps / (m0 + 5))
+    assert model.strategy.views_budget.value == model.config.max_anchors  # views not named yet
+    model.get_training_callbacks(TrainingCallbackAttributes(optimizers=opts, pipeline=SimpleNamespace(
+        datamanager=SimpleNamespace(all_train_cameras=cams))))
+    assert model.strategy.views_budget.value == m0 + 5
+    model.load_model_state(model.state_dict())  # a reload makes a new strategy: still reading the views
+    assert model.strategy.views_budget.value == m0 + 5
+    model.stats.reset(m0, model.config.n_offsets, torch.device("cpu"))
+    k = model.config.n_offsets
+    with torch.no_grad():
+        model.anchor["offsets"][:40] = 3.0
+    model.stats.grad_accum[torch.arange(40 * k)] = 1.0
+    model.stats.denom[:] = 100.0
+    added = grow_anchors(model.config, model.stats, model.anchor, float(model.voxel), opts, model.strategy.views_budget.value)
+    assert added == 5 and model.num_primitives() == m0 + 5

@@ -23,7 +23,7 @@ def _grown(pixels, **cfg) -> tuple[int, int]:
                                "quats": nn.Parameter(torch.tensor([[1.0, 0, 0, 0]]).repeat(10, 1)),
                                "opacities": nn.Parameter(torch.full((10,), 3.0))})
     strat = DefaultStrategy(DefaultStrategyConfig(warmup_length=0, refine_every=10, reset_alpha_every=0, stop_split_at=100, **cfg))
-    strat.pixels_fn = (lambda: pixels) if pixels is not None else None
+    strat.views_budget.pixels_fn = (lambda: pixels) if pixels is not None else None
     strat._reset_stats(10, torch.device("cpu"))
     strat.grad_accum[:] = torch.arange(10).float()
     strat.count[:] = 1.0
