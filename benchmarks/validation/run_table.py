@@ -36,12 +36,14 @@ def main(out: Path, rows_path: Path) -> None:
         psnr = {k: round(v["psnr"], 2) for k, v in res.items()}
         steps = json.loads((Path(r["run"]) / "bench_run.json").read_text())["overrides"].get("max_num_iterations")
         per_view = {k: [round(x, 2) for x in v["psnr_per_image"]] for k, v in res.items() if v.get("psnr_per_image")}
-        rows.append({**r, "steps": steps, "psnr": psnr, "mean": round(sum(psnr.values()) / len(psnr), 2), "psnr_per_view": per_view})
+        size = json.loads((Path(r["run"]) / eval_cache_name(EVAL_SPLITS)).read_text()).get("size", {})
+        rows.append({**r, "steps": steps, "primitives": size.get("primitives"), "psnr": psnr,
+                     "mean": round(sum(psnr.values()) / len(psnr), 2), "psnr_per_view": per_view})
     lines = [f"# {doc['title']}", "", f"Machine: {machine_line()}", "", doc["about"], "",
-             "| scene | variant | steps | PSNR per split | mean | PSNR per view (photo sets) |", "|---|---|---|---|---|---|"]
+             "| scene | variant | steps | primitives | PSNR per split | mean | PSNR per view (photo sets) |", "|---|---|---|---|---|---|---|"]
     for r in rows:
         views = "; ".join(" / ".join(f"{x:.2f}" for x in v) for k, v in r["psnr_per_view"].items() if k == "test")
-        lines.append(f"| {r['scene']} | {r['variant']} | {r['steps']} | " + ", ".join(f"{k} {v:.2f}" for k, v in r["psnr"].items())
+        lines.append(f"| {r['scene']} | {r['variant']} | {r['steps']} | {r['primitives'] if r['primitives'] is not None else 'n/a'} | " + ", ".join(f"{k} {v:.2f}" for k, v in r["psnr"].items())
                      + f" | {r['mean']:.2f} | {views} |")
     atomic_write_text(out.with_suffix(".json"), json.dumps({"machine": machine_line(), "title": doc["title"], "rows": rows}, indent=1))
     atomic_write_text(out.with_suffix(".md"), "\n".join(lines) + "\n")

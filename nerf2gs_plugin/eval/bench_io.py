@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from nerf2gs_plugin.errors import UserError
-from nerf2gs_plugin.eval.bench_runs import RunSpec, run_key, train_or_reuse
+from nerf2gs_plugin.eval.bench_runs import RunSpec, evaluation_lock, run_key, train_or_reuse
 from nerf2gs_plugin.eval.machine import machine_info, machine_line
 from nerf2gs_plugin.eval.metrics import LPIPS
 from nerf2gs_plugin.utils.config import apply_plain
@@ -188,18 +188,19 @@ class BenchRunner:
 
         eval_path = run_dir / eval_cache_name(self.splits)  # validation and test evaluations cached side by side
         want = self.eval_key(key)
-        res = json.loads(eval_path.read_text()) if eval_path.is_file() else None
-        if res is None or res.get("eval_key") != want:
-            run = load_run(run_dir, device=self.device)
-            names = [s for s in self.splits if s in run.pipeline.datamanager.eval_split_names()]
-            if not names and self.splits != EVAL_SPLITS:
-                return {"results": {}}  # asked for splits (validation views) this dataset does not have
-            names = names or None
-            res = evaluate_run(run, names, render_dir=run_dir / "eval_renders", lpips_model=self.lpips())
-            res["eval_key"] = want
-            res["measured"] = {"machine": machine_line(), "device": device_label(self.device),
-                               "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
-            atomic_write_text(eval_path, json.dumps(res, indent=1))
+        with evaluation_lock(run_dir):  # read after the lock: another bench may just have written it
+            res = json.loads(eval_path.read_text()) if eval_path.is_file() else None
+            if res is None or res.get("eval_key") != want:
+                run = load_run(run_dir, device=self.device)
+                names = [s for s in self.splits if s in run.pipeline.datamanager.eval_split_names()]
+                if not names and self.splits != EVAL_SPLITS:
+                    return {"results": {}}  # asked for splits (validation views) this dataset does not have
+                names = names or None
+                res = evaluate_run(run, names, render_dir=run_dir / "eval_renders", lpips_model=self.lpips())
+                res["eval_key"] = want
+                res["measured"] = {"machine": machine_line(), "device": device_label(self.device),
+                                   "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+                atomic_write_text(eval_path, json.dumps(res, indent=1))
         trained = run_dir / "bench_run.json"
         if trained.is_file():
             res["trained"] = json.loads(trained.read_text()).get("trained")

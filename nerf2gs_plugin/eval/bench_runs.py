@@ -16,9 +16,10 @@ import json
 import os
 import shutil
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Iterator, Optional
 
 from nerf2gs_plugin.engine.checkpoints import list_checkpoints, load_checkpoint
 from nerf2gs_plugin.engine.run_dir import LOCK_NAME
@@ -65,6 +66,23 @@ def wait_for_other_training(run_dir: Path, log=print) -> None:
             fcntl.flock(fd, fcntl.LOCK_SH)
         fcntl.flock(fd, fcntl.LOCK_UN)
     finally:
+        os.close(fd)
+
+
+EVAL_LOCK_NAME = ".eval.lock"
+
+
+@contextmanager
+def evaluation_lock(run_dir: Path) -> Iterator[None]:
+    """Hold one run's evaluation to one process at a time: two benches sharing a runs folder that reach
+    the same finished run evaluate it once (the second reads the first's cached result) instead of
+    both writing its renders (they raced on the same temp files and one failed)."""
+    fd = os.open(Path(run_dir) / EVAL_LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        fcntl.flock(fd, fcntl.LOCK_UN)
         os.close(fd)
 
 

@@ -192,3 +192,36 @@ def test_a_bench_waits_for_another_training_of_the_same_run(tmp_path):
     assert said and "waiting for another process" in said[0]
     wait_for_other_training(tmp_path / "run", log=said.append)  # free now: no wait, nothing said
     assert len(said) == 1
+
+
+def test_two_benches_evaluate_a_shared_run_once(tmp_path):
+    """Two benches reaching the same finished run at once: one evaluates it, the other waits and reads
+    its cached result (both used to write the same render files, and one failed on the other's temp file)."""
+    import threading
+    import time
+    from types import SimpleNamespace
+
+    from nerf2gs_plugin.eval.bench_io import BenchRunner
+
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    calls: list[int] = []
+
+    def load_run(path, device=None):
+        return SimpleNamespace(pipeline=SimpleNamespace(datamanager=SimpleNamespace(eval_split_names=lambda: ["street"])))
+
+    def evaluate_run(run, names, render_dir=None, lpips_model=None):
+        calls.append(1)
+        time.sleep(0.3)  # long enough for the other bench to arrive meanwhile
+        return {"results": {"street": {"psnr": 20.0 + len(calls)}}}
+
+    runners = [BenchRunner(tmp_path / "runs"), BenchRunner(tmp_path / "runs")]
+    for r in runners:
+        r._lpips = False  # no LPIPS weights needed
+    got: list[dict] = []
+    threads = [threading.Thread(target=lambda r=r: got.append(r._evaluate(run_dir, "k", load_run, evaluate_run))) for r in runners]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert len(calls) == 1 and [g["results"] for g in got] == [{"street": {"psnr": 21.0}}] * 2
