@@ -259,16 +259,14 @@ def test_size_plan_and_smallest_within():
     plan = size_plan("default")
     labels = [s.label for s in plan]
     assert len(labels) == len(set(labels))
-    assert "splatfacto pixel_steps_per_gaussian=108000" in labels and "scaffold-gs max_anchors=2000" in labels and "scaffold-gs pixel_steps_per_anchor=384000" in labels and "2dgs prune_weight_fraction=0.05" in labels
+    assert "splatfacto max_gaussians=5000" in labels and "scaffold-gs max_anchors=2000" in labels and "2dgs densify_grad_thresh=0.0016" in labels
     assert "splatfacto prune_weight_fraction=0" in labels  # the unpruned model is one of the swept configurations
-    # and nerfstudio's recipe (no budget from the views, no prune): one run setting both fields
-    unbounded = next(s for s in size_plan("quick") if s.label == "splatfacto pixel_steps_per_gaussian=0 prune_weight_fraction=0")
-    assert apply_plain(get_method("splatfacto").config, unbounded.overrides).pipeline.model.strategy.pixel_steps_per_gaussian == 0
+    assert "splatfacto pixel_steps_per_gaussian=54000" in labels and "scaffold-gs pixel_steps_per_anchor=96000" in labels  # the views budget
     for spec in plan:
         apply_plain(get_method(spec.method).config, spec.overrides)  # valid fields and types
     own = next(s for s in plan if s.label == "splatfacto default")  # the registered default, the paper table's run
     assert "pipeline" not in own.overrides
-    assert "splatfacto pixel_steps_per_gaussian=54000" not in labels  # the default's own value is not run twice
+    assert "splatfacto max_gaussians=60000" not in labels  # the default's own value is not run twice
     aug = size_plan("quick", ("splatfacto",), augment=True)
     assert aug[0].method == "streetnerf" and all(s.augment_from == "StreetNeRF" for s in aug[1:])
     with pytest.raises(ConfigError, match="no sweep for method 'nope'"):

@@ -73,12 +73,11 @@ class ScaffoldGSModelConfig(SplatModelConfig):
     """Prune anchors whose neural Gaussians' mean opacity is below this."""
     max_anchors: int = 20000
     """Soft budget on anchors for a CPU (0 = unlimited)."""
-    pixel_steps_per_anchor: float = 96000.0
+    pixel_steps_per_anchor: float = 0.0
     """0 = off (the fixed max-anchors). Else the anchors' soft budget is the pixel count of the training views
     (real and extra, at training resolution) x the growing steps (update-until - update-from) over this, at
-    most max-anchors: ~5k anchors for the synthetic street's 60 views of 200x112 px at the quick scale, ~19k
-    at the default one, twice that with a view from above for each input view (as Splatfacto's
-    pixel-steps-per-gaussian; chosen on validation views: benchmarks/results/model_size*.md)."""
+    most max-anchors (as Splatfacto's pixel-steps-per-gaussian; 96000 gives ~5k anchors for the synthetic
+    street at the quick scale: benchmarks/results/views_budget/README.md)."""
 
 
 class ScaffoldGSModel(Model):

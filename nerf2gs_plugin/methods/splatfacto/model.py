@@ -59,15 +59,14 @@ class SplatfactoModelConfig(SplatModelConfig):
     """Opacity of the initial Gaussians."""
     strategy_type: Literal["default", "mcmc"] = "default"
     """Densification: default (clone / split / prune, settings under strategy) or mcmc (settings under mcmc)."""
-    strategy: DefaultStrategyConfig = field(default_factory=lambda: cpu_scale_strategy(pixel_steps_per_gaussian=54000.0))
-    """The default strategy at CPU scale (paper values in config.py). Its soft budget is read from the views:
-    their pixels x the densification steps (stop-split-at - warmup-length) / 54,000, at most 60k: ~8k Gaussians
-    for the synthetic street's 60 views of 200x112 px at the quick scale (320 densification steps), ~30k at the
-    default 1200 (where growth stops below it), twice that with a view from above for each input view. Once
-    densification stops, the Gaussians carrying the lightest 10% of the training views' blending weight are
-    pruned (benchmarks/results/size_prune.md), and every prune keeps 1 m around the capture path free
-    (benchmarks/results/path_clearance.md). Budget chosen on the validation views of both synthetic streets,
-    with and without views from above, at both scales (benchmarks/results/model_size*.md)."""
+    strategy: DefaultStrategyConfig = field(default_factory=cpu_scale_strategy)
+    """The default strategy at CPU scale (paper values in config.py): 60k-Gaussian soft budget, and once
+    densification stops the Gaussians carrying the lightest 10% of the training views' blending weight are
+    pruned, so the size follows the scene (chosen on validation views: benchmarks/results/size_prune.md);
+    every prune keeps 1 m around the capture path free (benchmarks/results/path_clearance.md). A budget read
+    from the views (``strategy.pixel-steps-per-gaussian 54000``) meets issue 20's size target on both
+    synthetic streets at the quick scale but costs a real capture's validation photos 0.7 dB: off by default
+    (benchmarks/results/views_budget/README.md)."""
     depth_loss_weight: float = 0.1
     """Sparse-point depth (0: off): weight of mean_p A_p * min(|D_p - z_p| / z_p, 1) over the sparse
     points a training view sees (methods/point_visibility.py), D the rendered expected depth and A the
