@@ -64,7 +64,7 @@ class SplatfactoModelConfig(SplatModelConfig):
     densification stops the Gaussians carrying the lightest 10% of the training views' blending weight are
     pruned, so the size follows the scene (chosen on validation views: benchmarks/results/size_prune.md);
     every prune keeps 1 m around the capture path free (benchmarks/results/path_clearance.md). A budget read
-    from the views (``strategy.pixel-steps-per-gaussian 54000``) meets issue 20's size target on both
+    from the views (strategy.pixel-steps-per-gaussian 54000) meets issue 20's size target on both
     synthetic streets at the quick scale but costs a real capture's validation photos 0.7 dB: off by default
     (benchmarks/results/views_budget/README.md)."""
     depth_loss_weight: float = 0.1
