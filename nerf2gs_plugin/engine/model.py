@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from abc import ABCMeta, abstractmethod
 from dataclasses import dataclass, field
-from typing import Any, Optional, Union
+from typing import Any, Callable, Optional, Union
 
 import torch
 from torch import Tensor, nn
@@ -51,6 +51,8 @@ class Model(nn.Module, metaclass=ABCMeta):
         self.config = config
         self.scene_box = train_data.scene_box.clone()
         self.num_train_images = len(train_data)
+        self._train_cameras: Optional[Callable[[], Cameras]] = None
+        """Every training view (real and extra) once training named them (:meth:`name_training_views`)."""
         self.populate_modules(train_data)
 
     @property
@@ -82,6 +84,16 @@ class Model(nn.Module, metaclass=ABCMeta):
 
     def get_training_callbacks(self, attrs: TrainingCallbackAttributes) -> list[TrainingCallback]:
         return []
+
+    def name_training_views(self, attrs: TrainingCallbackAttributes) -> None:
+        """From now on read the training views (real and extra) from the pipeline's data manager: for what
+        a model decides from its views (a densification budget, a prune). Called by get_training_callbacks."""
+        if getattr(attrs.pipeline, "datamanager", None) is not None:
+            self._train_cameras = lambda: attrs.pipeline.datamanager.all_train_cameras
+
+    def training_pixels(self) -> Optional[int]:
+        """Pixels in every training view (real and extra), or None before training named them."""
+        return None if self._train_cameras is None else self._train_cameras().pixel_count()
 
     @abstractmethod
     @torch.no_grad()

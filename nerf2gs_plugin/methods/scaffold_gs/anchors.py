@@ -171,7 +171,7 @@ class AnchorStrategy(Strategy):
     def __init__(self, config: Any, voxel: float) -> None:
         self.config = config  # the model config: its anchor growing / pruning settings
         self.voxel = voxel
-        self.views_budget = ViewsBudget(getattr(config, "pixel_steps_per_anchor", 0.0), config.update_until - config.update_from,
+        self.views_budget = ViewsBudget(config.pixel_steps_per_anchor, config.update_until - config.update_from,
                                         config.max_anchors)
         """Its ``pixels_fn`` is set by the model: the training views' pixel count."""
         self.initialize_state()

@@ -12,7 +12,7 @@ several voxel levels) and are pruned when their accumulated opacity is low (:mod
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable, Optional
+from typing import Any, Optional
 
 import torch
 from torch import Tensor, nn
@@ -115,7 +115,6 @@ class ScaffoldGSModel(Model):
         self.register_buffer("train_c2w", train_data.cameras.camera_to_worlds.clone(), persistent=False)
         self.background = Background(c.background, c.sky_sh_degree)
         self.register_buffer("step", torch.zeros((), dtype=torch.long))
-        self._train_cameras: Optional[Callable[[], Cameras]] = None  # set with the training callbacks
         self.strategy = self._make_strategy()
         self._last: Optional[dict[str, Any]] = None
 
@@ -123,10 +122,6 @@ class ScaffoldGSModel(Model):
         strategy = AnchorStrategy(self.config, float(self.voxel))  # the buffer's (float32) value, as after a reload
         strategy.views_budget.pixels_fn = self.training_pixels
         return strategy
-
-    def training_pixels(self) -> Optional[int]:
-        """Pixels in every training view (real and extra), or None before the training callbacks named them."""
-        return None if self._train_cameras is None else self._train_cameras().pixel_count()
 
     def get_param_groups(self) -> dict[str, list[nn.Parameter]]:
         groups = {name: [p] for name, p in self.anchor.items()}
@@ -249,8 +244,7 @@ class ScaffoldGSModel(Model):
     def get_training_callbacks(self, attrs: TrainingCallbackAttributes) -> list[TrainingCallback]:
         optimizers = attrs.optimizers
 
-        if getattr(attrs.pipeline, "datamanager", None) is not None:
-            self._train_cameras = lambda: attrs.pipeline.datamanager.all_train_cameras
+        self.name_training_views(attrs)
 
         def before(step: int) -> None:
             self.step.fill_(step)

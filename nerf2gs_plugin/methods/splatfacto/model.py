@@ -9,9 +9,8 @@ The SH degree used for rendering rises by one every ``sh_degree_interval`` steps
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
-from typing import Any, Callable, Literal, Optional
+from typing import Any, Literal, Optional
 
 import torch
 from torch import Tensor, nn
@@ -39,13 +38,6 @@ MAX_SPARSE_ON_PATH = 0.05
 """More of the sparse points than this within the path clearance: the clearance is switched off."""
 
 
-def cpu_scale_strategy(**changes: Any) -> DefaultStrategyConfig:
-    """The densify / prune schedule at CPU scale, shared by Splatfacto and 2DGS (``changes``: their own fields)."""
-    return dataclasses.replace(DefaultStrategyConfig(
-        warmup_length=300, reset_alpha_every=1000, stop_split_at=1500, stop_screen_size_at=400, max_pause_after_reset=300,
-        max_gaussians=60000, prune_weight_fraction=0.1, path_clearance_m=1.0), **changes)
-
-
 @dataclass
 class SplatfactoModelConfig(SplatModelConfig):
     """Defaults are the CPU scale (the step counts and the paper-scale values are in methods/splatfacto/config.py)."""
@@ -59,7 +51,9 @@ class SplatfactoModelConfig(SplatModelConfig):
     """Opacity of the initial Gaussians."""
     strategy_type: Literal["default", "mcmc"] = "default"
     """Densification: default (clone / split / prune, settings under strategy) or mcmc (settings under mcmc)."""
-    strategy: DefaultStrategyConfig = field(default_factory=cpu_scale_strategy)
+    strategy: DefaultStrategyConfig = field(default_factory=lambda: DefaultStrategyConfig(
+        warmup_length=300, reset_alpha_every=1000, stop_split_at=1500, stop_screen_size_at=400,
+        max_pause_after_reset=300, max_gaussians=60000, prune_weight_fraction=0.1, path_clearance_m=1.0))
     """The default strategy at CPU scale (paper values in config.py): 60k-Gaussian soft budget, and once
     densification stops the Gaussians carrying the lightest 10% of the training views' blending weight are
     pruned, so the size follows the scene (chosen on validation views: benchmarks/results/size_prune.md);
@@ -111,7 +105,6 @@ class SplatfactoModel(Model):
         self.background = Background(cfg.background, cfg.sky_sh_degree)
         self.register_buffer("step", torch.zeros((), dtype=torch.long))
         self._meta: Optional[dict[str, Any]] = None
-        self._train_cameras: Optional[Callable[[], Cameras]] = None  # set with the training callbacks
         self._path = self._capture_path(train_data, means if train_data.points3D_xyz is not None else None)
         self._depth_targets = self._sparse_depth_targets(train_data) if cfg.depth_loss_weight > 0 else None
         self._setup_strategy()
@@ -256,10 +249,6 @@ class SplatfactoModel(Model):
         training callbacks named them (the strategy's weight prune then does nothing)."""
         return None if self._train_cameras is None else self.blend_weights(self._train_cameras())
 
-    def training_pixels(self) -> Optional[int]:
-        """Pixels in every training view (real and extra), or None before the training callbacks named them."""
-        return None if self._train_cameras is None else self._train_cameras().pixel_count()
-
     def get_outputs(self, inputs: Cameras) -> dict[str, Tensor]:
         return self._render(inputs, training=self.training)
 
@@ -290,8 +279,7 @@ class SplatfactoModel(Model):
     # ------------------------------------------------------------------ training callbacks
     def get_training_callbacks(self, attrs: TrainingCallbackAttributes) -> list[TrainingCallback]:
         optimizers = attrs.optimizers
-        if getattr(attrs.pipeline, "datamanager", None) is not None:
-            self._train_cameras = lambda: attrs.pipeline.datamanager.all_train_cameras
+        self.name_training_views(attrs)
 
         def set_step(step: int) -> None:
             self.step.fill_(step)

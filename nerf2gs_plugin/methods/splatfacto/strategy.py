@@ -144,7 +144,8 @@ class DefaultStrategy(Strategy):
         """Set by the model: each primitive's blending weight summed over the training pixels ``[N]``
         (None when it has no training views to render); read by the weight prune only."""
         self.views_budget = ViewsBudget(cfg.pixel_steps_per_gaussian, cfg.stop_split_at - cfg.warmup_length, cfg.max_gaussians)
-        """Its ``pixels_fn`` is set by the model: the training views' pixel count."""
+        """The soft budget in force (``views_budget.value``): max-gaussians, or read from the views (the model
+        sets its ``pixels_fn``)."""
         self.path: Optional[CapturePath] = None
         self.path_radius = 0.0
         """Set by the model (:meth:`clear_path`): the capture path and its clearance in world units."""
@@ -171,12 +172,6 @@ class DefaultStrategy(Strategy):
         c = self.cfg
         pause = min(self.num_train_images, c.max_pause_after_reset) + c.refine_every
         return min(pause, max(c.reset_alpha_every // 2, 0))
-
-    @property
-    def budget(self) -> int:
-        """The soft budget in force (0 = none): ``max_gaussians``, or the views' pixels x the densification
-        window over ``pixel_steps_per_gaussian`` (the smaller when both are set)."""
-        return self.views_budget.value
 
     def clear_path(self, path: Optional[CapturePath], metre: float) -> None:
         """Keep ``cfg.path_clearance_m`` metres (``metre`` world units each) around ``path`` free."""
@@ -244,7 +239,7 @@ class DefaultStrategy(Strategy):
         split = high & ~small
         if step < c.stop_screen_size_at:
             split |= self.max_radii > c.split_screen_size
-        budget = self.budget
+        budget = self.views_budget.value
         if budget > 0:  # soft budget: only the highest-gradient candidates, then nothing
             room = max(budget - n, 0)
             clone, split = _limit(clone, split, avg, room, c.n_split_samples)

@@ -27,7 +27,7 @@ def _grown(pixels, **cfg) -> tuple[int, int]:
     strat._reset_stats(10, torch.device("cpu"))
     strat.grad_accum[:] = torch.arange(10).float()
     strat.count[:] = 1.0
-    budget = strat.budget
+    budget = strat.views_budget.value
     strat.refine(10, params, None)
     return budget, params["means"].shape[0]
 
@@ -60,8 +60,8 @@ def test_training_stays_within_the_views_budget_and_learns():
         train(model, gaussian_optimizers(STEPS), cams, imgs, skies, STEPS, pipeline=_views(views))
         counts[name] = model.num_primitives()
         if name == "budget":
-            assert model.training_pixels() == 8 * 40 * 24 and model.strategy.budget == 8 * 40 * 24 * (50 - 10) // 320
-            assert n0 < counts[name] <= model.strategy.budget
+            assert model.training_pixels() == 8 * 40 * 24 and model.strategy.views_budget.value == 8 * 40 * 24 * (50 - 10) // 320
+            assert n0 < counts[name] <= model.strategy.views_budget.value
             assert psnr(model, cams, imgs) > p0 + 3.0
     assert counts["budget"] < counts["free"], counts  # the budget binds on this scene
     assert counts["more views"] > counts["budget"], counts  # twice the pixels: room to grow further
