@@ -6,8 +6,8 @@ one within that band (issue 20's target).
 Splatfacto and 2DGS sweep ``strategy.max_gaussians`` (the fixed soft budget),
 ``strategy.pixel_steps_per_gaussian`` (a budget read from the views: training pixels x densification
 steps over it), ``strategy.densify_grad_thresh`` and ``strategy.prune_weight_fraction`` (the blending-
-weight prune after densification); Scaffold-GS sweeps ``max_anchors``, ``pixel_steps_per_anchor`` and
-``grow_threshold``. The band and the picks are chosen on the validation
+weight prune after densification); Scaffold-GS sweeps ``max_anchors``, ``anchor_growth`` (growth relative to
+the initial anchors), ``pixel_steps_per_anchor`` and ``grow_threshold``. The band and the picks are chosen on the validation
 views (val_street, val_bev) where the dataset has them, the test views (street, bev_1, bev_2)
 otherwise; both are reported. With ``augment`` every run trains on StreetNeRF's views (the StreetNeRF
 run is shared with the paper table when the scale matches).
@@ -41,8 +41,9 @@ SWEEPS: dict[str, list[tuple[str, tuple, tuple]]] = {
              ("strategy.pixel_steps_per_gaussian", (18000.0, 36000.0, 72000.0, 144000.0), (36000.0, 72000.0, 144000.0)),
              ("strategy.densify_grad_thresh", (0.0016,), (0.0016,)),
              ("strategy.prune_weight_fraction", (0.0, 0.2), (0.0, 0.05, 0.2))],
-    "scaffold-gs": [("max_anchors", (1000, 5000, 20000), (2000, 5000, 10000, 20000)),
-                    ("pixel_steps_per_anchor", (48000.0, 96000.0, 192000.0), (96000.0, 192000.0, 384000.0)),
+    "scaffold-gs": [("max_anchors", (1000,), (2000,)),
+                    ("anchor_growth", (0.0, 1.1, 1.5, 2.0), (0.0, 1.1, 1.5, 2.0)),
+                    ("pixel_steps_per_anchor", (96000.0,), (192000.0,)),
                     ("grow_threshold", (0.0008,), (0.0001, 0.0008))],
 }
 

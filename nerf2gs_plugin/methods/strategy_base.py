@@ -101,29 +101,57 @@ class Strategy(ABC):
                     value.zero_()
 
 
-class ViewsBudget:
-    """A soft budget of primitives read from the training views: their pixels (every real and extra view
-    at its training resolution) x the steps the strategy grows for, over ``pixel_steps_per_primitive``,
-    at most ``cap``. More or larger views, or a longer growing phase, make room for more primitives: the
-    model follows the capture and the schedule, not a constant. ``pixel_steps_per_primitive`` <= 0: the
-    fixed ``cap`` (0 = unlimited). The model sets :attr:`pixels_fn` when training names its views; the
-    budget is read once, on first use after that."""
+class SceneBudget:
+    """A soft budget of primitives read from the scene, not a constant: the larger of what its views and
+    what its content call for, at most ``cap``.
 
-    def __init__(self, pixel_steps_per_primitive: float, growing_steps: int, cap: int) -> None:
+    * views: the pixels of every training view (real and extra, at training resolution) x the steps the
+      strategy grows for, over ``pixel_steps_per_primitive``: more or larger views, or a longer growing
+      phase, make room for more primitives (off when <= 0);
+    * content: ``per_point`` x ``points``, the model's count of what the capture's structure gave it (the
+      SfM points for Splatfacto / 2DGS, the initial anchors for Scaffold-GS): a courtyard whose photos
+      hold 15k SfM points needs more primitives per pixel than a synthetic street of 4k (off when <= 0).
+
+    Neither on: the fixed ``cap`` (0 = unlimited). The model sets :attr:`pixels_fn` when training names
+    its views and :attr:`points` when it is built from the data; the views term is read once, on first use
+    after the views are known (until then the budget is the cap)."""
+
+    def __init__(self, pixel_steps_per_primitive: float, growing_steps: int, cap: int, per_point: float = 0.0) -> None:
         self.pixel_steps_per_primitive = pixel_steps_per_primitive
         self.growing_steps = max(int(growing_steps), 1)
         self.cap = cap
+        self.per_point = per_point
+        self.points = 0
+        """Set by the model from its data (kept when a checkpoint is loaded into a model built from the same data)."""
         self.pixels_fn: Optional[Callable[[], Optional[int]]] = None
         self._from_views: Optional[int] = None
 
     @property
-    def value(self) -> int:
-        """The budget in force (0 = none); ``cap`` until the views are known."""
+    def from_views(self) -> Optional[int]:
+        """The views term (None: off, or the views not known yet)."""
         if self.pixel_steps_per_primitive <= 0:
-            return self.cap
+            return None
         if self._from_views is None:
             pixels = self.pixels_fn() if self.pixels_fn is not None else None
             if pixels is None:
-                return self.cap
+                return None
             self._from_views = max(int(pixels * self.growing_steps / self.pixel_steps_per_primitive), 1)
-        return min(self._from_views, self.cap) if self.cap > 0 else self._from_views
+        return self._from_views
+
+    @property
+    def from_content(self) -> Optional[int]:
+        """The content term (None: off, or the model has no points)."""
+        if self.per_point <= 0 or self.points <= 0:
+            return None
+        return max(int(self.per_point * self.points), 1)
+
+    @property
+    def value(self) -> int:
+        """The budget in force (0 = none)."""
+        views = self.from_views
+        if views is None and self.pixel_steps_per_primitive > 0:  # on, but the views are not known yet
+            return self.cap
+        terms = [t for t in (views, self.from_content) if t is not None]
+        if not terms:
+            return self.cap
+        return min(max(terms), self.cap) if self.cap > 0 else max(terms)

@@ -17,7 +17,7 @@ import torch
 from torch import Tensor
 
 from nerf2gs_plugin.methods.splatfacto.strategy import append_rows, keep_rows
-from nerf2gs_plugin.methods.strategy_base import Strategy, ViewsBudget
+from nerf2gs_plugin.methods.strategy_base import Strategy, SceneBudget
 
 
 def voxelize(points: Tensor, voxel: float) -> Tensor:
@@ -171,9 +171,9 @@ class AnchorStrategy(Strategy):
     def __init__(self, config: Any, voxel: float) -> None:
         self.config = config  # the model config: its anchor growing / pruning settings
         self.voxel = voxel
-        self.views_budget = ViewsBudget(config.pixel_steps_per_anchor, config.update_until - config.update_from,
-                                        config.max_anchors)
-        """Its ``pixels_fn`` is set by the model: the training views' pixel count."""
+        self.budget = SceneBudget(config.pixel_steps_per_anchor, config.update_until - config.update_from,
+                                  config.max_anchors, config.anchor_growth)
+        """Its ``pixels_fn`` (the training views' pixel count) and ``points`` (the initial anchors) are set by the model."""
         self.initialize_state()
 
     def initialize_state(self) -> None:
@@ -201,6 +201,6 @@ class AnchorStrategy(Strategy):
         k = self.config.n_offsets
         if self.stats.denom is None or self.stats.denom.shape[0] != params["anchors"].shape[0] * k:
             return {"grown": 0, "pruned": 0}
-        grown = grow_anchors(self.config, self.stats, params, self.voxel, optimizers, self.views_budget.value)
+        grown = grow_anchors(self.config, self.stats, params, self.voxel, optimizers, self.budget.value)
         pruned = prune_anchors(self.config, self.stats, params, optimizers)
         return {"grown": grown, "pruned": pruned}

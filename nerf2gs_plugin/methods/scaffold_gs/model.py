@@ -78,6 +78,11 @@ class ScaffoldGSModelConfig(SplatModelConfig):
     (real and extra, at training resolution) x the growing steps (update-until - update-from) over this, at
     most max-anchors (as Splatfacto's pixel-steps-per-gaussian; 96000 gives ~5k anchors for the synthetic
     street at the quick scale: benchmarks/results/views_budget/README.md)."""
+    anchor_growth: float = 1.25
+    """0 = off (the fixed max-anchors). Else the anchors' soft budget is this many times the initial anchors
+    (the voxelised sparse points: what the capture's structure gave), the larger of this and the pixel budget
+    above when both are on, at most max-anchors. Scaffold-GS's neural Gaussians carry the detail: growth bought
+    0.03-0.35 dB for 2.3-2.5x the anchors on two synthetic streets (benchmarks/results/views_budget/)."""
 
 
 class ScaffoldGSModel(Model):
@@ -98,6 +103,7 @@ class ScaffoldGSModel(Model):
         voxel = c.voxel_size if c.voxel_size > 0 else float(knn_mean_distance(pts, k=1).median().clamp_min(1e-4))
         self.register_buffer("voxel", torch.tensor(voxel))
         anchors = voxelize(pts, voxel)
+        self._initial_anchors = anchors.shape[0]  # the budget's content term (rebuilt from the data on a reload)
         m, k = anchors.shape[0], c.n_offsets
         dist = knn_mean_distance(anchors).clamp_min(1e-4)
         self.anchor = nn.ParameterDict({
@@ -120,7 +126,8 @@ class ScaffoldGSModel(Model):
 
     def _make_strategy(self) -> AnchorStrategy:
         strategy = AnchorStrategy(self.config, float(self.voxel))  # the buffer's (float32) value, as after a reload
-        strategy.views_budget.pixels_fn = self.training_pixels
+        strategy.budget.pixels_fn = self.training_pixels
+        strategy.budget.points = self._initial_anchors
         return strategy
 
     def get_param_groups(self) -> dict[str, list[nn.Parameter]]:

@@ -105,6 +105,7 @@ class SplatfactoModel(Model):
         self.background = Background(cfg.background, cfg.sky_sh_degree)
         self.register_buffer("step", torch.zeros((), dtype=torch.long))
         self._meta: Optional[dict[str, Any]] = None
+        self._sparse_points = len(train_data.points3D_xyz) if train_data.points3D_xyz is not None else 0
         self._path = self._capture_path(train_data, means if train_data.points3D_xyz is not None else None)
         self._depth_targets = self._sparse_depth_targets(train_data) if cfg.depth_loss_weight > 0 else None
         self._setup_strategy()
@@ -177,7 +178,8 @@ class SplatfactoModel(Model):
         self.strategy = self._make_strategy()
         if isinstance(self.strategy, DefaultStrategy):
             self.strategy.weights_fn = self.training_blend_weights
-            self.strategy.views_budget.pixels_fn = self.training_pixels
+            self.strategy.budget.pixels_fn = self.training_pixels
+            self.strategy.budget.points = self._sparse_points
             if self._path is not None:
                 self.strategy.clear_path(*self._path)
 

@@ -29,7 +29,7 @@ from torch import Tensor, nn
 
 from nerf2gs_plugin.methods.capture_path import CapturePath
 from nerf2gs_plugin.methods.gaussian_utils import logit
-from nerf2gs_plugin.methods.strategy_base import Strategy, ViewsBudget
+from nerf2gs_plugin.methods.strategy_base import Strategy, SceneBudget
 from nerf2gs_plugin.utils.quaternions import quat_to_rotmat
 from nerf2gs_plugin.utils.schedule import scheduled
 
@@ -119,6 +119,11 @@ class DefaultStrategyConfig:
     extra view at its training resolution) times the densification window (stop-split-at - warmup-length
     steps) over this (the smaller of the two when max-gaussians is set too): a capture with more or larger
     views, or a longer densification, makes room for more Gaussians, a constant does not."""
+    gaussians_per_sparse_point: float = 0.0
+    """0 = off. Else the soft budget is at least this many Gaussians per sparse (SfM) point of the capture
+    (the larger of this and the pixel budget above, at most max-gaussians): what the views show, not only
+    how many pixels they have: a real courtyard's photos give ~4x the points of a synthetic street's views
+    of the same pixel count, and need more Gaussians per pixel."""
     prune_weight_fraction: float = 0.0
     """0 = off (nerfstudio). Else, at the first refinement at or after stop-split-at, render every
     training view once and prune the Gaussians that together carry this fraction of the total
@@ -143,9 +148,10 @@ class DefaultStrategy(Strategy):
         self.weights_fn: Optional[Callable[[], Optional[Tensor]]] = None
         """Set by the model: each primitive's blending weight summed over the training pixels ``[N]``
         (None when it has no training views to render); read by the weight prune only."""
-        self.views_budget = ViewsBudget(cfg.pixel_steps_per_gaussian, cfg.stop_split_at - cfg.warmup_length, cfg.max_gaussians)
-        """The soft budget in force (``views_budget.value``): max-gaussians, or read from the views (the model
-        sets its ``pixels_fn``)."""
+        self.budget = SceneBudget(cfg.pixel_steps_per_gaussian, cfg.stop_split_at - cfg.warmup_length, cfg.max_gaussians,
+                                  cfg.gaussians_per_sparse_point)
+        """The soft budget in force (``budget.value``): max-gaussians, or read from the views and the sparse
+        points (the model sets its ``pixels_fn`` and ``points``)."""
         self.path: Optional[CapturePath] = None
         self.path_radius = 0.0
         """Set by the model (:meth:`clear_path`): the capture path and its clearance in world units."""
@@ -239,7 +245,7 @@ class DefaultStrategy(Strategy):
         split = high & ~small
         if step < c.stop_screen_size_at:
             split |= self.max_radii > c.split_screen_size
-        budget = self.views_budget.value
+        budget = self.budget.value
         if budget > 0:  # soft budget: only the highest-gradient candidates, then nothing
             room = max(budget - n, 0)
             clone, split = _limit(clone, split, avg, room, c.n_split_samples)

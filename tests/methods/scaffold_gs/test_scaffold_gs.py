@@ -173,17 +173,41 @@ def test_growth_stops_at_the_budget_read_from_the_views(scene):
     pixels, steps = cams.pixel_count(), 100 - 10  # update_until - update_from
     assert pixels == 6 * 40 * 24
     model, opts = _fresh_with_optimizers(scene, pixel_steps_per_anchor=pixels * steps / (m0 + 5))
-    assert model.strategy.views_budget.value == model.config.max_anchors  # views not named yet
+    assert model.strategy.budget.value == model.config.max_anchors  # views not named yet
     model.get_training_callbacks(TrainingCallbackAttributes(optimizers=opts, pipeline=SimpleNamespace(
         datamanager=SimpleNamespace(all_train_cameras=cams))))
-    assert model.strategy.views_budget.value == m0 + 5
+    assert model.strategy.budget.value == m0 + 5
     model.load_model_state(model.state_dict())  # a reload makes a new strategy: still reading the views
-    assert model.strategy.views_budget.value == m0 + 5
+    assert model.strategy.budget.value == m0 + 5
     model.stats.reset(m0, model.config.n_offsets, torch.device("cpu"))
     k = model.config.n_offsets
     with torch.no_grad():
         model.anchor["offsets"][:40] = 3.0
     model.stats.grad_accum[torch.arange(40 * k)] = 1.0
     model.stats.denom[:] = 100.0
-    added = grow_anchors(model.config, model.stats, model.anchor, float(model.voxel), opts, model.strategy.views_budget.value)
+    added = grow_anchors(model.config, model.stats, model.anchor, float(model.voxel), opts, model.strategy.budget.value)
     assert added == 5 and model.num_primitives() == m0 + 5
+
+
+@needs_rasterizer
+def test_growth_stops_at_a_multiple_of_the_initial_anchors(scene):
+    """``anchor_growth``: the anchors grow to at most that many times the initial ones (the voxelised sparse
+    points), with no views named and after a checkpoint reload; with the pixel budget on too, the larger."""
+    cams = scene[0]
+    m0 = _cfg().setup(train_data=make_train_data(cams)).num_primitives()
+    model, opts = _fresh_with_optimizers(scene, anchor_growth=(m0 + 5) / m0)
+    assert model.strategy.budget.value == m0 + 5
+    model.load_model_state(model.state_dict())
+    assert model.strategy.budget.value == m0 + 5
+    model.stats.reset(m0, model.config.n_offsets, torch.device("cpu"))
+    k = model.config.n_offsets
+    with torch.no_grad():
+        model.anchor["offsets"][:40] = 3.0
+    model.stats.grad_accum[torch.arange(40 * k)] = 1.0
+    model.stats.denom[:] = 100.0
+    added = grow_anchors(model.config, model.stats, model.anchor, float(model.voxel), opts, model.strategy.budget.value)
+    assert added == 5 and model.num_primitives() == m0 + 5
+    pixels = cams.pixel_count() * (100 - 10)
+    both, _ = _fresh_with_optimizers(scene, anchor_growth=(m0 + 5) / m0, pixel_steps_per_anchor=pixels / (m0 + 9))
+    both.strategy.budget.pixels_fn = lambda: cams.pixel_count()
+    assert both.strategy.budget.value == m0 + 9
