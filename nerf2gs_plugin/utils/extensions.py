@@ -14,8 +14,9 @@ import os
 import shutil
 import sys
 import threading
+from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any, Iterator, Optional, Sequence
 
 from nerf2gs_plugin.errors import UserError
 
@@ -84,12 +85,15 @@ def _build(name: str, sources: list[Path], headers: list[Path], cflags: list[str
         build_name = _build_name(name, sources, headers)
         cache = extension_cache_dir()
         cache.mkdir(parents=True, exist_ok=True)
-        _remove_stale_lock(cache / build_name / "lock")
-        if not (cache / build_name / f"{build_name}.so").is_file():
-            print(f"compiling the {name} kernel (first use, about 1 min)...", file=sys.stderr, flush=True)
-        include = sorted({str(h.parent) for h in headers})
-        _EXTS[name] = load(name=build_name, sources=[str(s) for s in sources], extra_cflags=cflags,
-                           extra_include_paths=include, extra_ldflags=["-fopenmp"], verbose=False)
+        with build_lock(cache / f"{build_name}.build-lock") as exclusive:
+            # holding the build lock, no other process of ours is building this kernel: a torch lock
+            # there was left by a killed build, and torch would wait on it forever
+            _remove_stale_lock(cache / build_name / "lock", 0.0 if exclusive else STALE_LOCK_SECONDS)
+            if not (cache / build_name / f"{build_name}.so").is_file():
+                print(f"compiling the {name} kernel (first use, about 1 min)...", file=sys.stderr, flush=True)
+            include = sorted({str(h.parent) for h in headers})
+            _EXTS[name] = load(name=build_name, sources=[str(s) for s in sources], extra_cflags=cflags,
+                               extra_include_paths=include, extra_ldflags=["-fopenmp"], verbose=False)
     except Exception as e:  # noqa: BLE001 - reported below: an error, or the torch fallback when opted out
         msg = str(e).strip().splitlines()[0][:200] if str(e).strip() else ""
         _FAILED[name] = f"{type(e).__name__}: {msg}"
@@ -97,12 +101,30 @@ def _build(name: str, sources: list[Path], headers: list[Path], cflags: list[str
 
 
 # A build takes 1-2 min on 2 cores; a lock this old was left by a build that was killed, and torch's
-# FileBaton would wait on it forever.
+# FileBaton would wait on it forever. Only the fallback where no OS file lock can be taken (below).
 STALE_LOCK_SECONDS = 20 * 60
 
 
+@contextmanager
+def build_lock(path: Path) -> Iterator[bool]:
+    """Hold an OS lock on ``path`` (``flock``: released by the OS when the holder dies, killed or not)
+    while building; waits while another process holds it. Yields True when it is held, False where
+    the platform has no ``flock`` (then only the age of torch's own lock tells a killed build)."""
+    try:
+        import fcntl
+    except ImportError:  # not POSIX
+        yield False
+        return
+    with open(path, "a+") as f:
+        fcntl.flock(f.fileno(), fcntl.LOCK_EX)
+        try:
+            yield True
+        finally:
+            fcntl.flock(f.fileno(), fcntl.LOCK_UN)
+
+
 def _remove_stale_lock(lock: Path, max_age_s: float = STALE_LOCK_SECONDS) -> bool:
-    """Delete torch's build ``lock`` when it is older than any build (returns whether it did)."""
+    """Delete torch's build ``lock`` when it is older than ``max_age_s`` (0: whatever its age; returns whether it did)."""
     import time
 
     try:
@@ -112,7 +134,7 @@ def _remove_stale_lock(lock: Path, max_age_s: float = STALE_LOCK_SECONDS) -> boo
     if age < max_age_s:
         return False
     lock.unlink(missing_ok=True)
-    print(f"removed a stale kernel-build lock ({lock}, {age / 60:.0f} min old: a build was killed)", file=sys.stderr, flush=True)
+    print(f"removed a stale kernel-build lock ({lock}, left by a build that was killed)", file=sys.stderr, flush=True)
     return True
 
 

@@ -55,3 +55,48 @@ def test_a_stale_build_lock_is_removed_a_fresh_one_kept(tmp_path, capsys):
     assert _remove_stale_lock(lock) and not lock.exists()
     assert "stale kernel-build lock" in capsys.readouterr().err
     assert not _remove_stale_lock(lock)  # none there: nothing to do
+
+
+def test_a_lock_left_by_a_killed_build_does_not_hang_the_next_one(tmp_path):
+    """torch's own build lock, left fresh by a build that was killed (kill -9 mid-compile), is removed by
+    the next process at once (it holds the OS build lock, so no build of ours is running) instead of
+    torch waiting on it forever."""
+    import os
+    import subprocess
+    import sys
+
+    src = tmp_path / "broken.cpp"
+    src.write_text("this is not C++;\n")
+    ext = tmp_path / "ext"
+    build = ext / extensions._build_name("nerf2gs_test_killed", [src], [])
+    build.mkdir(parents=True)
+    (build / "lock").write_text("")  # fresh: the age rule alone would wait 20 min
+    code = ("from pathlib import Path; from nerf2gs_plugin.utils.extensions import load_extension; "
+            f"print(load_extension('nerf2gs_test_killed', [Path({str(src)!r})]))")
+    env = {**os.environ, "TORCH_EXTENSIONS_DIR": str(ext), OPT_OUT_ENV: "1"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0 and out.stdout.strip() == "None", out.stderr  # built (and failed) instead of hanging
+    assert "removed a stale kernel-build lock" in out.stderr and not (build / "lock").exists()
+
+
+def test_the_build_lock_is_released_when_its_holder_is_killed(tmp_path):
+    import fcntl
+    import signal
+    import subprocess
+    import sys
+
+    path = tmp_path / "k.build-lock"
+    code = ("import sys, time; from pathlib import Path; from nerf2gs_plugin.utils.extensions import build_lock\n"
+            f"with build_lock(Path({str(path)!r})) as held:\n    print(held, flush=True); time.sleep(600)")
+    child = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    try:
+        assert child.stdout.readline().strip() == "True"
+        with open(path, "a+") as f:  # held by the child: not ours
+            with pytest.raises(BlockingIOError):
+                fcntl.flock(f.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        child.send_signal(signal.SIGKILL)
+        child.wait(timeout=30)
+        with extensions.build_lock(path) as held:  # the OS released it with the killed holder
+            assert held
+    finally:
+        child.kill()
