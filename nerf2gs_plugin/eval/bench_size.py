@@ -5,7 +5,7 @@ one within that band (issue 20's target).
 
 Splatfacto and 2DGS sweep ``strategy.max_gaussians`` (the fixed soft budget),
 ``strategy.pixel_steps_per_gaussian`` (a budget read from the views: training pixels x densification
-steps over it), ``strategy.densify_grad_thresh`` and ``strategy.prune_weight_fraction`` (the blending-
+steps over it), ``strategy.gaussians_per_sparse_point`` (the budget's floor read from the SfM points), ``strategy.densify_grad_thresh`` and ``strategy.prune_weight_fraction`` (the blending-
 weight prune after densification); Scaffold-GS sweeps ``max_anchors``, ``anchor_growth`` (growth relative to
 the initial anchors), ``pixel_steps_per_anchor`` and ``grow_threshold``. The band and the picks are chosen on the validation
 views (val_street, val_bev) where the dataset has them, the test views (street, bev_1, bev_2)
@@ -34,11 +34,13 @@ SIZE_TARGET = 1.5
 # run of its own ("<method> default"), and a swept value equal to it is not run twice.
 SWEEPS: dict[str, list[tuple[str, tuple, tuple]]] = {
     "splatfacto": [("strategy.max_gaussians", (2000, 8000), (5000, 15000, 30000, 120000)),
-                   ("strategy.pixel_steps_per_gaussian", (27000.0, 54000.0, 108000.0, 216000.0), (54000.0, 108000.0, 216000.0)),
+                   ("strategy.pixel_steps_per_gaussian", (0.0, 27000.0, 54000.0, 108000.0, 216000.0), (0.0, 54000.0, 108000.0, 216000.0)),
+                   ("strategy.gaussians_per_sparse_point", (0.0, 3.0), (0.0, 3.0)),
                    ("strategy.densify_grad_thresh", (0.0016,), (0.0016,)),
                    ("strategy.prune_weight_fraction", (0.0, 0.2), (0.0, 0.05, 0.2))],
     "2dgs": [("strategy.max_gaussians", (2000, 8000), (5000, 15000, 30000)),
-             ("strategy.pixel_steps_per_gaussian", (18000.0, 36000.0, 72000.0, 144000.0), (36000.0, 72000.0, 144000.0)),
+             ("strategy.pixel_steps_per_gaussian", (0.0, 18000.0, 36000.0, 72000.0, 144000.0), (0.0, 36000.0, 72000.0, 144000.0)),
+             ("strategy.gaussians_per_sparse_point", (0.0, 3.0), (0.0, 3.0)),
              ("strategy.densify_grad_thresh", (0.0016,), (0.0016,)),
              ("strategy.prune_weight_fraction", (0.0, 0.2), (0.0, 0.05, 0.2))],
     "scaffold-gs": [("max_anchors", (1000,), (2000,)),

@@ -2,13 +2,13 @@
 
 Default (CPU scale): 3000 steps; statistics from step 50, anchor growing/pruning every 100 steps
 from 150 to 1500; k = 10 offsets, 32-d features, voxel size = median nearest-neighbour distance
-of the sparse points; soft budget of 20k anchors.
+of the sparse points; anchors grow to at most 1.25x the initial ones (and 20k).
 
 Paper scale (Scaffold-GS defaults, for a GPU)::
 
     ns2gs-train scaffold-gs --data DATA --max-num-iterations 30000 \\
       --pipeline.model.start-stat 500 --pipeline.model.update-from 1500 \\
-      --pipeline.model.update-until 15000 --pipeline.model.max-anchors 0 \\
+      --pipeline.model.update-until 15000 --pipeline.model.max-anchors 0 --pipeline.model.anchor-growth 0 \\
       --optimizers.offsets.max-steps 30000 ... (every scheduled group: max-steps 30000)
 
 (:func:`paper_scale` applies them; ``scaffold_gs_paper_method`` is that config.)
@@ -46,7 +46,7 @@ def scaffold_optimizers(max_steps: int) -> dict[str, OptimizerConfig]:
 
 def paper_scale(config: TrainerConfig) -> TrainerConfig:
     model = dataclasses.replace(config.pipeline.model, start_stat=500, update_from=1500, update_until=15000,
-                                max_anchors=0, num_random=50000)
+                                max_anchors=0, anchor_growth=0.0, num_random=50000)
     return dataclasses.replace(
         config, max_num_iterations=PAPER_STEPS, steps_per_save=2000, steps_per_eval_image=1000,
         pipeline=dataclasses.replace(config.pipeline, model=model), optimizers=scaffold_optimizers(PAPER_STEPS),

@@ -9,6 +9,7 @@ The SH degree used for rendering rises by one every ``sh_degree_interval`` steps
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, Literal, Optional
 
@@ -38,6 +39,14 @@ MAX_SPARSE_ON_PATH = 0.05
 """More of the sparse points than this within the path clearance: the clearance is switched off."""
 
 
+def cpu_scale_strategy(**changes: Any) -> DefaultStrategyConfig:
+    """Splatfacto's densification at the CPU scale (2DGS's with its own changes)."""
+    base = DefaultStrategyConfig(warmup_length=300, reset_alpha_every=1000, stop_split_at=1500, stop_screen_size_at=400,
+                                 max_pause_after_reset=300, max_gaussians=60000, pixel_steps_per_gaussian=54000.0,
+                                 gaussians_per_sparse_point=2.0, prune_weight_fraction=0.1, path_clearance_m=1.0)
+    return dataclasses.replace(base, **changes)
+
+
 @dataclass
 class SplatfactoModelConfig(SplatModelConfig):
     """Defaults are the CPU scale (the step counts and the paper-scale values are in methods/splatfacto/config.py)."""
@@ -51,16 +60,14 @@ class SplatfactoModelConfig(SplatModelConfig):
     """Opacity of the initial Gaussians."""
     strategy_type: Literal["default", "mcmc"] = "default"
     """Densification: default (clone / split / prune, settings under strategy) or mcmc (settings under mcmc)."""
-    strategy: DefaultStrategyConfig = field(default_factory=lambda: DefaultStrategyConfig(
-        warmup_length=300, reset_alpha_every=1000, stop_split_at=1500, stop_screen_size_at=400,
-        max_pause_after_reset=300, max_gaussians=60000, prune_weight_fraction=0.1, path_clearance_m=1.0))
-    """The default strategy at CPU scale (paper values in config.py): 60k-Gaussian soft budget, and once
-    densification stops the Gaussians carrying the lightest 10% of the training views' blending weight are
-    pruned, so the size follows the scene (chosen on validation views: benchmarks/results/size_prune.md);
-    every prune keeps 1 m around the capture path free (benchmarks/results/path_clearance.md). A budget read
-    from the views (strategy.pixel-steps-per-gaussian 54000) meets issue 20's size target on both
-    synthetic streets at the quick scale but costs a real capture's validation photos 0.7 dB: off by default
-    (benchmarks/results/views_budget/README.md)."""
+    strategy: DefaultStrategyConfig = field(default_factory=lambda: cpu_scale_strategy())
+    """The default strategy at CPU scale (paper values in config.py). Growth stops at a soft budget read from
+    the scene (strategy_base.SceneBudget): the larger of the training views' pixels x the densification
+    window / 54,000 and 2 Gaussians per sparse point, at most 60k; once densification stops the Gaussians
+    carrying the lightest 10% of the training views' blending weight are pruned (benchmarks/results/size_prune.md);
+    every prune keeps 1 m around the capture path free (benchmarks/results/path_clearance.md). The pixel
+    term meets issue 20's size target on two synthetic streets (benchmarks/results/views_budget/), the
+    point term keeps a real courtyard's Gaussians (castle-P30's validation photos: benchmarks/results/scene_budget/)."""
     depth_loss_weight: float = 0.1
     """Sparse-point depth (0: off): weight of mean_p A_p * min(|D_p - z_p| / z_p, 1) over the sparse
     points a training view sees (methods/point_visibility.py), D the rendered expected depth and A the

@@ -21,9 +21,9 @@ from torch import Tensor, nn
 from nerf2gs_plugin.cameras import Cameras
 from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.utils.quaternions import normalize_quats
-from nerf2gs_plugin.methods.splatfacto.model import SplatfactoModel, SplatfactoModelConfig
+from nerf2gs_plugin.methods.splatfacto.model import SplatfactoModel, SplatfactoModelConfig, cpu_scale_strategy
 from nerf2gs_plugin.methods.splatfacto.shared import composite
-from nerf2gs_plugin.methods.splatfacto.strategy import DefaultStrategy
+from nerf2gs_plugin.methods.splatfacto.strategy import DefaultStrategy, DefaultStrategyConfig
 from nerf2gs_plugin.methods.strategy_base import Strategy
 from nerf2gs_plugin.utils.schedule import scheduled
 
@@ -50,6 +50,10 @@ class TwoDGSModelConfig(SplatfactoModelConfig):
     """Step from which the depth distortion loss is on (2DGS: 3000 of 30000)."""
     normals_frame: Literal["camera", "world"] = "camera"
     """Frame of the rasterizer's rendered normals (converted to world for the viewer)."""
+    strategy: DefaultStrategyConfig = field(default_factory=lambda: cpu_scale_strategy(pixel_steps_per_gaussian=36000.0))
+    """Splatfacto's CPU-scale strategy with the views' pixels x densification steps / 36,000 (~12k surfels at the
+    quick scale on the synthetic street): Splatfacto's ~8k there left 2DGS 0.6 dB below its best
+    (benchmarks/results/model_size*.md)."""
     depth_loss_weight: float = 0.0
     """Splatfacto's sparse-point depth loss: off for 2DGS (its depth output is the median by default;
     not measured)."""

@@ -41,6 +41,7 @@ def trained(scene):
 def test_spec_and_voxelize():
     assert scaffold_gs_method.config.method_name == "scaffold-gs"
     assert paper_scale(scaffold_gs_method.config).pipeline.model.update_until == 15000
+    assert paper_scale(scaffold_gs_method.config).pipeline.model.anchor_growth == 0  # Scaffold-GS grows without a budget
     pts = torch.tensor([[0.01, 0.0, 0.0], [0.04, 0.0, 0.0], [0.27, 0.0, 0.0], [0.31, 0.01, 0.0]])
     anchors = voxelize(pts, 0.1)
     assert anchors.shape == (2, 3)
@@ -172,7 +173,7 @@ def test_growth_stops_at_the_budget_read_from_the_views(scene):
     m0 = _cfg().setup(train_data=make_train_data(cams)).num_primitives()
     pixels, steps = cams.pixel_count(), 100 - 10  # update_until - update_from
     assert pixels == 6 * 40 * 24
-    model, opts = _fresh_with_optimizers(scene, pixel_steps_per_anchor=pixels * steps / (m0 + 5))
+    model, opts = _fresh_with_optimizers(scene, pixel_steps_per_anchor=pixels * steps / (m0 + 5), anchor_growth=0.0)
     assert model.strategy.budget.value == model.config.max_anchors  # views not named yet
     model.get_training_callbacks(TrainingCallbackAttributes(optimizers=opts, pipeline=SimpleNamespace(
         datamanager=SimpleNamespace(all_train_cameras=cams))))

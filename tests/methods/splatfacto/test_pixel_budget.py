@@ -55,7 +55,8 @@ def _cfg(pixel_steps_per_gaussian: float):
     base = splatfacto_config.pipeline.model
     strategy = dataclasses.replace(base.strategy, warmup_length=10, refine_every=10, reset_alpha_every=0, stop_split_at=50,
                                    stop_screen_size_at=0, densify_grad_thresh=0.0002, prune_weight_fraction=0.0,
-                                   path_clearance_m=0.0, max_gaussians=0, pixel_steps_per_gaussian=pixel_steps_per_gaussian)
+                                   path_clearance_m=0.0, max_gaussians=0, pixel_steps_per_gaussian=pixel_steps_per_gaussian,
+                                   gaussians_per_sparse_point=0.0)
     return dataclasses.replace(base, sh_degree_interval=20, strategy=strategy)
 
 
