@@ -2,7 +2,8 @@
 
 Default (CPU scale, the synthetic street at ~200x112 px on 2 cores): 3000 steps, refinement every
 100 steps from step 300 to 1500, opacity reset every 1000 steps, SH degree +1 every 300 steps,
-soft budget of 60k Gaussians, the lightest 10% of the blending weight pruned after densification.
+a soft budget read from the scene (the larger of the training views' pixels x densification steps / 54,000 and
+2 Gaussians per sparse point, at most 60k), the lightest 10% of the blending weight pruned after densification.
 
 Paper scale (nerfstudio's splatfacto defaults, for a GPU)::
 
@@ -11,7 +12,8 @@ Paper scale (nerfstudio's splatfacto defaults, for a GPU)::
       --pipeline.model.strategy.warmup-length 500 --pipeline.model.strategy.reset-alpha-every 3000 \\
       --pipeline.model.strategy.stop-split-at 15000 --pipeline.model.strategy.stop-screen-size-at 4000 \\
       --pipeline.model.strategy.max-gaussians 0 --pipeline.model.strategy.max-pause-after-reset 1000 \\
-      --pipeline.model.strategy.prune-weight-fraction 0 \\
+      --pipeline.model.strategy.prune-weight-fraction 0 --pipeline.model.strategy.pixel-steps-per-gaussian 0 \\
+      --pipeline.model.strategy.gaussians-per-sparse-point 0 \\
       --optimizers.means.max-steps 30000 --optimizers.means.lr-final 1.6e-6 --steps-per-save 2000
 
 (:func:`paper_scale` applies the same changes in code; ``splatfacto_paper_method`` is that config.)

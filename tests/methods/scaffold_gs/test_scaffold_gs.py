@@ -160,6 +160,18 @@ def test_with_steps_rescales_anchor_schedule():
     assert quick.optimizers["offsets"].max_steps == 1500 and quick.optimizers["anchors"].max_steps == 30000
 
 
+def _assert_growth_stops_at(model, opts, m0: int, room: int) -> None:
+    """40 anchors' offsets well above the growing threshold: growth adds exactly the budget's room."""
+    model.stats.reset(m0, model.config.n_offsets, torch.device("cpu"))
+    k = model.config.n_offsets
+    with torch.no_grad():
+        model.anchor["offsets"][:40] = 3.0
+    model.stats.grad_accum[torch.arange(40 * k)] = 1.0
+    model.stats.denom[:] = 100.0
+    added = grow_anchors(model.config, model.stats, model.anchor, float(model.voxel), opts, model.strategy.budget.value)
+    assert added == room and model.num_primitives() == m0 + room
+
+
 @needs_rasterizer
 def test_growth_stops_at_the_budget_read_from_the_views(scene):
     """``pixel_steps_per_anchor``: the views' pixels x the growing steps over it caps the anchors; the
@@ -180,14 +192,7 @@ def test_growth_stops_at_the_budget_read_from_the_views(scene):
     assert model.strategy.budget.value == m0 + 5
     model.load_model_state(model.state_dict())  # a reload makes a new strategy: still reading the views
     assert model.strategy.budget.value == m0 + 5
-    model.stats.reset(m0, model.config.n_offsets, torch.device("cpu"))
-    k = model.config.n_offsets
-    with torch.no_grad():
-        model.anchor["offsets"][:40] = 3.0
-    model.stats.grad_accum[torch.arange(40 * k)] = 1.0
-    model.stats.denom[:] = 100.0
-    added = grow_anchors(model.config, model.stats, model.anchor, float(model.voxel), opts, model.strategy.budget.value)
-    assert added == 5 and model.num_primitives() == m0 + 5
+    _assert_growth_stops_at(model, opts, m0, 5)
 
 
 @needs_rasterizer
@@ -200,14 +205,7 @@ def test_growth_stops_at_a_multiple_of_the_initial_anchors(scene):
     assert model.strategy.budget.value == m0 + 5
     model.load_model_state(model.state_dict())
     assert model.strategy.budget.value == m0 + 5
-    model.stats.reset(m0, model.config.n_offsets, torch.device("cpu"))
-    k = model.config.n_offsets
-    with torch.no_grad():
-        model.anchor["offsets"][:40] = 3.0
-    model.stats.grad_accum[torch.arange(40 * k)] = 1.0
-    model.stats.denom[:] = 100.0
-    added = grow_anchors(model.config, model.stats, model.anchor, float(model.voxel), opts, model.strategy.budget.value)
-    assert added == 5 and model.num_primitives() == m0 + 5
+    _assert_growth_stops_at(model, opts, m0, 5)
     pixels = cams.pixel_count() * (100 - 10)
     both, _ = _fresh_with_optimizers(scene, anchor_growth=(m0 + 5) / m0, pixel_steps_per_anchor=pixels / (m0 + 9))
     both.strategy.budget.pixels_fn = lambda: cams.pixel_count()
