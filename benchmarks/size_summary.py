@@ -9,11 +9,13 @@ configuration within 0.5 dB of the best (target: within 0.5 dB, at most 1.5x).
 * views_budget: the budget read from the views as the default (the code of 2026-11-25, 15th session,
   where it was; off by default after it);
 * scene_budget: today's defaults (the larger of that views budget and 2 Gaussians per sparse point for
-  Splatfacto / 2DGS, anchors at most 1.25x the initial ones for Scaffold-GS). A method whose default
-  trains exactly as in an earlier sweep is read from that sweep (the file is named in each row): on the
+  Splatfacto / 2DGS, anchors at most 1.25x the initial ones for Scaffold-GS). A method whose default is
+  the configuration of an earlier sweep is read from that sweep (the file is named in each row): on the
   synthetic streets the point term (2 x 4,000 points) binds only Splatfacto's quick runs without NeRF
   views (8,000 against the views' 7,964), never 2DGS's (11,946) nor a run with NeRF views or at the
-  default scale, so those sweeps of views_budget/ are the Splatfacto / 2DGS sweeps of today's code.
+  default scale, so there today's defaults are the views-budget defaults of views_budget/ (a rerun of
+  2DGS's quick default with the point term on and off gives the same 4,428 surfels; that sweep, two days'
+  code earlier, had 4,485: not reproduced to the digit).
 """
 from __future__ import annotations
 

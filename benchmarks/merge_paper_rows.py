@@ -1,0 +1,39 @@
+"""Replace some rows of a committed paper table with the rows of a newer run of the same bench, and
+write the table again (JSON, Markdown with the differences, PSNR chart).
+
+Usage: python benchmarks/merge_paper_rows.py TABLE_DIR NEW_DIR LABEL [LABEL ...]
+TABLE_DIR and NEW_DIR each hold a paper_table.json (``ns2gs-bench paper-table``); the rows LABEL of
+NEW_DIR replace (or join) TABLE_DIR's, every other row stays as it was. For a default change that
+retrains only some targets (e.g. ``--targets scaffold-gs``) where the others provably train as before;
+the Markdown says which rows came from where.
+"""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+from nerf2gs_plugin.eval.bench_paper import ratios_md, write_results  # noqa: E402
+
+
+def main(table_dir: Path, new_dir: Path, labels: list[str]) -> None:
+    old = json.loads((table_dir / "paper_table.json").read_text())["results"]
+    new = json.loads((new_dir / "paper_table.json").read_text())["results"]
+    missing = [lab for lab in labels if lab not in new]
+    if missing:
+        raise SystemExit(f"{new_dir / 'paper_table.json'}: no row {missing}")
+    merged = {lab: new[lab] if lab in labels else row for lab, row in old.items()}
+    merged.update({lab: new[lab] for lab in labels if lab not in merged})
+    title = (table_dir / "paper_table.md").read_text().splitlines()[0].lstrip("# ").strip()
+    pairs = [(f"{t} + NeRF views", t) for t in ("splatfacto", "scaffold-gs", "2dgs")] + \
+            [(f"{t} + NeRF views + enhancer", f"{t} + NeRF views") for t in ("splatfacto", "scaffold-gs", "2dgs")] + \
+            [(f"{t} + NeRF views (consistency confidence)", f"{t} + NeRF views") for t in ("splatfacto", "scaffold-gs", "2dgs")]
+    note = (f"Rows retrained in a later run of the bench and merged here (`benchmarks/merge_paper_rows.py`): "
+            f"{', '.join(labels)}; every other row is the earlier run's.\n\nDifferences (rows as merged):\n\n{ratios_md(merged, pairs)}\n")
+    print(write_results(table_dir, "paper_table", merged, title, extra_md=note))
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1]), Path(sys.argv[2]), sys.argv[3:])
