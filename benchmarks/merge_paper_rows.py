@@ -15,7 +15,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from nerf2gs_plugin.eval.bench_paper import ratios_md, write_results  # noqa: E402
+from nerf2gs_plugin.eval.bench_paper import TARGETS, paper_table_pairs, ratios_md, write_results  # noqa: E402
 
 
 def main(table_dir: Path, new_dir: Path, labels: list[str]) -> None:
@@ -27,9 +27,9 @@ def main(table_dir: Path, new_dir: Path, labels: list[str]) -> None:
     merged = {lab: new[lab] if lab in labels else row for lab, row in old.items()}
     merged.update({lab: new[lab] for lab in labels if lab not in merged})
     title = (table_dir / "paper_table.md").read_text().splitlines()[0].lstrip("# ").strip()
-    pairs = [(f"{t} + NeRF views", t) for t in ("splatfacto", "scaffold-gs", "2dgs")] + \
-            [(f"{t} + NeRF views + enhancer", f"{t} + NeRF views") for t in ("splatfacto", "scaffold-gs", "2dgs")] + \
-            [(f"{t} + NeRF views (consistency confidence)", f"{t} + NeRF views") for t in ("splatfacto", "scaffold-gs", "2dgs")]
+    targets = [t for t in TARGETS if t in merged]
+    modes = tuple(dict.fromkeys(lab.rsplit(" (", 1)[1][: -len(" confidence)")] for lab in merged if lab.endswith(" confidence)")))
+    pairs = paper_table_pairs(targets, any(f"{t} + NeRF views + enhancer" in merged for t in targets), modes)
     note = (f"Rows retrained in a later run of the bench and merged here (`benchmarks/merge_paper_rows.py`): "
             f"{', '.join(labels)}; every other row is the earlier run's.\n\nDifferences (rows as merged):\n\n{ratios_md(merged, pairs)}\n")
     print(write_results(table_dir, "paper_table", merged, title, extra_md=note))

@@ -109,15 +109,13 @@ class PaperTable:
     """Retrain and re-evaluate every run of the bench even when a finished one with its key exists."""
 
     def main(self) -> None:
-        from nerf2gs_plugin.eval.bench_paper import confidence_label, paper_table_plan, run_named_bench
+        from nerf2gs_plugin.eval.bench_paper import paper_table_pairs, paper_table_plan, run_named_bench
 
         data = ensure_street(self.data, self.runs)
         enh = bench_enhancer(data, self.runs, self.scale, self.enhancer_prior, self.enhancer_fine_tune) if self.enhancer else None
         plan = paper_table_plan(self.scale, self.targets, enh, self.confidence)
-        compare = [(f"{t} + NeRF views", t) for t in self.targets] + [(f"{t} + NeRF views + enhancer", t) for t in self.targets if enh]
-        compare += [(f"{t} + NeRF views{confidence_label(c)}", f"{t} + NeRF views") for t in self.targets for c in self.confidence]
         run_named_bench("paper_table", plan, data, self.runs, self.out, f"Paper table, synthetic street ({self.scale} scale)",
-                        compare=compare, figure_labels=["StreetNeRF", "splatfacto", "splatfacto + NeRF views"], rerun=self.rerun)
+                        compare=paper_table_pairs(self.targets, enh is not None, self.confidence), figure_labels=["StreetNeRF", "splatfacto", "splatfacto + NeRF views"], rerun=self.rerun)
 
 
 @dataclass

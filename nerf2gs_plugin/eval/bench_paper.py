@@ -67,6 +67,13 @@ def confidence_label(mode: str) -> str:
     return f" ({mode} confidence)"
 
 
+def paper_table_pairs(targets, enhancer: bool, confidence: tuple[str, ...] = ()) -> list[tuple[str, str]]:
+    """The paper table's "Differences" rows: each target with NeRF views (and with the enhancer) against the target
+    alone, each confidence mode against NeRF views without it."""
+    pairs = [(f"{t} + NeRF views", t) for t in targets] + [(f"{t} + NeRF views + enhancer", t) for t in targets if enhancer]
+    return pairs + [(f"{t} + NeRF views{confidence_label(c)}", f"{t} + NeRF views") for t in targets for c in confidence]
+
+
 def paper_table_plan(scale: str, targets=TARGETS, enhancer: Optional[str] = None, confidence: tuple[str, ...] = ()) -> list[RunSpec]:
     """StreetNeRF, then per target: alone, + NeRF views (+ the same with ``--augment.confidence`` per
     mode in ``confidence``), + NeRF views + enhancer."""

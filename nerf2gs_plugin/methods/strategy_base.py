@@ -127,31 +127,18 @@ class SceneBudget:
         self._from_views: Optional[int] = None
 
     @property
-    def from_views(self) -> Optional[int]:
-        """The views term (None: off, or the views not known yet)."""
-        if self.pixel_steps_per_primitive <= 0:
-            return None
-        if self._from_views is None:
-            pixels = self.pixels_fn() if self.pixels_fn is not None else None
-            if pixels is None:
-                return None
-            self._from_views = max(int(pixels * self.growing_steps / self.pixel_steps_per_primitive), 1)
-        return self._from_views
-
-    @property
-    def from_content(self) -> Optional[int]:
-        """The content term (None: off, or the model has no points)."""
-        if self.per_point <= 0 or self.points <= 0:
-            return None
-        return max(int(self.per_point * self.points), 1)
-
-    @property
     def value(self) -> int:
         """The budget in force (0 = none)."""
-        views = self.from_views
-        if views is None and self.pixel_steps_per_primitive > 0:  # on, but the views are not known yet
-            return self.cap
-        terms = [t for t in (views, self.from_content) if t is not None]
+        terms = []
+        if self.pixel_steps_per_primitive > 0:
+            if self._from_views is None:
+                pixels = self.pixels_fn() if self.pixels_fn is not None else None
+                if pixels is None:  # on, but the views are not known yet
+                    return self.cap
+                self._from_views = max(int(pixels * self.growing_steps / self.pixel_steps_per_primitive), 1)
+            terms.append(self._from_views)
+        if self.per_point > 0 and self.points > 0:
+            terms.append(max(int(self.per_point * self.points), 1))
         if not terms:
             return self.cap
         return min(max(terms), self.cap) if self.cap > 0 else max(terms)
