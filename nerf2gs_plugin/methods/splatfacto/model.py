@@ -35,6 +35,9 @@ from nerf2gs_plugin.methods.splatfacto.strategy import (
 from nerf2gs_plugin.methods.strategy_base import Strategy
 from nerf2gs_plugin.utils.schedule import scheduled
 
+HIDDEN_OPACITY_LOGIT = -30.0
+"""An opacity logit that the rasterizer skips (sigmoid ~1e-13, far below its 1/255 alpha floor)."""
+
 MAX_SPARSE_ON_PATH = 0.05
 """More of the sparse points than this within the path clearance: the clearance is switched off."""
 
@@ -185,6 +188,7 @@ class SplatfactoModel(Model):
         self.strategy = self._make_strategy()
         if isinstance(self.strategy, DefaultStrategy):
             self.strategy.weights_fn = self.training_blend_weights
+            self.strategy.fidelity_fn = self.training_render_fidelity
             self.strategy.budget.pixels_fn = self.training_pixels
             self.strategy.budget.points = self._sparse_points
             if self._path is not None:
@@ -257,6 +261,31 @@ class SplatfactoModel(Model):
         """:meth:`blend_weights` over every training view (real and extra), or None before the
         training callbacks named them (the strategy's weight prune then does nothing)."""
         return None if self._train_cameras is None else self.blend_weights(self._train_cameras())
+
+    @torch.no_grad()
+    def render_fidelity(self, cameras: Cameras, cull: Tensor) -> float:
+        """PSNR (dB) of ``cameras`` rendered without the primitives of ``cull [N]`` (bool) against their
+        renders with all: how much of what the views show those primitives draw. They are hidden by their
+        opacity for the second render and restored after it (one view at a time)."""
+        opacities = self.gauss["opacities"]
+        saved = opacities.data[cull].clone()
+        sse, count = 0.0, 0
+        for i in range(len(cameras)):
+            camera = cameras[i]
+            full = self.render_camera(camera)["rgb"]
+            opacities.data[cull] = HIDDEN_OPACITY_LOGIT
+            try:
+                without = self.render_camera(camera)["rgb"]
+            finally:
+                opacities.data[cull] = saved
+            sse += float(((full - without) ** 2).sum())
+            count += full.numel()
+        return float(psnr_from_mse(torch.tensor(sse / max(count, 1))))
+
+    def training_render_fidelity(self, cull: Tensor) -> Optional[float]:
+        """:meth:`render_fidelity` over every training view (real and extra), or None before the training
+        callbacks named them."""
+        return None if self._train_cameras is None else self.render_fidelity(self._train_cameras(), cull)
 
     def get_outputs(self, inputs: Cameras) -> dict[str, Tensor]:
         return self._render(inputs, training=self.training)
