@@ -459,6 +459,9 @@ class AugmentedDataManager(DataManager):
     def all_train_cameras(self) -> Cameras:
         return self.inner.all_train_cameras
 
+    def train_batch(self, i: int) -> dict[str, Any]:
+        return self.inner.train_batch(i)
+
     def set_train_images(self, images: ImageSet) -> None:
         self.inner.set_train_images(images)
 

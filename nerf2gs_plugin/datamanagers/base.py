@@ -85,6 +85,18 @@ class DataManager(ABC):
             return self.train_images.cameras
         return Cameras.cat([self.train_images.cameras, self.extra_images.cameras])
 
+    def train_batch(self, i: int) -> dict[str, Any]:
+        """Training view ``i`` of :attr:`all_train_cameras` (real then extra) as a whole-image batch; an extra
+        view carries all-false masks of the kinds the real ones have (nothing of a render is sky or transient)."""
+        n = len(self.train_images)
+        if i < n or self.extra_images is None:
+            return self.train_images.image_batch(i)
+        batch = self.extra_images.image_batch(i - n)
+        batch["image_idx"] = i
+        for kind in self.train_images.masks:
+            batch.setdefault(f"{kind}_mask", torch.zeros_like(batch["image"][..., :1], dtype=torch.bool))
+        return batch
+
     # ------------------------------------------------------------------ eval
     def eval_split_names(self) -> list[str]:
         ordered = [s for s in PREFERRED_EVAL_SPLITS if s in self._split_names]

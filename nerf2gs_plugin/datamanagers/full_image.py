@@ -26,13 +26,8 @@ class FullImageDataManager(DataManager):
 
     def next_train(self, step: int) -> tuple[Cameras, dict[str, Any]]:
         if self._use_extra():
-            extra = self.extra_images
-            i = int(torch.randint(len(extra), (), generator=self.generator))
-            batch = extra.image_batch(i)
-            batch["image_idx"] = len(self.train_images) + i
-            for kind in self.train_images.masks:  # extra views have no masks: nothing is sky/transient-masked
-                batch.setdefault(f"{kind}_mask", torch.zeros_like(batch["image"][..., :1], dtype=torch.bool))
-            return extra.cameras[i], batch
+            i = int(torch.randint(len(self.extra_images), (), generator=self.generator))
+            return self.extra_images.cameras[i], self.train_batch(len(self.train_images) + i)
         if not self._order:
             self._order = torch.randperm(len(self.train_images), generator=self.generator).tolist()
         i = self._order.pop()

@@ -53,6 +53,8 @@ class Model(nn.Module, metaclass=ABCMeta):
         self.num_train_images = len(train_data)
         self._train_cameras: Optional[Callable[[], Cameras]] = None
         """Every training view (real and extra) once training named them (:meth:`name_training_views`)."""
+        self._train_batch: Optional[Callable[[int], dict[str, Any]]] = None
+        """Training view ``i`` of those as a whole-image batch (image and masks), once training named them."""
         self.populate_modules(train_data)
 
     @property
@@ -90,6 +92,7 @@ class Model(nn.Module, metaclass=ABCMeta):
         a model decides from its views (a densification budget, a prune). Called by get_training_callbacks."""
         if getattr(attrs.pipeline, "datamanager", None) is not None:
             self._train_cameras = lambda: attrs.pipeline.datamanager.all_train_cameras
+            self._train_batch = lambda i: attrs.pipeline.datamanager.train_batch(i)
 
     def training_pixels(self) -> Optional[int]:
         """Pixels in every training view (real and extra), or None before training named them."""

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any, Literal, Optional
+from typing import Any, Callable, Literal, Optional
 
 import torch
 from torch import Tensor, nn
@@ -46,7 +46,8 @@ def cpu_scale_strategy(**changes: Any) -> DefaultStrategyConfig:
     """Splatfacto's densification at the CPU scale (2DGS's with its own changes)."""
     base = DefaultStrategyConfig(warmup_length=300, reset_alpha_every=1000, stop_split_at=1500, stop_screen_size_at=400,
                                  max_pause_after_reset=300, max_gaussians=60000, pixel_steps_per_gaussian=54000.0,
-                                 gaussians_per_sparse_point=2.0, prune_weight_fraction=0.1, path_clearance_m=1.0)
+                                 gaussians_per_sparse_point=2.0, prune_weight_fraction=0.1, prune_margin_db=4.0,
+                                 path_clearance_m=1.0)
     return dataclasses.replace(base, **changes)
 
 
@@ -188,7 +189,7 @@ class SplatfactoModel(Model):
         self.strategy = self._make_strategy()
         if isinstance(self.strategy, DefaultStrategy):
             self.strategy.weights_fn = self.training_blend_weights
-            self.strategy.fidelity_fn = self.training_render_fidelity
+            self.strategy.fidelity_fn = self.training_prune_fidelity
             self.strategy.budget.pixels_fn = self.training_pixels
             self.strategy.budget.points = self._sparse_points
             if self._path is not None:
@@ -263,29 +264,38 @@ class SplatfactoModel(Model):
         return None if self._train_cameras is None else self.blend_weights(self._train_cameras())
 
     @torch.no_grad()
-    def render_fidelity(self, cameras: Cameras, cull: Tensor) -> float:
-        """PSNR (dB) of ``cameras`` rendered without the primitives of ``cull [N]`` (bool) against their
-        renders with all: how much of what the views show those primitives draw. They are hidden by their
-        opacity for the second render and restored after it (one view at a time)."""
+    def prune_fidelity(self, cameras: Cameras, batches: Callable[[int], dict[str, Any]], cull: Tensor) -> tuple[float, float]:
+        """``(change, error)`` in dB over the pixels of ``cameras`` that the primitives must explain (neither
+        sky- nor transient-masked in ``batches(i)``): PSNR of the renders without the primitives of ``cull [N]``
+        (bool) against the renders with all, and PSNR of the renders with all against the images. The hidden
+        primitives get a zero opacity for the second render and theirs back after it (one view at a time)."""
         opacities = self.gauss["opacities"]
         saved = opacities.data[cull].clone()
-        sse, count = 0.0, 0
+        change, error, count = 0.0, 0.0, 0
         for i in range(len(cameras)):
-            camera = cameras[i]
+            camera, batch = cameras[i], batches(i)
             full = self.render_camera(camera)["rgb"]
             opacities.data[cull] = HIDDEN_OPACITY_LOGIT
             try:
                 without = self.render_camera(camera)["rgb"]
             finally:
                 opacities.data[cull] = saved
-            sse += float(((full - without) ** 2).sum())
-            count += full.numel()
-        return float(psnr_from_mse(torch.tensor(sse / max(count, 1))))
+            keep = torch.ones_like(full[..., :1], dtype=torch.bool)
+            for kind in ("sky_mask", "transient_mask"):
+                if batch.get(kind) is not None:
+                    keep &= ~batch[kind].to(keep.device)
+            change += float((((full - without) ** 2) * keep).sum())
+            error += float((((full - batch["image"].to(full)) ** 2) * keep).sum())
+            count += 3 * int(keep.sum())
+        n = max(count, 1)
+        return float(psnr_from_mse(torch.tensor(change / n))), float(psnr_from_mse(torch.tensor(error / n)))
 
-    def training_render_fidelity(self, cull: Tensor) -> Optional[float]:
-        """:meth:`render_fidelity` over every training view (real and extra), or None before the training
+    def training_prune_fidelity(self, cull: Tensor) -> Optional[tuple[float, float]]:
+        """:meth:`prune_fidelity` over every training view (real and extra), or None before the training
         callbacks named them."""
-        return None if self._train_cameras is None else self.render_fidelity(self._train_cameras(), cull)
+        if self._train_cameras is None or self._train_batch is None:
+            return None
+        return self.prune_fidelity(self._train_cameras(), self._train_batch, cull)
 
     def get_outputs(self, inputs: Cameras) -> dict[str, Tensor]:
         return self._render(inputs, training=self.training)

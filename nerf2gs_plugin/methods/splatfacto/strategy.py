@@ -129,12 +129,14 @@ class DefaultStrategyConfig:
     training view once and prune the Gaussians that together carry this fraction of the total
     blending weight (alpha x transmittance summed over all training pixels), lightest first
     (LightGaussian / Taming-3DGS significance): the count left follows the scene and its views."""
-    prune_fidelity_db: float = 0.0
+    prune_margin_db: float = 0.0
     """0 = off: the weight prune drops exactly prune-weight-fraction. Else it drops the largest of
-    prune-weight-fraction x (1, 3/4, 1/2, 3/8, 1/4, 1/8) whose removal leaves the training views' renders
-    at least this PSNR (dB) against the unpruned renders (all views' pixels together), nothing when none
-    does: what the light Gaussians still draw decides how many go, not a fraction fixed per schedule (a
-    longer training leaves more detail on them)."""
+    prune-weight-fraction x (1, 3/4, 1/2, 3/8, 1/4, 1/8) whose change to the training views' renders stays
+    this many dB below the model's own error on them (PSNR of the pruned renders against the unpruned ones
+    >= PSNR of the unpruned renders against the images + this; sky and transient pixels left out), nothing
+    when none does. A model still far from its images loses little by the prune, one that fits them
+    closely (a longer training) keeps the light Gaussians that draw what is left: 4 dB lets the prune
+    lower the training PSNR by at most ~1.5 dB (10 log10(1 + 10^-0.4)) before training goes on."""
     path_clearance_m: float = 0.0
     """0 = off (nerfstudio). Else every prune also drops the Gaussians whose centre lies within this
     many metres of the capture path (the training cameras joined in order, see
@@ -154,13 +156,13 @@ class DefaultStrategy(Strategy):
         self.weights_fn: Optional[Callable[[], Optional[Tensor]]] = None
         """Set by the model: each primitive's blending weight summed over the training pixels ``[N]``
         (None when it has no training views to render); read by the weight prune only."""
-        self.fidelity_fn: Optional[Callable[[Tensor], Optional[float]]] = None
-        """Set by the model: PSNR (dB) of the training views rendered without the primitives of a bool
-        mask ``[N]`` against their renders with all (None without training views); read by the weight
-        prune when ``prune_fidelity_db`` > 0."""
+        self.fidelity_fn: Optional[Callable[[Tensor], Optional[tuple[float, float]]]] = None
+        """Set by the model: ``(change, error)`` in dB over the training views: PSNR of their renders without
+        the primitives of a bool mask ``[N]`` against those with all, and of those with all against the images
+        (None without training views); read by the weight prune when ``prune_margin_db`` > 0."""
         self.weight_prunes: list[dict[str, float]] = []
-        """What each weight prune did: ``fraction`` of the weight dropped, ``fidelity_db`` (nan unmeasured),
-        ``pruned`` primitives; the trainer's log and the tests read it."""
+        """What each weight prune did: ``fraction`` of the weight dropped, ``change_db`` and ``error_db`` (nan
+        unmeasured) and ``pruned`` primitives; the tests and the bench read it."""
         self.budget = SceneBudget(cfg.pixel_steps_per_gaussian, cfg.stop_split_at - cfg.warmup_length, cfg.max_gaussians,
                                   cfg.gaussians_per_sparse_point)
         """The soft budget in force (``budget.value``): max-gaussians, or read from the views and the sparse
@@ -299,38 +301,39 @@ class DefaultStrategy(Strategy):
 
     def prune_by_weight(self, params: nn.ParameterDict, optimizers: Any) -> int:
         """Drop the lightest Gaussians carrying ``prune_weight_fraction`` of the training views'
-        blending weight (:func:`light_mask`), or less under ``prune_fidelity_db``; nothing without
+        blending weight (:func:`light_mask`), or less under ``prune_margin_db``; nothing without
         :attr:`weights_fn` or its weights."""
         weights = self.weights_fn() if self.weights_fn is not None else None
         if weights is None or weights.shape[0] != params["means"].shape[0]:
             return 0
-        cull, fraction, fidelity = self._weight_cull(weights)
+        cull, record = self._weight_cull(weights)
         if bool(cull.all()):  # never empty the scene
             cull[weights.argmax()] = False
         n = int(cull.sum())
         if n:
             keep_rows(params, optimizers, ~cull)
-        self.weight_prunes.append({"fraction": fraction, "fidelity_db": fidelity, "pruned": float(n)})
+        self.weight_prunes.append({**record, "pruned": float(n)})
         return n
 
-    def _weight_cull(self, weights: Tensor) -> tuple[Tensor, float, float]:
-        """The prune mask ``[N]``, the weight fraction it drops and the fidelity measured (nan if none)."""
+    def _weight_cull(self, weights: Tensor) -> tuple[Tensor, dict[str, float]]:
+        """The prune mask ``[N]`` and what decided it (fraction, change and error measured)."""
         c = self.cfg
-        if c.prune_fidelity_db <= 0 or self.fidelity_fn is None:
-            return light_mask(weights, c.prune_weight_fraction), c.prune_weight_fraction, math.nan
-        fidelity = math.nan
-        for ratio in PRUNE_FIDELITY_RATIOS:
+        unmeasured = {"fraction": c.prune_weight_fraction, "change_db": math.nan, "error_db": math.nan}
+        if c.prune_margin_db <= 0 or self.fidelity_fn is None:
+            return light_mask(weights, c.prune_weight_fraction), unmeasured
+        record = {"fraction": 0.0, "change_db": math.nan, "error_db": math.nan}
+        for ratio in PRUNE_MARGIN_RATIOS:
             fraction = c.prune_weight_fraction * ratio
             cull = light_mask(weights, fraction)
             if not bool(cull.any()):
-                return cull, fraction, math.inf
+                return cull, {**record, "fraction": fraction}
             measured = self.fidelity_fn(cull)
             if measured is None:  # no views to measure on: the fraction as configured
-                return light_mask(weights, c.prune_weight_fraction), c.prune_weight_fraction, math.nan
-            fidelity = measured
-            if measured >= c.prune_fidelity_db:
-                return cull, fraction, measured
-        return torch.zeros_like(weights, dtype=torch.bool), 0.0, fidelity
+                return light_mask(weights, c.prune_weight_fraction), unmeasured
+            record = {"fraction": fraction, "change_db": measured[0], "error_db": measured[1]}
+            if measured[0] >= measured[1] + c.prune_margin_db:
+                return cull, record
+        return torch.zeros_like(weights, dtype=torch.bool), {**record, "fraction": 0.0}
 
     def reset_opacities(self, params: nn.ParameterDict, optimizers: Any) -> None:
         """Clamp opacities to ``2 * cull_alpha_thresh`` and clear their Adam moments."""
@@ -339,8 +342,8 @@ class DefaultStrategy(Strategy):
         zero_state_rows(params, optimizers, slice(None), ["opacities"])
 
 
-PRUNE_FIDELITY_RATIOS = (1.0, 0.75, 0.5, 0.375, 0.25, 0.125)
-"""The weight prune's fractions tried under ``prune_fidelity_db``, largest first (x prune-weight-fraction)."""
+PRUNE_MARGIN_RATIOS = (1.0, 0.75, 0.5, 0.375, 0.25, 0.125)
+"""The weight prune's fractions tried under ``prune_margin_db``, largest first (x prune-weight-fraction)."""
 
 
 def light_mask(weights: Tensor, fraction: float) -> Tensor:

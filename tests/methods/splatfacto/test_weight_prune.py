@@ -104,3 +104,75 @@ def test_prune_default_and_without_views(scene):
     assert model.training_blend_weights() is None  # no training callbacks yet: nothing to render
     n = model.num_primitives()
     assert model.strategy.prune_by_weight(model.gauss, None) == 0 and model.num_primitives() == n
+
+
+
+def _strategy(fraction: float, margin: float, fidelity_fn):
+    from nerf2gs_plugin.methods.splatfacto.strategy import DefaultStrategy
+
+    strategy = DefaultStrategy(DefaultStrategyConfig(prune_weight_fraction=fraction, prune_margin_db=margin))
+    strategy.fidelity_fn = fidelity_fn
+    return strategy
+
+
+def _params(n: int) -> torch.nn.ParameterDict:
+    return torch.nn.ParameterDict({"means": torch.nn.Parameter(torch.zeros(n, 3)), "opacities": torch.nn.Parameter(torch.zeros(n))})
+
+
+def test_margin_picks_the_largest_fraction_whose_change_stays_below_the_error():
+    """A stand-in measurement: the renders change by 60 dB minus 100 x the hidden weight share, the model's
+    error is 25 dB. The margin decides the fraction; one no candidate meets prunes nothing."""
+    weights = torch.rand(400, generator=torch.Generator().manual_seed(1)) ** 3
+
+    def measure(cull):
+        return 60.0 - 100.0 * float(weights[cull].sum() / weights.sum()), 25.0
+
+    def pruned(margin: float) -> tuple[int, dict]:
+        s = _strategy(0.2, margin, measure)
+        s.weights_fn = lambda: weights
+        n = s.prune_by_weight(_params(400), None)
+        return n, s.weight_prunes[-1]
+
+    n_free, log_free = pruned(0.0)  # off: exactly the fraction, nothing measured
+    assert n_free == int(light_mask(weights, 0.2).sum()) and log_free["fraction"] == 0.2
+    assert log_free["change_db"] != log_free["change_db"]  # nan
+    n_loose, log_loose = pruned(5.0)  # 0.2 hides <= 20% of the weight: 40 dB >= 25 + 5, the whole fraction
+    assert n_loose == n_free and log_loose["change_db"] >= 30.0 and log_loose["error_db"] == 25.0
+    n_mid, log_mid = pruned(27.0)  # needs <= 8% hidden: 0.2 x 3/8 = 0.075 is the largest candidate
+    assert log_mid["fraction"] == pytest.approx(0.075) and log_mid["change_db"] >= 52.0
+    assert 0 < n_mid < n_loose and n_mid == int(light_mask(weights, 0.075).sum())
+    n_none, log_none = pruned(34.99)  # even 0.2 x 1/8 hides more than 0.01%: nothing goes
+    assert n_none == 0 and log_none["fraction"] == 0.0 and log_none["change_db"] < 59.99
+
+
+def test_margin_without_views_prunes_the_fraction():
+    """No training views to measure on (None): the configured fraction, as without a margin."""
+    weights = torch.rand(100, generator=torch.Generator().manual_seed(2))
+    s = _strategy(0.1, 4.0, lambda cull: None)
+    s.weights_fn = lambda: weights
+    assert s.prune_by_weight(_params(100), None) == int(light_mask(weights, 0.1).sum())
+
+
+@needs_rasterizer
+def test_prune_fidelity_measures_what_the_hidden_primitives_draw(scene):
+    """Hiding nothing changes nothing (100 dB); the heaviest primitives change the renders more than as many
+    of the lightest; a larger weight fraction changes them more; the error is the renders' PSNR against the
+    images over the pixels not masked as sky; the opacities are put back exactly."""
+    cams, imgs, skies = scene
+    model, _, trained_psnr = _trained(scene, 0.0)
+    batches = lambda i: {"image": imgs[i], "sky_mask": torch.zeros_like(imgs[i][..., :1], dtype=torch.bool)}
+    before = model.gauss["opacities"].detach().clone()
+    weights = model.blend_weights(cams)
+    none = torch.zeros_like(weights, dtype=torch.bool)
+    change, error = model.prune_fidelity(cams, batches, none)
+    assert change == pytest.approx(100.0) and error == pytest.approx(trained_psnr, abs=0.5)
+    order = torch.argsort(weights)
+    light, heavy = none.clone(), none.clone()
+    light[order[:20]], heavy[order[-20:]] = True, True
+    assert model.prune_fidelity(cams, batches, heavy)[0] + 10.0 < model.prune_fidelity(cams, batches, light)[0]
+    assert model.prune_fidelity(cams, batches, light_mask(weights, 0.2))[0] < model.prune_fidelity(cams, batches, light_mask(weights, 0.05))[0]
+    assert torch.equal(model.gauss["opacities"].detach(), before)
+    top = lambda i: {"image": imgs[i], "sky_mask": torch.arange(imgs[i].shape[0])[:, None, None] < imgs[i].shape[0] // 2}
+    assert model.prune_fidelity(cams, top, none)[1] != pytest.approx(error, abs=1e-3)  # masked pixels left out
+    model._train_cameras = None
+    assert model.training_prune_fidelity(light) is None
