@@ -211,6 +211,8 @@ class ModelSize:
     methods: tuple[str, ...] = ("splatfacto", "scaffold-gs", "2dgs")
     augment: bool = False
     """Train every run on StreetNeRF's views (--augment-from)."""
+    sweep_fields: Optional[tuple[str, ...]] = None
+    """Sweep only these fields (last names, e.g. prune_margin_db prune_weight_fraction) beside the default; all when not given."""
     out: Path = RESULTS
     runs: Path = RUNS
     rerun: bool = False
@@ -219,7 +221,7 @@ class ModelSize:
     def main(self) -> None:
         from nerf2gs_plugin.eval.bench_size import run, size_plan
 
-        plan = size_plan(self.scale, self.methods, self.augment)  # bad names fail before any work
+        plan = size_plan(self.scale, self.methods, self.augment, self.sweep_fields)  # bad names fail before any work
         data = ensure_street(self.data, self.runs)
         run(plan, data, self.runs, self.out, self.scale, rerun=self.rerun)
 

@@ -5,8 +5,9 @@ one within that band (issue 20's target).
 
 Splatfacto and 2DGS sweep ``strategy.max_gaussians`` (the fixed soft budget),
 ``strategy.pixel_steps_per_gaussian`` (a budget read from the views: training pixels x densification
-steps over it), ``strategy.gaussians_per_sparse_point`` (the budget's floor read from the SfM points), ``strategy.densify_grad_thresh`` and ``strategy.prune_weight_fraction`` (the blending-
-weight prune after densification); Scaffold-GS sweeps ``max_anchors``, ``anchor_growth`` (growth relative to
+steps over it), ``strategy.gaussians_per_sparse_point`` (the budget's floor read from the SfM points), ``strategy.densify_grad_thresh``, ``strategy.prune_weight_fraction`` (the blending-
+weight prune after densification) and ``strategy.prune_margin_db`` (how far below the model's error the prune's
+change to the training renders must stay); Scaffold-GS sweeps ``max_anchors``, ``anchor_growth`` (growth relative to
 the initial anchors), ``pixel_steps_per_anchor`` and ``grow_threshold``. The band and the picks are chosen on the validation
 views (val_street, val_bev) where the dataset has them, the test views (street, bev_1, bev_2)
 otherwise; both are reported. With ``augment`` every run trains on StreetNeRF's views (the StreetNeRF
@@ -37,12 +38,14 @@ SWEEPS: dict[str, list[tuple[str, tuple, tuple]]] = {
                    ("strategy.pixel_steps_per_gaussian", (0.0, 27000.0, 54000.0, 108000.0, 216000.0), (0.0, 54000.0, 108000.0, 216000.0)),
                    ("strategy.gaussians_per_sparse_point", (0.0, 3.0), (0.0, 3.0)),
                    ("strategy.densify_grad_thresh", (0.0016,), (0.0016,)),
-                   ("strategy.prune_weight_fraction", (0.0, 0.2), (0.0, 0.05, 0.2))],
+                   ("strategy.prune_weight_fraction", (0.0, 0.2), (0.0, 0.05, 0.2)),
+                   ("strategy.prune_margin_db", (0.0, 2.0, 6.0), (0.0, 2.0, 6.0))],
     "2dgs": [("strategy.max_gaussians", (2000, 8000), (5000, 15000, 30000)),
              ("strategy.pixel_steps_per_gaussian", (0.0, 18000.0, 36000.0, 72000.0, 144000.0), (0.0, 36000.0, 72000.0, 144000.0)),
              ("strategy.gaussians_per_sparse_point", (0.0, 3.0), (0.0, 3.0)),
              ("strategy.densify_grad_thresh", (0.0016,), (0.0016,)),
-             ("strategy.prune_weight_fraction", (0.0, 0.2), (0.0, 0.05, 0.2))],
+             ("strategy.prune_weight_fraction", (0.0, 0.2), (0.0, 0.05, 0.2)),
+             ("strategy.prune_margin_db", (0.0, 2.0, 6.0), (0.0, 2.0, 6.0))],
     "scaffold-gs": [("max_anchors", (1000,), (2000,)),
                     ("anchor_growth", (0.0, 1.1, 1.5, 2.0), (0.0, 1.1, 1.5, 2.0)),
                     ("pixel_steps_per_anchor", (96000.0,), (192000.0,)),
@@ -83,13 +86,19 @@ def model_overrides(items: list[str]) -> dict:
     return {"pipeline": {"model": model}} if model else {}
 
 
-def size_plan(scale: str, methods=tuple(SWEEPS), augment: bool = False) -> list[RunSpec]:
-    """The default run, then one run per swept value that differs from the default."""
+def size_plan(scale: str, methods=tuple(SWEEPS), augment: bool = False, fields: Optional[tuple[str, ...]] = None) -> list[RunSpec]:
+    """The default run, then one run per swept value that differs from the default (of the swept
+    ``fields`` only when given, by their last name: ``prune_margin_db``)."""
     from nerf2gs_plugin.eval.bench_paper import _overrides
 
     from nerf2gs_plugin.registry import get_method
 
     plan: list[RunSpec] = []
+    if fields is not None:
+        known = {fld.rsplit(".", 1)[-1] for m in methods if m in SWEEPS for fld, _, _ in SWEEPS[m]}
+        unknown = sorted(set(fields) - known)
+        if unknown:
+            raise ConfigError(f"model-size sweeps no field {', '.join(unknown)} for {', '.join(methods)} (has: {', '.join(sorted(known))})")
     if augment:
         plan.append(RunSpec("StreetNeRF", "streetnerf", _overrides(scale, "streetnerf")))
     for m in methods:
@@ -100,6 +109,8 @@ def size_plan(scale: str, methods=tuple(SWEEPS), augment: bool = False) -> list[
         plan.append(RunSpec(f"{m} default", m, _overrides(scale, m), augment_from=ref))
         model_defaults = get_method(m).config.pipeline.model
         for fld, quick, default in SWEEPS[m]:
+            if fields is not None and fld.rsplit(".", 1)[-1] not in fields:
+                continue
             for value in (quick if scale == "quick" else default):
                 if _get(model_defaults, fld) == value:
                     continue

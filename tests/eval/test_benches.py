@@ -274,6 +274,12 @@ def test_size_plan_and_smallest_within():
     assert aug[0].method == "streetnerf" and all(s.augment_from == "StreetNeRF" for s in aug[1:])
     with pytest.raises(ConfigError, match="no sweep for method 'nope'"):
         size_plan("quick", ("nope",))
+    assert "2dgs prune_margin_db=0" in labels and "splatfacto prune_margin_db=6" in labels  # the prune read from the fit, off
+    some = [s.label for s in size_plan("default", ("2dgs",), fields=("prune_margin_db", "prune_weight_fraction"))]
+    assert some == ["2dgs default", "2dgs prune_weight_fraction=0", "2dgs prune_weight_fraction=0.05", "2dgs prune_weight_fraction=0.2",
+                    "2dgs prune_margin_db=0", "2dgs prune_margin_db=2", "2dgs prune_margin_db=6"]
+    with pytest.raises(ConfigError, match="sweeps no field prune_margin for 2dgs"):
+        size_plan("quick", ("2dgs",), fields=("prune_margin",))
     rows = [{"label": "a", "method": "m", "quality": 20.0, "primitives": 60000},
             {"label": "b", "method": "m", "quality": 19.6, "primitives": 15000},
             {"label": "c", "method": "m", "quality": 19.4, "primitives": 5000},
