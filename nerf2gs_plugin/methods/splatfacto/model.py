@@ -46,8 +46,7 @@ def cpu_scale_strategy(**changes: Any) -> DefaultStrategyConfig:
     """Splatfacto's densification at the CPU scale (2DGS's with its own changes)."""
     base = DefaultStrategyConfig(warmup_length=300, reset_alpha_every=1000, stop_split_at=1500, stop_screen_size_at=400,
                                  max_pause_after_reset=300, max_gaussians=60000, pixel_steps_per_gaussian=54000.0,
-                                 gaussians_per_sparse_point=2.0, prune_weight_fraction=0.1, prune_margin_db=4.0,
-                                 path_clearance_m=1.0)
+                                 gaussians_per_sparse_point=2.0, prune_weight_fraction=0.1, path_clearance_m=1.0)
     return dataclasses.replace(base, **changes)
 
 

@@ -135,8 +135,8 @@ class DefaultStrategyConfig:
     this many dB below the model's own error on them (PSNR of the pruned renders against the unpruned ones
     >= PSNR of the unpruned renders against the images + this; sky and transient pixels left out), nothing
     when none does. A model still far from its images loses little by the prune, one that fits them
-    closely (a longer training) keeps the light Gaussians that draw what is left: 4 dB lets the prune
-    lower the training PSNR by at most ~1.5 dB (10 log10(1 + 10^-0.4)) before training goes on."""
+    closely (a longer training) keeps the light Gaussians that draw what is left: a margin of m dB lets the
+    prune lower the training PSNR by at most 10 log10(1 + 10^(-m/10)) dB (1.8 dB at 3) before training goes on."""
     path_clearance_m: float = 0.0
     """0 = off (nerfstudio). Else every prune also drops the Gaussians whose centre lies within this
     many metres of the capture path (the training cameras joined in order, see
@@ -162,7 +162,7 @@ class DefaultStrategy(Strategy):
         (None without training views); read by the weight prune when ``prune_margin_db`` > 0."""
         self.weight_prunes: list[dict[str, float]] = []
         """What each weight prune did: ``fraction`` of the weight dropped, ``change_db`` and ``error_db`` (nan
-        unmeasured) and ``pruned`` primitives; the tests and the bench read it."""
+        unmeasured) and ``pruned`` primitives (for inspection and the tests)."""
         self.budget = SceneBudget(cfg.pixel_steps_per_gaussian, cfg.stop_split_at - cfg.warmup_length, cfg.max_gaussians,
                                   cfg.gaussians_per_sparse_point)
         """The soft budget in force (``budget.value``): max-gaussians, or read from the views and the sparse

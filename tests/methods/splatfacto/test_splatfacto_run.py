@@ -79,17 +79,22 @@ def test_weight_prune_reads_the_training_views_through_the_trainer(tmp_path):
     """strategy.prune_weight_fraction in a real run: the model renders the data manager's training
     views once after densification and ends with fewer Gaussians than the same run without it."""
     data = write_dataset(tmp_path / "data")
-    counts = {}
-    for fraction in (0.0, 0.3):
-        cfg = _config(data, tmp_path / f"out{fraction}", 12)
+    counts, prunes = {}, {}
+    for fraction, margin in ((0.0, 0.0), (0.3, 0.0), (0.3, 60.0)):
+        cfg = _config(data, tmp_path / f"out{fraction}-{margin}", 12)
         model = cfg.pipeline.model
-        strategy = dataclasses.replace(model.strategy, stop_split_at=9, prune_weight_fraction=fraction)
+        strategy = dataclasses.replace(model.strategy, stop_split_at=9, prune_weight_fraction=fraction, prune_margin_db=margin)
         cfg = dataclasses.replace(cfg, pipeline=dataclasses.replace(cfg.pipeline, model=dataclasses.replace(model, strategy=strategy)))
         torch.manual_seed(0)
         trainer = Trainer(cfg)
         trainer.setup()
         trainer.train()
-        counts[fraction] = trainer.pipeline.model.num_primitives()
+        counts[fraction, margin] = trainer.pipeline.model.num_primitives()
+        prunes[fraction, margin] = trainer.pipeline.model.strategy.weight_prunes
         weights = trainer.pipeline.model.training_blend_weights()
-        assert weights is not None and weights.shape == (counts[fraction],)
-    assert counts[0.3] < 0.9 * counts[0.0], counts
+        assert weights is not None and weights.shape == (counts[fraction, margin],)
+    assert counts[0.3, 0.0] < 0.9 * counts[0.0, 0.0], counts
+    # a margin no prune can keep (the renders' change 60 dB below the model's error): nothing pruned, both measured
+    assert counts[0.3, 60.0] == counts[0.0, 0.0], counts
+    record = prunes[0.3, 60.0][-1]
+    assert record["pruned"] == 0 and 0 < record["error_db"] < record["change_db"] < 100, record
