@@ -1,6 +1,6 @@
 """Issue 20's size target over the model-size sweeps of one set of defaults, in one table.
 
-Usage: python benchmarks/size_summary.py [views_budget|scene_budget]   (default: views_budget)
+Usage: python benchmarks/size_summary.py [views_budget|scene_budget|prune_margin]   (default: views_budget)
 Reads the picks of each sweep (`ns2gs-bench model-size`, picks on the validation views) and writes
 benchmarks/results/<set>/summary.{json,md}: per sweep and method, the default's primitives and
 validation PSNR, how far below the best swept configuration it ends, and its ratio to the smallest
@@ -16,6 +16,11 @@ configuration within 0.5 dB of the best (target: within 0.5 dB, at most 1.5x).
   default scale, so there today's defaults are the views-budget defaults of views_budget/ (a rerun of
   2DGS's quick default with the point term on and off gives the same 4,428 surfels; that sweep, two days'
   code earlier, had 4,485: not reproduced to the digit).
+* prune_margin: today's defaults since 2DGS's weight prune reads the fit (`strategy.prune_margin_db` 3): 2DGS
+  swept again (the whole quick sweeps; at the default scale only the default, `prune_weight_fraction` and
+  `prune_margin_db`, so there its row is also held against the earlier full sweep of the same street: its best
+  and its smallest model within 0.5 dB, both made with the fixed 10% prune, two days' code earlier);
+  Splatfacto and Scaffold-GS, whose defaults did not change, read as in scene_budget.
 """
 from __future__ import annotations
 
@@ -30,8 +35,8 @@ from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results"
 ALL = ("splatfacto", "2dgs", "scaffold-gs")
-# set -> (title, [(sweep, file under benchmarks/results, methods read from it)])
-SETS: dict[str, tuple[str, list[tuple[str, str, tuple[str, ...]]]]] = {
+# set -> (title, [(sweep, file under benchmarks/results, methods read from it[, an earlier full sweep to hold it against])])
+SETS: dict[str, tuple[str, list[tuple]]] = {
     "views_budget": ("with the budget read from the views as the default", [
         ("embedded street, quick", "views_budget/street_quick/model_size.json", ALL),
         ("second street, quick", "views_budget/second_street_quick/model_size.json", ALL),
@@ -53,12 +58,30 @@ SETS: dict[str, tuple[str, list[tuple[str, str, tuple[str, ...]]]]] = {
         ("second street, default", "views_budget/second_street_default/model_size.json", ("splatfacto", "2dgs")),
         ("second street, default", "scene_budget/second_street_default_scaffold/model_size.json", ("scaffold-gs",)),
     ]),
+    "prune_margin": ("with 2DGS's weight prune read from the fit (today's defaults)", [
+        ("embedded street, quick", "scene_budget/street_quick_splatfacto/model_size.json", ("splatfacto",)),
+        ("embedded street, quick", "prune_margin/street_quick/model_size.json", ("2dgs",)),
+        ("embedded street, quick", "scene_budget/street_quick_scaffold/model_size.json", ("scaffold-gs",)),
+        ("second street, quick", "scene_budget/second_street_quick_splatfacto/model_size.json", ("splatfacto",)),
+        ("second street, quick", "prune_margin/second_street_quick/model_size.json", ("2dgs",)),
+        ("second street, quick", "scene_budget/second_street_quick_scaffold/model_size.json", ("scaffold-gs",)),
+        ("embedded street + NeRF views, quick", "views_budget/street_nerf_views_quick/model_size.json", ("splatfacto",)),
+        ("embedded street + NeRF views, quick", "prune_margin/street_nerf_views_quick/model_size.json", ("2dgs",)),
+        ("embedded street + NeRF views, quick", "scene_budget/street_nerf_views_quick_scaffold/model_size.json", ("scaffold-gs",)),
+        ("embedded street, default", "views_budget/street_default/model_size.json", ("splatfacto",)),
+        ("embedded street, default", "prune_margin/street_default/model_size.json", ("2dgs",), "views_budget/street_default/model_size.json"),
+        ("embedded street, default", "scene_budget/street_default_scaffold/model_size.json", ("scaffold-gs",)),
+        ("second street, default", "views_budget/second_street_default/model_size.json", ("splatfacto",)),
+        ("second street, default", "prune_margin/second_street_default/model_size.json", ("2dgs",),
+         "views_budget/second_street_default/model_size.json"),
+        ("second street, default", "scene_budget/second_street_default_scaffold/model_size.json", ("scaffold-gs",)),
+    ]),
 }
 
 
 def summary(name: str = "views_budget") -> list[dict]:
     rows = []
-    for sweep, file, methods in SETS[name][1]:
+    for sweep, file, methods, *earlier in SETS[name][1]:
         path = RESULTS / file
         if not path.is_file():
             continue
@@ -67,22 +90,42 @@ def summary(name: str = "views_budget") -> list[dict]:
             d = p.get("default")
             if d is None or method not in methods:
                 continue
-            rows.append({"sweep": sweep, "file": Path(file).relative_to(name).as_posix() if file.startswith(name + "/") else f"../{file}",
-                         "method": method, "primitives": d["primitives"],
-                         "val_psnr": round(d["mean_psnr"], 2), "below_best_db": round(p["default_below_best_db"], 2),
-                         "best": p["best"], "smallest_within_0_5dB": p["smallest"],
-                         "default_over_smallest": round(p["default_over_smallest"], 2), "target_met": p["target_met"]})
+            row = {"sweep": sweep, "file": Path(file).relative_to(name).as_posix() if file.startswith(name + "/") else f"../{file}",
+                   "method": method, "primitives": d["primitives"],
+                   "val_psnr": round(d["mean_psnr"], 2), "below_best_db": round(p["default_below_best_db"], 2),
+                   "best": p["best"], "smallest_within_0_5dB": p["smallest"],
+                   "default_over_smallest": round(p["default_over_smallest"], 2), "target_met": p["target_met"]}
+            if earlier:
+                row.update(held_against(d, json.loads((RESULTS / earlier[0]).read_text())["picks"][method], earlier[0]))
+                row["target_met"] = row["target_met"] and row["earlier_target_met"]
+            rows.append(row)
     order = {m: i for i, m in enumerate(ALL)}
-    sweeps = list(dict.fromkeys(s for s, _, _ in SETS[name][1]))
+    sweeps = list(dict.fromkeys(entry[0] for entry in SETS[name][1]))
     return sorted(rows, key=lambda r: (sweeps.index(r["sweep"]), order.get(r["method"], 99)))
 
 
+def held_against(default: dict, earlier: dict, file: str) -> dict:
+    """The default of a partial sweep against an earlier full sweep's best and its smallest model within 0.5 dB."""
+    below = earlier["best_quality"] - default["mean_psnr"]
+    ratio = default["primitives"] / earlier["smallest_primitives"]
+    return {"earlier_file": f"../{file}", "earlier_below_best_db": round(below, 2), "earlier_over_smallest": round(ratio, 2),
+            "earlier_target_met": bool(below <= 0.5 and ratio <= 1.5)}
+
+
 def markdown(rows: list[dict], with_file: bool = False) -> str:
-    head = "| sweep | method | default primitives | val PSNR | below best | / smallest in band | target met |" + (" sweep file |" if with_file else "")
-    lines = [head, "|---|---|---|---|---|---|---|" + ("---|" if with_file else "")]
+    earlier = any("earlier_file" in r for r in rows)
+    head = "| sweep | method | default primitives | val PSNR | below best | / smallest in band |"
+    head += " earlier full sweep: below best, / smallest |" if earlier else ""
+    head += " target met |" + (" sweep file |" if with_file else "")
+    lines = [head, "|---" * head.count(" |") + "|"]
     for r in rows:
-        lines.append(f"| {r['sweep']} | {r['method']} | {r['primitives']:,} | {r['val_psnr']:.2f} | {r['below_best_db']:.2f} dB | "
-                     f"{r['default_over_smallest']:.2f}x | {'yes' if r['target_met'] else '**no**'} |" + (f" `{r['file']}` |" if with_file else ""))
+        line = (f"| {r['sweep']} | {r['method']} | {r['primitives']:,} | {r['val_psnr']:.2f} | {r['below_best_db']:.2f} dB | "
+                f"{r['default_over_smallest']:.2f}x |")
+        if earlier:
+            line += (f" {r['earlier_below_best_db']:.2f} dB, {r['earlier_over_smallest']:.2f}x (`{r['earlier_file']}`) |"
+                     if "earlier_file" in r else " |")
+        line += f" {'yes' if r['target_met'] else '**no**'} |" + (f" `{r['file']}` |" if with_file else "")
+        lines.append(line)
     return "\n".join(lines)
 
 

@@ -212,7 +212,8 @@ class ModelSize:
     augment: bool = False
     """Train every run on StreetNeRF's views (--augment-from)."""
     sweep_fields: Optional[tuple[str, ...]] = None
-    """Sweep only these fields (last names, e.g. prune_margin_db prune_weight_fraction) beside the default; all when not given."""
+    """Sweep only these fields (last names, e.g. prune_margin_db prune_weight_fraction) beside the default; all when not given,
+    none (the default alone, to hold against an earlier sweep) when given without names."""
     out: Path = RESULTS
     runs: Path = RUNS
     rerun: bool = False

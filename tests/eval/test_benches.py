@@ -278,6 +278,7 @@ def test_size_plan_and_smallest_within():
     some = [s.label for s in size_plan("default", ("2dgs",), fields=("prune_margin_db", "prune_weight_fraction"))]
     assert some == ["2dgs default", "2dgs prune_weight_fraction=0", "2dgs prune_weight_fraction=0.05", "2dgs prune_weight_fraction=0.2",
                     "2dgs prune_margin_db=0", "2dgs prune_margin_db=2", "2dgs prune_margin_db=6"]
+    assert [s.label for s in size_plan("quick", ("2dgs",), fields=())] == ["2dgs default"]
     with pytest.raises(ConfigError, match="sweeps no field prune_margin for 2dgs"):
         size_plan("quick", ("2dgs",), fields=("prune_margin",))
     rows = [{"label": "a", "method": "m", "quality": 20.0, "primitives": 60000},
