@@ -1180,3 +1180,22 @@ def test_scene_budget_claims():
     assert saved["rows"] == rows and saved["met"] == sum(r["target_met"] for r in rows) and saved["of"] == len(rows) == 15
     assert mod.markdown(rows, with_file=True) in (RESULTS / "scene_budget" / "summary.md").read_text()
     assert f"is met in {saved['met']} of {saved['of']} cases" in README
+
+
+def test_real_bench_with_todays_size_defaults():
+    """The real bench's seed-42 run with the budget read from the scene: the README's figures are real_scene_budget.json's."""
+    d = _real("real_scene_budget")
+    est, gt = d["results"]["estimated"], d["results"]["ground_truth"]
+    psnrs = lambda r: " / ".join(f"{r['results'][s]['psnr']:.2f}" for s in ("street", "bev_1", "bev_2"))
+    text = (f"{d['registered_fraction'] * 30:.0f}/30 registered ({d['process']['points']} SfM points), ATE {d['ate_percent']:.2f}%, "
+            f"scale {d['scale_error_percent']:+.2f}%, sky IoU {d['mask_iou']['sky']:.3f},\nground {d['mask_iou']['ground']:.3f}; "
+            f"gain ratio {d['gain_ratio']['bev_1']:.2f} / {d['gain_ratio']['bev_2']:.2f} (bev_1 / bev_2)")
+    assert text in README, text
+    sizes = (f"Splatfacto ends with {est['splatfacto']['size']['primitives']:,}\nGaussians on the estimated capture and "
+             f"{gt['splatfacto']['size']['primitives']:,} on the true one (+ NeRF views {est['splatfacto + NeRF views']['size']['primitives']:,} / "
+             f"{gt['splatfacto + NeRF views']['size']['primitives']:,})")
+    assert sizes in README, sizes
+    flat = " ".join(README.split())
+    for label, r in (("StreetNeRF", est["StreetNeRF"]), ("Splatfacto", est["splatfacto"]), ("+ NeRF views", est["splatfacto + NeRF views"])):
+        assert f"{label} {psnrs(r)}" in flat, (label, psnrs(r))
+    assert f"with ground truth: Splatfacto {psnrs(gt['splatfacto'])}, + NeRF views {psnrs(gt['splatfacto + NeRF views'])}" in flat
