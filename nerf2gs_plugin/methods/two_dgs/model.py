@@ -51,12 +51,12 @@ class TwoDGSModelConfig(SplatfactoModelConfig):
     normals_frame: Literal["camera", "world"] = "camera"
     """Frame of the rasterizer's rendered normals (converted to world for the viewer)."""
     strategy: DefaultStrategyConfig = field(default_factory=lambda: cpu_scale_strategy(pixel_steps_per_gaussian=36000.0,
-                                                                                       prune_margin_db=3.0))
+                                                                                       prune_margin_db=2.0))
     """Splatfacto's CPU-scale strategy with the views' pixels x densification steps / 36,000 (~12k surfels at the
     quick scale on the synthetic street): Splatfacto's ~8k there left 2DGS 0.6 dB below its best
     (benchmarks/results/model_size*.md). The weight prune drops at most Splatfacto's 10% and less where the
-    surfels fit their views closely (prune-margin-db 3): the fixed 10% left 2DGS 0.6-0.8 dB below its best at
-    the default scale, where 5% was in the band (benchmarks/results/prune_margin/)."""
+    surfels fit their views closely (prune-margin-db 2, chosen on the validation views of two streets at the
+    default scale, where the fixed 10% ended 0.43-0.82 dB below the unpruned best: benchmarks/results/prune_margin/)."""
     depth_loss_weight: float = 0.0
     """Splatfacto's sparse-point depth loss: off for 2DGS (its depth output is the median by default;
     not measured)."""

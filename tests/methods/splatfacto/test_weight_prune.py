@@ -101,7 +101,7 @@ def test_prune_default_and_without_views(scene):
     # the fraction read from the fit: 2DGS's (its fixed 10% fell out of the band at the default scale), not Splatfacto's
     from nerf2gs_plugin.registry import get_method
 
-    assert get_method("2dgs").config.pipeline.model.strategy.prune_margin_db == 3.0
+    assert get_method("2dgs").config.pipeline.model.strategy.prune_margin_db == 2.0
     assert splatfacto_config.pipeline.model.strategy.prune_margin_db == 0.0 == DefaultStrategyConfig().prune_margin_db
     cams, imgs, skies = scene
     torch.manual_seed(0)
