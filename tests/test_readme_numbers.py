@@ -1199,3 +1199,49 @@ def test_real_bench_with_todays_size_defaults():
     for label, r in (("StreetNeRF", est["StreetNeRF"]), ("Splatfacto", est["splatfacto"]), ("+ NeRF views", est["splatfacto + NeRF views"])):
         assert f"{label} {psnrs(r)}" in flat, (label, psnrs(r))
     assert f"with ground truth: Splatfacto {psnrs(gt['splatfacto'])}, + NeRF views {psnrs(gt['splatfacto + NeRF views'])}" in flat
+
+
+def test_prune_margin_claims():
+    """2DGS's weight prune read from the fit: the default in code is the README's, the summary's rows are what
+    benchmarks/size_summary.py makes of the committed sweeps, each relabelled sweep's picks are the bench's own
+    picks of its rows, and the README's count of met targets and its figures are theirs."""
+    import importlib.util
+
+    from nerf2gs_plugin.eval.bench_size import smallest_within
+    from nerf2gs_plugin.methods.splatfacto.model import SplatfactoModelConfig
+    from nerf2gs_plugin.methods.two_dgs.model import TwoDGSModelConfig
+
+    assert (TwoDGSModelConfig().strategy.prune_margin_db, SplatfactoModelConfig().strategy.prune_margin_db) == (2.0, 0.0)
+    assert "2DGS `strategy.prune-margin-db 2`" in README
+    spec = importlib.util.spec_from_file_location("size_summary", RESULTS.parent / "size_summary.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    rows = mod.summary("prune_margin")
+    saved = json.loads((RESULTS / "prune_margin" / "summary.json").read_text())
+    assert saved["rows"] == rows and saved["met"] == sum(r["target_met"] for r in rows) and saved["of"] == len(rows) == 15
+    assert mod.markdown(rows, with_file=True) in (RESULTS / "prune_margin" / "summary.md").read_text()
+    assert f"met in {saved['met']} of {saved['of']} cases" in README
+    assert mod.markdown(rows) in README  # the README's table is the summary's
+    for street in ("street_default", "second_street_default"):
+        sweep = json.loads((RESULTS / "prune_margin" / street / "model_size.json").read_text())
+        assert sweep["picks"] == json.loads(json.dumps(smallest_within(sweep["rows"])))
+        by = {r["label"]: r for r in sweep["rows"]}
+        for label in ("2dgs default", "2dgs prune_margin_db=0", "2dgs prune_margin_db=3", "2dgs prune_weight_fraction=0"):
+            r = by[label]
+            assert f"{r['val_quality']:.2f} ({r['primitives']:,})" in README, (street, label)
+
+
+def test_second_street_2dgs_today():
+    """The second street's 2DGS rows with today's defaults: the README's figures are twodgs_today/paper_table.json's."""
+    r = json.loads((RESULTS / "second_scene" / "twodgs_today" / "paper_table.json").read_text())["results"]
+    old = json.loads((RESULTS / "second_scene" / "paper_table.json").read_text())["results"]
+    p = lambda row, s: row["results"][s]["psnr"]
+    trio = lambda row: " / ".join(f"{p(row, s):.2f}" for s in ("street", "bev_1", "bev_2"))
+    gain = lambda rows: " / ".join(f"{p(rows['2dgs + NeRF views'], s) - p(rows['2dgs'], s):+.2f}" for s in ("street", "bev_1", "bev_2"))
+    flat = " ".join(README.split())
+    for text in (f"StreetNeRF {trio(r['StreetNeRF'])} dB street / bev_1 / bev_2 (retrained)",
+                 f"2DGS {trio(r['2dgs'])} with {r['2dgs']['size']['primitives']:,} surfels ({old['2dgs']['size']['primitives']:,} in the table above)",
+                 f"+ NeRF views {trio(r['2dgs + NeRF views'])} ({r['2dgs + NeRF views']['size']['primitives']:,}): {gain(r)} dB from the NeRF views, against {gain(old)} in the table above",
+                 f"bev_2 ({p(r['2dgs + NeRF views'], 'bev_2') - p(old['2dgs + NeRF views'], 'bev_2'):+.2f} dB with NeRF views)"):
+        assert text in flat, text
+    assert f"StreetNeRF {abs(p(r['StreetNeRF'], 'street') - p(old['StreetNeRF'], 'street')):.2f} / {abs(p(r['StreetNeRF'], 'bev_1') - p(old['StreetNeRF'], 'bev_1')):.2f} dB apart" in flat
