@@ -1220,7 +1220,7 @@ def test_prune_margin_claims():
     saved = json.loads((RESULTS / "prune_margin" / "summary.json").read_text())
     assert saved["rows"] == rows and saved["met"] == sum(r["target_met"] for r in rows) and saved["of"] == len(rows) == 15
     assert mod.markdown(rows, with_file=True) in (RESULTS / "prune_margin" / "summary.md").read_text()
-    assert f"met in {saved['met']} of {saved['of']} cases" in README
+    assert f"in {saved['met']} of {saved['of']} with today's 2DGS prune read from the fit" in " ".join(README.split())
     assert mod.markdown(rows) in README  # the README's table is the summary's
     for street in ("street_default", "second_street_default"):
         sweep = json.loads((RESULTS / "prune_margin" / street / "model_size.json").read_text())
@@ -1229,6 +1229,21 @@ def test_prune_margin_claims():
         for label in ("2dgs default", "2dgs prune_margin_db=0", "2dgs prune_margin_db=3", "2dgs prune_weight_fraction=0"):
             r = by[label]
             assert f"{r['val_quality']:.2f} ({r['primitives']:,})" in README, (street, label)
+    flat = " ".join(README.split())
+    row = {(r["sweep"], r["method"]): r for r in rows}
+    d1, d2 = row["embedded street, default", "2dgs"], row["second street, default", "2dgs"]
+    assert (f"keeps {d1['primitives']:,} / {d2['primitives']:,} surfels there, {d1['below_best_db']:.2f} / {d2['below_best_db']:.2f} dB "
+            f"below today's best and {d1['default_over_smallest']:.2f}x / {d2['default_over_smallest']:.2f}x today's smallest model in the band "
+            f"(the fixed 10%), {d1['earlier_over_smallest']:.2f}x / {d2['earlier_over_smallest']:.2f}x the earlier sweeps'") in flat
+    quick = []
+    for street in ("street_quick", "second_street_quick", "street_nerf_views_quick"):
+        by = {r["label"]: r for r in json.loads((RESULTS / "prune_margin" / street / "model_size.json").read_text())["rows"]}
+        assert by["2dgs default"]["primitives"] == by["2dgs prune_margin_db=0"]["primitives"]  # the whole 10% passed
+        quick.append(f"{by['2dgs default']['primitives']:,}")
+    assert f"as `prune-margin-db 0` ({' / '.join(quick)})" in flat
+    fixed = [json.loads((RESULTS / "prune_margin" / st / "model_size.json").read_text()) for st in ("street_default", "second_street_default")]
+    below = [f["picks"]["2dgs"]["best_quality"] - {r["label"]: r for r in f["rows"]}["2dgs prune_margin_db=0"]["val_quality"] for f in fixed]
+    assert f"0.43 / 0.43 dB in today's" in flat and [round(b, 2) for b in below] == [0.43, 0.43]
 
 
 def test_second_street_2dgs_today():
