@@ -1154,12 +1154,25 @@ def _castle_scene(variant: str, seed2: bool = False) -> dict:
     return next(r for r in _r(SB + "castle_val.json", "rows") if r["scene"] == scene and r["variant"].startswith(variant))
 
 
+def _size_summary(name: str):
+    """benchmarks/size_summary.py as a module, the rows it makes of the committed sweeps of set ``name`` and the
+    committed summary.json, checked equal (15 cases) and its Markdown in summary.md."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("size_summary", RESULTS.parent / "size_summary.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    rows = mod.summary(name)
+    saved = json.loads((RESULTS / name / "summary.json").read_text())
+    assert saved["rows"] == rows and saved["met"] == sum(r["target_met"] for r in rows) and saved["of"] == len(rows) == 15
+    assert mod.markdown(rows, with_file=True) in (RESULTS / name / "summary.md").read_text()
+    return mod, rows, saved
+
+
 def test_scene_budget_claims():
     """The budget read from the scene: the defaults in code are the README's, its castle-P30 figures are
     scene_budget/castle_val.json's, its count of met targets is scene_budget/summary.json's (which is what
     benchmarks/size_summary.py makes of the committed sweeps)."""
-    import importlib.util
-
     from nerf2gs_plugin.methods.scaffold_gs.model import ScaffoldGSModelConfig
     from nerf2gs_plugin.methods.splatfacto.model import SplatfactoModelConfig
     from nerf2gs_plugin.methods.two_dgs.model import TwoDGSModelConfig
@@ -1177,13 +1190,7 @@ def test_scene_budget_claims():
     assert s2 in README, s2
     d2, df = _castle_scene("2dgs, scene"), _castle_scene("2dgs, fixed")
     assert f"2DGS there: {d2['mean']:.2f} dB with {d2['primitives']:,} surfels against {df['mean']:.2f} with {df['primitives']:,}" in README
-    spec = importlib.util.spec_from_file_location("size_summary", RESULTS.parent / "size_summary.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    rows = mod.summary("scene_budget")
-    saved = json.loads((RESULTS / "scene_budget" / "summary.json").read_text())
-    assert saved["rows"] == rows and saved["met"] == sum(r["target_met"] for r in rows) and saved["of"] == len(rows) == 15
-    assert mod.markdown(rows, with_file=True) in (RESULTS / "scene_budget" / "summary.md").read_text()
+    mod, rows, saved = _size_summary("scene_budget")
     assert f"is met in {saved['met']} of {saved['of']} cases" in README
 
 
@@ -1210,21 +1217,13 @@ def test_prune_margin_claims():
     """2DGS's weight prune read from the fit: the default in code is the README's, the summary's rows are what
     benchmarks/size_summary.py makes of the committed sweeps, each relabelled sweep's picks are the bench's own
     picks of its rows, and the README's count of met targets and its figures are theirs."""
-    import importlib.util
-
     from nerf2gs_plugin.eval.bench_size import smallest_within
     from nerf2gs_plugin.methods.splatfacto.model import SplatfactoModelConfig
     from nerf2gs_plugin.methods.two_dgs.model import TwoDGSModelConfig
 
     assert (TwoDGSModelConfig().strategy.prune_margin_db, SplatfactoModelConfig().strategy.prune_margin_db) == (2.0, 0.0)
     assert "2DGS `strategy.prune-margin-db 2`" in README
-    spec = importlib.util.spec_from_file_location("size_summary", RESULTS.parent / "size_summary.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    rows = mod.summary("prune_margin")
-    saved = json.loads((RESULTS / "prune_margin" / "summary.json").read_text())
-    assert saved["rows"] == rows and saved["met"] == sum(r["target_met"] for r in rows) and saved["of"] == len(rows) == 15
-    assert mod.markdown(rows, with_file=True) in (RESULTS / "prune_margin" / "summary.md").read_text()
+    mod, rows, saved = _size_summary("prune_margin")
     assert f"in {saved['met']} of {saved['of']} with today's 2DGS prune read from the fit" in " ".join(README.split())
     assert mod.markdown(rows) in README  # the README's table is the summary's
     for street in ("street_default", "second_street_default"):
