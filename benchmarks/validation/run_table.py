@@ -13,7 +13,8 @@ benchmarks/results/path_clearance.{json,md} (rows: benchmarks/validation/path_cl
 benchmarks/results/castle_confidence.{json,md} (rows: benchmarks/validation/castle_confidence_rows.json),
 benchmarks/results/augment_appearance.{json,md} (rows: benchmarks/validation/augment_appearance_rows.json),
 benchmarks/results/depth_loss.{json,md} (rows: benchmarks/validation/depth_loss_rows.json),
-benchmarks/results/views_budget/castle_val.{json,md} (rows: benchmarks/validation/views_budget_castle_rows.json).
+benchmarks/results/views_budget/castle_val.{json,md} (rows: benchmarks/validation/views_budget_castle_rows.json),
+benchmarks/results/prune_margin/castle_val.{json,md} (rows: benchmarks/validation/prune_margin_castle_rows.json).
 """
 import json
 import sys
