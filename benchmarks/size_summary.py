@@ -4,7 +4,10 @@ Usage: python benchmarks/size_summary.py [views_budget|scene_budget|prune_margin
 Reads the picks of each sweep (`ns2gs-bench model-size`, picks on the validation views) and writes
 benchmarks/results/<set>/summary.{json,md}: per sweep and method, the default's primitives and
 validation PSNR, how far below the best swept configuration it ends, and its ratio to the smallest
-configuration within 0.5 dB of the best (target: within 0.5 dB, at most 1.5x).
+configuration within 0.5 dB of the best (target: within 0.5 dB, at most 1.5x). The set of today's
+defaults (CURRENT) also writes issue 20's committed verdict, benchmarks/results/model_size.{json,md,png}:
+per method and scene its `default`, `smallest_within_0_5dB` and `best` (primitives, mean PSNR, MB, FPS),
+`default_over_smallest`, and one panel per sweep.
 
 * views_budget: the budget read from the views as the default (the code of 2026-11-25, 15th session,
   where it was; off by default after it);
@@ -31,7 +34,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from nerf2gs_plugin.eval.bench_io import write_bench_files  # noqa: E402
+from nerf2gs_plugin.eval.bench_size import SIZE_TARGET, TOLERANCE_DB, draw  # noqa: E402
 from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
+from nerf2gs_plugin.utils.plotting import pyplot, save_figure  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results"
@@ -81,6 +87,9 @@ SETS: dict[str, tuple[str, list[tuple]]] = {
     ]),
 }
 
+
+CURRENT = "prune_margin"
+"""The set whose defaults are today's: its summary is also benchmarks/results/model_size.*."""
 
 EARLIER_NOTE = (" A row whose sweep reran only some fields (2DGS: its default beside `prune_margin_db` 0 and 6, at the default "
                 "scale also `prune_weight_fraction`) is also held against the earlier full sweep of the same data named in it "
@@ -137,6 +146,75 @@ def markdown(rows: list[dict], with_file: bool = False) -> str:
     return "\n".join(lines)
 
 
+def _sweeps(name: str) -> dict[str, tuple[list[dict], dict[str, dict]]]:
+    """Per sweep of a set: the rows and picks of the methods read for it (from their own files)."""
+    out: dict[str, tuple[list[dict], dict[str, dict]]] = {}
+    for sweep, file, methods, *_ in SETS[name][1]:
+        path = RESULTS / file
+        if not path.is_file():
+            continue
+        data = json.loads(path.read_text())
+        rows, picks = out.setdefault(sweep, ([], {}))
+        rows += [r for r in data["rows"] if r["method"] in methods]
+        picks.update({m: p for m, p in data["picks"].items() if m in methods})
+    return out
+
+
+def _entry(pick: dict, rows: list[dict], label: str, quality: float) -> dict:
+    """A configuration of a sweep by its label: primitives, mean PSNR (validation views), MB, FPS."""
+    row = next(r for r in rows if r["label"] == label)
+    return {"label": label, "primitives": row["primitives"], "mean_psnr": round(quality, 3),
+            "megabytes": round(row["megabytes"], 2), "fps": round(row["fps"], 1)}
+
+
+def top_level(name: str, rows: list[dict]) -> None:
+    """Issue 20's committed verdict: per method and scene the default, the smallest model within 0.5 dB of the
+    best, and the best, with their sizes; one picture, a panel per sweep."""
+    sweeps = _sweeps(name)
+    methods: dict[str, dict[str, dict]] = {}
+    for r in rows:
+        srows, picks = sweeps[r["sweep"]]
+        p = picks[r["method"]]
+        entry = {"sweep_file": r["file"],
+                 "default": _entry(p, srows, p["default"]["label"], p["default"]["mean_psnr"]),
+                 "smallest_within_0_5dB": _entry(p, srows, p["smallest"], p["smallest_quality"]),
+                 "best": _entry(p, srows, p["best"], p["best_quality"]),
+                 "default_over_smallest": r["default_over_smallest"], "default_below_best_db": r["below_best_db"],
+                 "target_met": r["target_met"]}
+        entry.update({k: v for k, v in r.items() if k.startswith("earlier_")})
+        methods.setdefault(r["method"], {})[r["sweep"]] = entry
+    met = sum(r["target_met"] for r in rows)
+    title = "Model size against quality with today's defaults, both streets"
+    lines = ["| method | scene | default: primitives, val PSNR, MB, FPS | smallest within 0.5 dB | best | "
+             "default / smallest | below best | target met |", "|---" * 8 + "|"]
+    for m, scenes in methods.items():
+        for sweep, e in scenes.items():
+            d, sm, b = e["default"], e["smallest_within_0_5dB"], e["best"]
+            lines.append(f"| {m} | {sweep} | {d['primitives']:,}, {d['mean_psnr']:.2f} dB, {d['megabytes']:.1f} MB, "
+                         f"{d['fps']:.0f} | `{sm['label']}` ({sm['primitives']:,}, {sm['mean_psnr']:.2f}) | `{b['label']}` "
+                         f"({b['primitives']:,}, {b['mean_psnr']:.2f}) | {e['default_over_smallest']:.2f}x | "
+                         f"{e['default_below_best_db']:.2f} dB | {'yes' if e['target_met'] else '**no**'} |")
+    body = (f"Written by `python benchmarks/size_summary.py {name}` from the sweeps of `benchmarks/results/{name}/summary.md` "
+            f"(each method's sweep file named there; picks on the validation views). Target: the default within "
+            f"{TOLERANCE_DB:g} dB of the best swept configuration and at most {SIZE_TARGET:g}x the primitives of the smallest "
+            f"one within that band. Met in {met} of {len(rows)}.{EARLIER_NOTE if any('earlier_file' in r for r in rows) else ''}"
+            f"\n\n" + "\n".join(lines) + "\n\n![model size](model_size.png)\n")
+    payload = {"set": name, "tolerance_db": TOLERANCE_DB, "size_target": SIZE_TARGET, "met": met, "of": len(rows),
+               "methods": methods}
+    write_bench_files(RESULTS, "model_size", title, payload, body)
+    plt = pyplot()
+    cols = min(3, len(sweeps))
+    rows_n = -(-len(sweeps) // cols)
+    fig, axes = plt.subplots(rows_n, cols, figsize=(5.2 * cols, 4.2 * rows_n), squeeze=False)
+    for k, (ax, (sweep, (srows, picks))) in enumerate(zip(axes.flat, sweeps.items())):
+        draw(ax, srows, picks, sweep, legend=k == 0)
+    for ax in list(axes.flat)[len(sweeps):]:
+        ax.axis("off")
+    fig.suptitle(title + f": met in {met} of {len(rows)}", fontsize=11)
+    fig.tight_layout()
+    save_figure(fig, RESULTS / "model_size.png")
+
+
 def main(name: str = "views_budget") -> None:
     rows = summary(name)
     met = sum(r["target_met"] for r in rows)
@@ -149,6 +227,8 @@ def main(name: str = "views_budget") -> None:
     atomic_write_text(out / "summary.json", json.dumps({"machine": machine_line(), "met": met, "of": len(rows),
                                                         "rows": rows}, indent=1))
     atomic_write_text(out / "summary.md", md)
+    if name == CURRENT:
+        top_level(name, rows)
     print(md)
 
 

@@ -200,10 +200,9 @@ def markdown(rows: list[dict], best: dict[str, dict], tol: float = TOLERANCE_DB)
     return "\n".join(lines)
 
 
-def chart(rows: list[dict], best: dict[str, dict], path: Path, title: str) -> None:
-    """Mean PSNR against primitives (log x), one curve per method and swept field; picks marked."""
+def draw(ax, rows: list[dict], best: dict[str, dict], title: str, legend: bool = True) -> None:
+    """One sweep on ``ax``: mean PSNR against primitives (log x) per method, picks marked."""
     plt = pyplot()
-    fig, ax = plt.subplots(figsize=(7.5, 4.6))
     methods = list(dict.fromkeys(r["method"] for r in rows))
     key = choice_key(rows)
     for k, m in enumerate(methods):
@@ -221,8 +220,15 @@ def chart(rows: list[dict], best: dict[str, dict], path: Path, title: str) -> No
     ax.set_xlabel("primitives (Gaussians / anchors / surfels, log)")
     ax.set_ylabel(f"mean PSNR over the {'validation' if key == 'val_quality' else 'test'} views (dB)")
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8, title=f"star: default; ringed: smallest within {TOLERANCE_DB:g} dB of the best (dotted)", title_fontsize=7)
+    if legend:
+        ax.legend(fontsize=8, title=f"star: default; ringed: smallest within {TOLERANCE_DB:g} dB of the best (dotted)", title_fontsize=7)
     ax.set_title(title, fontsize=10)
+
+
+def chart(rows: list[dict], best: dict[str, dict], path: Path, title: str) -> None:
+    """The sweep's picture (:func:`draw`) on its own."""
+    fig, ax = pyplot().subplots(figsize=(7.5, 4.6))
+    draw(ax, rows, best, title)
     fig.tight_layout()
     save_figure(fig, path)
 
