@@ -14,7 +14,8 @@ benchmarks/results/castle_confidence.{json,md} (rows: benchmarks/validation/cast
 benchmarks/results/augment_appearance.{json,md} (rows: benchmarks/validation/augment_appearance_rows.json),
 benchmarks/results/depth_loss.{json,md} (rows: benchmarks/validation/depth_loss_rows.json),
 benchmarks/results/views_budget/castle_val.{json,md} (rows: benchmarks/validation/views_budget_castle_rows.json),
-benchmarks/results/prune_margin/castle_val.{json,md} (rows: benchmarks/validation/prune_margin_castle_rows.json).
+benchmarks/results/prune_margin/castle_val.{json,md} (rows: benchmarks/validation/prune_margin_castle_rows.json),
+benchmarks/results/augment_weight_val.{json,md} (rows: benchmarks/validation/augment_weight_rows.json).
 """
 import json
 import sys
