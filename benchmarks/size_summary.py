@@ -24,7 +24,9 @@ per method and scene its `default`, `smallest_within_0_5dB` and `best` (primitiv
   `prune_weight_fraction`, read with the 2 dB run as the default by benchmarks/relabel_sweep.py), and held
   against the earlier full sweep of the same data (views_budget/, two days' code earlier, the fixed 10% prune):
   its best and its smallest model within 0.5 dB of it. Splatfacto and Scaffold-GS, whose defaults did not
-  change, are read as in scene_budget.
+  change, are read as in scene_budget. With NeRF views at the default scale (swept 2026-11-26, 18th session; no earlier
+  sweep of it): Splatfacto's `prune_weight_fraction` and `pixel_steps_per_gaussian`, 2DGS's `prune_margin_db`,
+  Scaffold-GS's `anchor_growth` and `max_anchors`.
 """
 from __future__ import annotations
 
@@ -84,6 +86,9 @@ SETS: dict[str, tuple[str, list[tuple]]] = {
         ("second street, default", "prune_margin/second_street_default/model_size.json", ("2dgs",),
          "views_budget/second_street_default/model_size.json"),
         ("second street, default", "scene_budget/second_street_default_scaffold/model_size.json", ("scaffold-gs",)),
+        ("embedded street + NeRF views, default", "prune_margin/street_nerf_views_default/splatfacto/model_size.json", ("splatfacto",)),
+        ("embedded street + NeRF views, default", "prune_margin/street_nerf_views_default/2dgs/model_size.json", ("2dgs",)),
+        ("embedded street + NeRF views, default", "prune_margin/street_nerf_views_default/scaffold/model_size.json", ("scaffold-gs",)),
     ]),
 }
 
