@@ -165,14 +165,18 @@ def _sweeps(name: str) -> dict[str, tuple[list[dict], dict[str, dict]]]:
     return out
 
 
-def _entry(pick: dict, rows: list[dict], label: str, quality: float) -> dict:
+def _entry(rows: list[dict], label: str, quality: float) -> dict:
     """A configuration of a sweep by its label: primitives, mean PSNR (validation views), MB, FPS."""
     row = next(r for r in rows if r["label"] == label)
     return {"label": label, "primitives": row["primitives"], "mean_psnr": round(quality, 3),
             "megabytes": round(row["megabytes"], 2), "fps": round(row["fps"], 1)}
 
 
-def top_level(name: str, rows: list[dict]) -> None:
+def _earlier_note(rows: list[dict]) -> str:
+    return EARLIER_NOTE if any("earlier_file" in r for r in rows) else ""
+
+
+def top_level(name: str, rows: list[dict], met: int) -> None:
     """Issue 20's committed verdict: per method and scene the default, the smallest model within 0.5 dB of the
     best, and the best, with their sizes; one picture, a panel per sweep."""
     sweeps = _sweeps(name)
@@ -181,14 +185,13 @@ def top_level(name: str, rows: list[dict]) -> None:
         srows, picks = sweeps[r["sweep"]]
         p = picks[r["method"]]
         entry = {"sweep_file": r["file"],
-                 "default": _entry(p, srows, p["default"]["label"], p["default"]["mean_psnr"]),
-                 "smallest_within_0_5dB": _entry(p, srows, p["smallest"], p["smallest_quality"]),
-                 "best": _entry(p, srows, p["best"], p["best_quality"]),
+                 "default": _entry(srows, p["default"]["label"], p["default"]["mean_psnr"]),
+                 "smallest_within_0_5dB": _entry(srows, p["smallest"], p["smallest_quality"]),
+                 "best": _entry(srows, p["best"], p["best_quality"]),
                  "default_over_smallest": r["default_over_smallest"], "default_below_best_db": r["below_best_db"],
                  "target_met": r["target_met"]}
         entry.update({k: v for k, v in r.items() if k.startswith("earlier_")})
         methods.setdefault(r["method"], {})[r["sweep"]] = entry
-    met = sum(r["target_met"] for r in rows)
     title = "Model size against quality with today's defaults, both streets"
     lines = ["| method | scene | default: primitives, val PSNR, MB, FPS | smallest within 0.5 dB | best | "
              "default / smallest | below best | target met |", "|---" * 8 + "|"]
@@ -202,7 +205,7 @@ def top_level(name: str, rows: list[dict]) -> None:
     body = (f"Written by `python benchmarks/size_summary.py {name}` from the sweeps of `benchmarks/results/{name}/summary.md` "
             f"(each method's sweep file named there; picks on the validation views). Target: the default within "
             f"{TOLERANCE_DB:g} dB of the best swept configuration and at most {SIZE_TARGET:g}x the primitives of the smallest "
-            f"one within that band. Met in {met} of {len(rows)}.{EARLIER_NOTE if any('earlier_file' in r for r in rows) else ''}"
+            f"one within that band. Met in {met} of {len(rows)}.{_earlier_note(rows)}"
             f"\n\n" + "\n".join(lines) + "\n\n![model size](model_size.png)\n")
     payload = {"set": name, "tolerance_db": TOLERANCE_DB, "size_target": SIZE_TARGET, "met": met, "of": len(rows),
                "methods": methods}
@@ -227,13 +230,13 @@ def main(name: str = "views_budget") -> None:
     md = (f"# Issue 20's size target {SETS[name][0]}\n\nMachine: {machine_line()}\n\n"
           f"Each sweep's picks on its validation views (`benchmarks/size_summary.py {name}`): the default within 0.5 dB of the "
           f"best swept configuration and at most 1.5x the primitives of the smallest one within that band. "
-          f"Met in {met} of {len(rows)}.{EARLIER_NOTE if any('earlier_file' in r for r in rows) else ''}\n\n{table}\n")
+          f"Met in {met} of {len(rows)}.{_earlier_note(rows)}\n\n{table}\n")
     out = RESULTS / name
     atomic_write_text(out / "summary.json", json.dumps({"machine": machine_line(), "met": met, "of": len(rows),
                                                         "rows": rows}, indent=1))
     atomic_write_text(out / "summary.md", md)
     if name == CURRENT:
-        top_level(name, rows)
+        top_level(name, rows, met)
     print(md)
 
 

@@ -1267,7 +1267,8 @@ def test_scene_budget_claims():
 def test_real_bench_with_todays_size_defaults():
     """The real bench's three seeds with the budget read from the scene: the README's figures are
     real_scene_budget{,_seed43,_seed44}.json's."""
-    runs = [_real(f"real_scene_budget{x}") for x in ("", "_seed43", "_seed44")]
+    stems = [f"real_scene_budget{x}" for x in ("", "_seed43", "_seed44")]
+    runs = [_real(st) for st in stems]
     d = runs[0]
     assert [r["options"]["seed"] for r in runs] == [None, 43, 44]
     assert all(r["mask_iou"] == d["mask_iou"] and r["ate_percent"] == d["ate_percent"] for r in runs)  # one capture, one set of masks
@@ -1278,8 +1279,8 @@ def test_real_bench_with_todays_size_defaults():
             f"scale {d['scale_error_percent']:+.2f}%, sky IoU {d['mask_iou']['sky']:.3f},\nground {d['mask_iou']['ground']:.3f}; "
             f"gain ratio {d['gain_ratio']['bev_1']:.2f} / {d['gain_ratio']['bev_2']:.2f} (bev_1 / bev_2), {ratios.replace(', ', ' and ')} at seeds 42 / 43 / 44")
     assert text in README, text
-    gain = lambda r, side, s: _real_psnr_of(r, "splatfacto + NeRF views", s, side) - _real_psnr_of(r, "splatfacto", s, side)
-    mean = lambda side, s: sum(gain(r, side, s) for r in runs) / 3
+    gain = lambda st, side, s: _real_psnr(st, "splatfacto + NeRF views", s, side) - _real_psnr(st, "splatfacto", s, side)
+    mean = lambda side, s: sum(gain(st, side, s) for st in stems) / 3
     flat = " ".join(README.split())
     three = (f"over the three seeds the bird's-eye gain with everything estimated is {mean('estimated', 'bev_1'):.2f} / {mean('estimated', 'bev_2'):.2f} dB "
              f"against {mean('ground_truth', 'bev_1'):.2f} / {mean('ground_truth', 'bev_2'):.2f} with ground truth, a ratio of "
@@ -1292,21 +1293,17 @@ def test_real_bench_with_todays_size_defaults():
     for label, r in (("StreetNeRF", est["StreetNeRF"]), ("Splatfacto", est["splatfacto"]), ("+ NeRF views", est["splatfacto + NeRF views"])):
         assert f"{label} {psnrs(r)}" in flat, (label, psnrs(r))
     assert f"with ground truth: Splatfacto {psnrs(gt['splatfacto'])}, + NeRF views {psnrs(gt['splatfacto + NeRF views'])}" in flat
-    above = lambda side: ", ".join(" / ".join(f"{_real_psnr_of(r, 'StreetNeRF', s, side) - _real_psnr_of(r, 'splatfacto', s, side):.2f}"
-                                              for s in ("bev_1", "bev_2")) for r in runs)
+    above = lambda side: ", ".join(" / ".join(f"{_real_psnr(st, 'StreetNeRF', s, side) - _real_psnr(st, 'splatfacto', s, side):.2f}"
+                                              for s in ("bev_1", "bev_2")) for st in stems)
     for side in ("estimated", "ground_truth"):
         parts = above(side).split(", ")
-        assert f"{parts[0]}, {parts[1]} and {parts[2]} dB above" in flat or f"{parts[0]}, {parts[1]} and {parts[2]}" in flat, (side, parts)
-    drop = [_real_psnr_of(r, "StreetNeRF", "bev_1", "ground_truth") - _real_psnr_of(r, "StreetNeRF", "bev_1", "estimated") for r in runs]
+        assert f"{parts[0]}, {parts[1]} and {parts[2]}" in flat, (side, parts)
+    drop = [_real_psnr(st, "StreetNeRF", "bev_1", "ground_truth") - _real_psnr(st, "StreetNeRF", "bev_1", "estimated") for st in stems]
     assert f"The estimated StreetNeRF is {min(drop):.1f}-{max(drop):.1f} dB below the true one from above" in flat, drop
     # "the 1,500 Gaussians of the estimated Splatfacto ... score within 0.5 dB of it" (from above, every seed)
     assert "score within 0.5 dB of it" in flat
     assert all(abs(float(x)) <= 0.5 for x in above("estimated").replace(",", " /").split(" / "))
     assert all(1400 <= r["results"]["estimated"]["splatfacto"]["size"]["primitives"] <= 1600 for r in runs)
-
-
-def _real_psnr_of(run: dict, label: str, split: str, side: str) -> float:
-    return run["results"][side][label]["results"][split]["psnr"]
 
 
 def test_prune_margin_claims():
@@ -1388,14 +1385,14 @@ def test_model_size_verdict():
     """benchmarks/results/model_size.json (issue 20's committed keys) is what size_summary.py makes of today's set:
     per method and scene `default` and `smallest_within_0_5dB` (primitives, mean PSNR) and `default_over_smallest`,
     each the sweep's own pick; the target held wherever it says met."""
-    mod, rows, saved = _size_summary(mod_name := "prune_margin")
-    assert mod.CURRENT == mod_name
+    mod, rows, saved = _size_summary("prune_margin")
+    assert mod.CURRENT == "prune_margin"
     top = json.loads((RESULTS / "model_size.json").read_text())
     assert (top["met"], top["of"]) == (saved["met"], saved["of"])
     assert sum(len(scenes) for scenes in top["methods"].values()) == len(rows)
     for r in rows:
         e = top["methods"][r["method"]][r["sweep"]]
-        sweep = json.loads((RESULTS / mod_name / r["file"]).read_text())["picks"][r["method"]]
+        sweep = json.loads((RESULTS / "prune_margin" / r["file"]).read_text())["picks"][r["method"]]
         assert e["default"]["primitives"] == sweep["default"]["primitives"] == r["primitives"]
         assert e["smallest_within_0_5dB"]["primitives"] == sweep["smallest_primitives"]
         assert abs(e["smallest_within_0_5dB"]["mean_psnr"] - sweep["smallest_quality"]) < 1e-3
