@@ -15,7 +15,8 @@ benchmarks/results/augment_appearance.{json,md} (rows: benchmarks/validation/aug
 benchmarks/results/depth_loss.{json,md} (rows: benchmarks/validation/depth_loss_rows.json),
 benchmarks/results/views_budget/castle_val.{json,md} (rows: benchmarks/validation/views_budget_castle_rows.json),
 benchmarks/results/prune_margin/castle_val.{json,md} (rows: benchmarks/validation/prune_margin_castle_rows.json),
-benchmarks/results/augment_weight_val.{json,md} (rows: benchmarks/validation/augment_weight_rows.json).
+benchmarks/results/augment_weight_val.{json,md} (rows: benchmarks/validation/augment_weight_rows.json),
+benchmarks/results/reference_length_val.{json,md} (rows: benchmarks/validation/reference_length_rows.json).
 """
 import json
 import sys
@@ -23,6 +24,7 @@ from pathlib import Path
 
 from nerf2gs_plugin.eval.bench_io import EVAL_SPLITS, VAL_SPLITS, eval_cache_name
 from nerf2gs_plugin.eval.machine import machine_line
+from nerf2gs_plugin.registry import get_method
 from nerf2gs_plugin.utils.io import atomic_write_text
 
 
@@ -37,7 +39,8 @@ def main(out: Path, rows_path: Path) -> None:
     for r in doc["rows"]:
         res = results(Path(r["run"]), r["splits"])
         psnr = {k: round(v["psnr"], 2) for k, v in res.items()}
-        steps = json.loads((Path(r["run"]) / "bench_run.json").read_text())["overrides"].get("max_num_iterations")
+        spec = json.loads((Path(r["run"]) / "bench_run.json").read_text())
+        steps = spec["overrides"].get("max_num_iterations") or get_method(spec["method"]).config.max_num_iterations
         per_view = {k: [round(x, 2) for x in v["psnr_per_image"]] for k, v in res.items() if v.get("psnr_per_image")}
         size = json.loads((Path(r["run"]) / eval_cache_name(EVAL_SPLITS)).read_text()).get("size", {})
         rows.append({**r, "steps": steps, "primitives": size.get("primitives"), "psnr": psnr,
