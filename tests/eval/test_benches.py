@@ -261,10 +261,11 @@ def test_size_plan_and_smallest_within():
     assert len(labels) == len(set(labels))
     assert "splatfacto max_gaussians=5000" in labels and "scaffold-gs max_anchors=2000" in labels and "2dgs densify_grad_thresh=0.0016" in labels
     assert "splatfacto prune_weight_fraction=0" in labels  # the unpruned model is one of the swept configurations
-    assert "splatfacto pixel_steps_per_gaussian=108000" in labels and "scaffold-gs pixel_steps_per_anchor=192000" in labels  # the views budget
+    assert "splatfacto pixel_steps_per_gaussian=108000" in labels and "scaffold-gs pixel_steps_per_anchor=20000" in labels  # the views budget
     assert "splatfacto pixel_steps_per_gaussian=0" in labels and "2dgs gaussians_per_sparse_point=0" in labels  # either term off
     assert "splatfacto pixel_steps_per_gaussian=54000" not in labels  # the default's own value
-    assert "scaffold-gs anchor_growth=0" in labels  # the fixed max-anchors of before
+    assert "scaffold-gs anchor_growth=0" in labels  # Scaffold-GS's views term alone
+    assert "scaffold-gs pixel_steps_per_anchor=0" in labels  # its growth term alone (the default before 2026-11-26's)
     for spec in plan:
         apply_plain(get_method(spec.method).config, spec.overrides)  # valid fields and types
     own = next(s for s in plan if s.label == "splatfacto default")  # the registered default, the paper table's run

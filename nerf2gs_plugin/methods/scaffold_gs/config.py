@@ -46,7 +46,8 @@ def scaffold_optimizers(max_steps: int) -> dict[str, OptimizerConfig]:
 
 def paper_scale(config: TrainerConfig) -> TrainerConfig:
     model = dataclasses.replace(config.pipeline.model, start_stat=500, update_from=1500, update_until=15000,
-                                max_anchors=0, anchor_growth=0.0, num_random=50000)
+                                max_anchors=0, anchor_growth=0.0, pixel_steps_per_anchor=0.0,
+                                num_random=50000)
     return dataclasses.replace(
         config, max_num_iterations=PAPER_STEPS, steps_per_save=2000, steps_per_eval_image=1000,
         pipeline=dataclasses.replace(config.pipeline, model=model), optimizers=scaffold_optimizers(PAPER_STEPS),

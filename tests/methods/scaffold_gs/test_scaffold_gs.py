@@ -41,7 +41,13 @@ def trained(scene):
 def test_spec_and_voxelize():
     assert scaffold_gs_method.config.method_name == "scaffold-gs"
     assert paper_scale(scaffold_gs_method.config).pipeline.model.update_until == 15000
-    assert paper_scale(scaffold_gs_method.config).pipeline.model.anchor_growth == 0  # Scaffold-GS grows without a budget
+    paper = paper_scale(scaffold_gs_method.config).pipeline.model
+    assert paper.anchor_growth == 0 and paper.pixel_steps_per_anchor == 0  # Scaffold-GS grows without a budget
+    # an anchor spawns n-offsets neural Gaussians: the views term gives each Splatfacto's pixel-steps per Gaussian
+    from nerf2gs_plugin.methods.splatfacto.model import SplatfactoModelConfig
+
+    own = scaffold_gs_method.config.pipeline.model
+    assert own.pixel_steps_per_anchor == own.n_offsets * SplatfactoModelConfig().strategy.pixel_steps_per_gaussian
     pts = torch.tensor([[0.01, 0.0, 0.0], [0.04, 0.0, 0.0], [0.27, 0.0, 0.0], [0.31, 0.01, 0.0]])
     anchors = voxelize(pts, 0.1)
     assert anchors.shape == (2, 3)
@@ -198,10 +204,10 @@ def test_growth_stops_at_the_budget_read_from_the_views(scene):
 @needs_rasterizer
 def test_growth_stops_at_a_multiple_of_the_initial_anchors(scene):
     """``anchor_growth``: the anchors grow to at most that many times the initial ones (the voxelised sparse
-    points), with no views named and after a checkpoint reload; with the pixel budget on too, the larger."""
+    points; the views term off), with no views named and after a checkpoint reload; with the views term on too, the larger."""
     cams = scene[0]
     m0 = _cfg().setup(train_data=make_train_data(cams)).num_primitives()
-    model, opts = _fresh_with_optimizers(scene, anchor_growth=(m0 + 5) / m0)
+    model, opts = _fresh_with_optimizers(scene, anchor_growth=(m0 + 5) / m0, pixel_steps_per_anchor=0.0)
     assert model.strategy.budget.value == m0 + 5
     model.load_model_state(model.state_dict())
     assert model.strategy.budget.value == m0 + 5
