@@ -211,7 +211,7 @@ def progress_log(progress, log_file: BenchLog) -> Callable[[str], None]:
     """Log lines printed above a running rich progress bar."""
 
     def echo(line: str) -> None:
-        progress.console.print(line, markup=False, highlight=False)
+        progress.console.print(line, markup=False, highlight=False, soft_wrap=True)  # a long path stays on its line
 
     log_file.echo = echo
     return log_file
