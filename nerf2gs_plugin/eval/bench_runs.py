@@ -23,6 +23,7 @@ from typing import Any, Iterator, Optional
 
 from nerf2gs_plugin.engine.checkpoints import list_checkpoints, load_checkpoint
 from nerf2gs_plugin.engine.run_dir import LOCK_NAME
+from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.utils.config import apply_plain, to_plain
 from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.engine.trainer import Trainer
@@ -69,6 +70,9 @@ def wait_for_other_training(run_dir: Path, log=print) -> None:
         os.close(fd)
 
 
+IN_USE = "run directory is in use by another training"
+"""What ``engine/run_dir.RunDirLock`` says when another process holds a run's lock."""
+
 EVAL_LOCK_NAME = ".eval.lock"
 
 
@@ -88,7 +92,7 @@ def evaluation_lock(run_dir: Path) -> Iterator[None]:
 
 def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, reference: Optional[tuple[Path, str]] = None,
                    progress: bool = True, log=print, step_hook=None, device: str = "auto",
-                   rerun: bool = False) -> tuple[Path, str]:
+                   rerun: bool = False, _wait_on_lock: bool = True) -> tuple[Path, str]:
     """Returns (run_dir, key). A finished run with the same key is reused (unless ``rerun``: then
     its directory is replaced); a partial one resumes. ``step_hook(step)`` is called after every
     training step (a bench-wide progress bar). ``bench_run.json`` records where and when it trained."""
@@ -121,7 +125,16 @@ def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, ref
     else:
         log(f"[bench] train {spec.label} ({spec.method}, {cfg.max_num_iterations} steps)")
     trainer = Trainer(cfg)
-    trainer.setup()
+    try:
+        trainer.setup()
+    except ConfigError as e:
+        # another bench sharing the runs folder took the run's lock between the wait above and this setup: wait for it
+        # and reuse its run, once; never a failure of the run (a bench would remember it as a known failure)
+        if not (_wait_on_lock and IN_USE in str(e)):
+            raise
+        log(f"[bench] {spec.label}: another process started training it; waiting to reuse it")
+        wait_for_other_training(run_dir, log)
+        return train_or_reuse(spec, data, runs_root, dataset, reference, progress, log, step_hook, device, False, _wait_on_lock=False)
     if step_hook is not None:
         trainer.step_hooks.append(step_hook)
     trainer.train()

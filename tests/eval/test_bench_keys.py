@@ -225,3 +225,44 @@ def test_two_benches_evaluate_a_shared_run_once(tmp_path):
     for t in threads:
         t.join()
     assert len(calls) == 1 and [g["results"] for g in got] == [{"street": {"psnr": 21.0}}] * 2
+
+
+def test_a_bench_that_loses_the_race_for_a_run_waits_and_reuses_it(tmp_path, monkeypatch):
+    """The other bench takes a run's lock between this bench's wait and its trainer's setup: the lock error is
+    not the run's failure (a bench would remember it and report the run as failed): wait, then reuse the run."""
+    from nerf2gs_plugin.engine.run_dir import RunDirLock
+    from nerf2gs_plugin.errors import ConfigError
+
+    held = RunDirLock(tmp_path / "x")
+    held.acquire()
+    with pytest.raises(ConfigError) as e:
+        RunDirLock(tmp_path / "x").acquire()
+    held.release()
+    assert bench_runs.IN_USE in str(e.value)  # the message the bench recognises is the lock's own
+
+    finished = {"now": False}
+
+    class OtherHasIt:
+        def __init__(self, cfg):
+            self.cfg = cfg
+
+        def setup(self):
+            finished["now"] = True  # by the time this bench has waited, the other bench has finished the run
+            raise ConfigError(f"{bench_runs.IN_USE} (pid 1); choose another --timestamp or --run-dir", tmp_path)
+
+    monkeypatch.setattr(bench_runs, "Trainer", OtherHasIt)
+    monkeypatch.setattr(bench_runs, "list_checkpoints", lambda d: [Path(d) / "step-9.ckpt"] if finished["now"] else [])
+    monkeypatch.setattr(bench_runs, "load_checkpoint", lambda p: {"step": 10 ** 9})
+    said: list[str] = []
+    run_dir, key = bench_runs.train_or_reuse(RunSpec("s", "splatfacto", {}), tmp_path / "data", tmp_path / "runs", "fp", log=said.append)
+    assert any("waiting to reuse it" in s for s in said) and any(s.startswith("[bench] reuse s:") for s in said)
+    assert run_dir.parent.parent.parent == tmp_path / "runs" and run_dir.name == key
+
+    class Broken(OtherHasIt):
+        def setup(self):
+            raise ConfigError("some other mistake", tmp_path)
+
+    finished["now"] = False
+    monkeypatch.setattr(bench_runs, "Trainer", Broken)
+    with pytest.raises(ConfigError, match="some other mistake"):  # any other error is the run's own
+        bench_runs.train_or_reuse(RunSpec("s", "splatfacto", {}), tmp_path / "data", tmp_path / "runs", "fp", log=said.append)
