@@ -26,7 +26,8 @@ per method and scene its `default`, `smallest_within_0_5dB` and `best` (primitiv
   its best and its smallest model within 0.5 dB of it. Splatfacto and Scaffold-GS, whose defaults did not
   change, are read as in scene_budget. With NeRF views at the default scale (swept 2026-11-26, 18th session; no earlier
   sweep of it): Splatfacto's `prune_weight_fraction` and `pixel_steps_per_gaussian`, 2DGS's `prune_margin_db`,
-  Scaffold-GS's `anchor_growth` and `max_anchors`.
+  Scaffold-GS's `pixel_steps_per_anchor` and `max_anchors` (its views term, the default since the 19th session, binds
+  only there; its other sweeps in scene_budget predate the term, which stays below its growth term in them).
 """
 from __future__ import annotations
 

@@ -522,18 +522,15 @@ def _enh_d(table: str, target: str, split: str, metric: str) -> float:
 ENH_TABLES = (Q, "second_scene/quick/paper_table.json")
 def _stab_masks(method: str, variant: str, what: str = "worst") -> float:
     """A stressed run of stability_masks against its method's seeds (street, bev or the worse of the two)."""
-    d = json.loads((RESULTS / "stability_masks" / "stability.json").read_text())
-    s, r = d["summary"][method], next(r for r in d["rows"] if r["method"] == method and r["variant"] == variant)
-    street, bev = s["seed_street_mean"] - r["street_psnr"], s["seed_bev_mean"] - r["bev_psnr"]
-    return {"street": street, "bev": bev, "worst": max(street, bev)}[what]
+    if what == "worst":
+        return _stab_drop(method, variant, "stability_masks/stability")
+    return _stab_view(method, variant, "stability_masks/stability", what)
 
 
 def _stab_drops(stem: str) -> dict:
     """Every stressed run of a stability bench: (method, case) -> (street, BEV) dB below its method's seed mean."""
-    d = json.loads((RESULTS / stem / "stability.json").read_text())
-    return {(r["method"], r["variant"]): (d["summary"][r["method"]]["seed_street_mean"] - r["street_psnr"],
-                                          d["summary"][r["method"]]["seed_bev_mean"] - r["bev_psnr"])
-            for r in d["rows"] if r["stress"] is not None}
+    return {(r["method"], r["variant"]): tuple(_stab_view(r["method"], r["variant"], f"{stem}/stability", v) for v in ("street", "bev"))
+            for r in _stability(f"{stem}/stability")["rows"] if r["stress"] is not None}
 
 
 def _stab_shift(new: str, old: str, skip: tuple) -> float:

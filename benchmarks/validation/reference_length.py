@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 from nerf2gs_plugin.eval.bench_io import BenchRunner, failure_reason
-from nerf2gs_plugin.eval.bench_real_photos import RealPhotosOptions, run_overrides
+from nerf2gs_plugin.eval.bench_real_photos import RealPhotosOptions, augment_overrides, run_overrides
 from nerf2gs_plugin.eval.bench_runs import RunSpec
 
 
@@ -34,7 +34,7 @@ def main(data: Path, runs: Path, args: list[str]) -> None:
         show(label, sn)
         if ov.get("aug"):
             spec = RunSpec("aug:" + label, "splatfacto", run_overrides(opts, "splatfacto", opts.splatfacto_steps), augment_from=label,
-                           augment={"delta_h": opts.delta_h, "theta_pitch": opts.theta_pitch, "every_n": opts.every_n})
+                           augment=augment_overrides(opts))
             show("aug:" + label, runner.run(spec, data, reference=(Path(sn.run_dir), sn.key)))
 
 

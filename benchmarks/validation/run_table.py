@@ -40,6 +40,8 @@ def main(out: Path, rows_path: Path) -> None:
         res = results(Path(r["run"]), r["splits"])
         psnr = {k: round(v["psnr"], 2) for k, v in res.items()}
         spec = json.loads((Path(r["run"]) / "bench_run.json").read_text())
+        # not bench_io.planned_steps: a row may be a run of code that was tried and not kept, whose overrides name
+        # fields today's config lacks; only its step count is read, the method's default when it set none
         steps = spec["overrides"].get("max_num_iterations") or get_method(spec["method"]).config.max_num_iterations
         per_view = {k: [round(x, 2) for x in v["psnr_per_image"]] for k, v in res.items() if v.get("psnr_per_image")}
         size = json.loads((Path(r["run"]) / eval_cache_name(EVAL_SPLITS)).read_text()).get("size", {})

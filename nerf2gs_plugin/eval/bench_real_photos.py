@@ -75,6 +75,11 @@ def run_overrides(opts: RealPhotosOptions, method: str, steps: int) -> dict:
     return {**ov, "steps_per_eval_image": 0}
 
 
+def augment_overrides(opts: RealPhotosOptions) -> dict:
+    """The ``--augment.*`` of the bench's Splatfacto + NeRF views run."""
+    return {"delta_h": opts.delta_h, "theta_pitch": opts.theta_pitch, "every_n": opts.every_n}
+
+
 def process_photos(opts: RealPhotosOptions, out: Path):
     """``ns2gs-data process images`` (same code path as the CLI) into ``out``."""
     from nerf2gs_plugin.data.process.frames import collect_images, list_images
@@ -134,7 +139,7 @@ def run_real_photos(opts: RealPhotosOptions, runs_root: Path, out_dir: Path, rer
     specs = {"StreetNeRF": RunSpec("StreetNeRF", "streetnerf", run_overrides(opts, "streetnerf", opts.streetnerf_steps)),
              "splatfacto": RunSpec("splatfacto", "splatfacto", run_overrides(opts, "splatfacto", opts.splatfacto_steps)),
              NERF_VIEWS: RunSpec(NERF_VIEWS, "splatfacto", run_overrides(opts, "splatfacto", opts.splatfacto_steps),
-                                 augment_from="StreetNeRF", augment={"delta_h": opts.delta_h, "theta_pitch": opts.theta_pitch, "every_n": opts.every_n})}
+                                 augment_from="StreetNeRF", augment=augment_overrides(opts))}
     results: dict[str, dict] = {}
     done_runs: dict[str, tuple[Path, str]] = {}
     check = None
