@@ -308,6 +308,8 @@ class Real:
     runs: Path = RUNS
     rerun: bool = False
     frames: int = 30
+    video_scale: int = 4
+    """The video's frames at this multiple of the street's 200x112 (1, 2, 4, 8); the models train at 200x112."""
     reference_steps: int = 1000
     streetnerf_steps: int = 400
     splatfacto_steps: int = 800
@@ -319,7 +321,7 @@ class Real:
     def main(self) -> None:
         from nerf2gs_plugin.eval.bench_real import RealBenchOptions, results_md, run_real_bench
 
-        opts = RealBenchOptions(frames=self.frames, reference_steps=self.reference_steps,
+        opts = RealBenchOptions(frames=self.frames, video_scale=self.video_scale, reference_steps=self.reference_steps,
                                 streetnerf_steps=self.streetnerf_steps, splatfacto_steps=self.splatfacto_steps,
                                 camera_optimizer=self.camera_optimizer, seed=self.seed)
         doc = run_real_bench(self.runs, self.out, opts, rerun=self.rerun)

@@ -30,6 +30,7 @@ from typing import Callable, Literal, Optional
 import numpy as np
 
 from nerf2gs_plugin.data.dataparser_outputs import MASK_KINDS
+from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.eval.pose_eval import LocalAlignment, Sim3, capture_report
 from nerf2gs_plugin.utils.io import atomic_write_text
 
@@ -43,6 +44,11 @@ class RealBenchOptions:
 
     frames: int = 30
     """Frames of the forward drive written to the video (the street's first pass has 30)."""
+    video_scale: int = 4
+    """The video's frames are the street rendered at this multiple of its 200x112 (1, 2, 4 or 8: a dashcam
+    hands over large frames); the SfM runs on them and the estimated column trains on ``process``'s
+    ``images_<video_scale>`` copies, the ground-truth column's size. SIFT places a keypoint to about a
+    pixel: from 200x112 frames the eval cameras' local rotation noise was 0.25 deg, from 800x448 0.05."""
     reference_steps: int = 1000
     """Steps of the masks' first reference (StreetNeRF without masks)."""
     streetnerf_steps: int = 400
@@ -161,13 +167,15 @@ def write_video(path: Path, images: list[Path], fps: float = 10.0) -> Path:
     return Path(path)
 
 
-def make_street(root: Path, opts: RealBenchOptions) -> Path:
-    """The synthetic street (made once; remade when its generator changed)."""
+def make_street(root: Path, opts: RealBenchOptions, scale: int = 1) -> Path:
+    """The synthetic street (made once; remade when its generator changed), at ``scale`` times its
+    image size (the same cameras, cars and exposures: everything follows from the seed)."""
     from nerf2gs_plugin.data.synthetic_street import GENERATOR_VERSION, SynthStreetConfig, generate_street, read_generator_version
 
-    path = Path(root) / "street"
+    path = Path(root) / ("street" if scale == 1 else f"street_x{scale}")
+    base = SynthStreetConfig()
     cfg = SynthStreetConfig(out=path, num_street=opts.num_street, num_bev=opts.num_bev, num_val_street=0, num_val_bev=0,
-                            progress=False, overwrite=True)
+                            width=base.width * scale, height=base.height * scale, progress=False, overwrite=True)
     if not (path / "transforms.json").is_file() or read_generator_version(path) != GENERATOR_VERSION:
         generate_street(cfg)
     return path
@@ -188,6 +196,27 @@ def ground_truth_dataset(street: Path, out: Path, n: int) -> Path:
     meta.pop("eval_splits", None)
     atomic_write_text(out / "transforms.json", json.dumps(meta, indent=1))
     return out
+
+
+def training_view(capture: Path, out: Path, factor: int) -> Path:
+    """``out/transforms.json``: the processed ``capture`` at 1/``factor`` of its size - its
+    ``images_<factor>`` copies (absolute paths) with the intrinsics scaled by the parser's rule - so the
+    estimated column trains, makes its masks and is scored at the size of the ground-truth one."""
+    from nerf2gs_plugin.data.images import scaled_size
+
+    meta = json.loads((Path(capture) / "transforms.json").read_text())
+    for frame in [meta, *meta["frames"]]:
+        if "w" in frame:
+            w, h = scaled_size(int(frame["w"]), int(frame["h"]), factor)
+            sx, sy = w / frame["w"], h / frame["h"]
+            frame.update(w=w, h=h, fl_x=frame["fl_x"] * sx, fl_y=frame["fl_y"] * sy, cx=frame["cx"] * sx, cy=frame["cy"] * sy)
+    for frame in meta["frames"]:
+        frame["file_path"] = str((Path(capture) / f"images_{factor}" / Path(frame["file_path"]).name).resolve())
+    if "ply_file_path" in meta:
+        meta["ply_file_path"] = str((Path(capture) / meta["ply_file_path"]).resolve())
+    Path(out).mkdir(parents=True, exist_ok=True)
+    atomic_write_text(Path(out) / "transforms.json", json.dumps(meta, indent=1))
+    return Path(out)
 
 
 def reference_dir(root: Path, est: Path, steps: int, options: str = "") -> Path:
@@ -265,8 +294,11 @@ def run_real_bench(runs_root: Path, out_dir: Path, opts: RealBenchOptions = Real
     ``train=False`` stops after the capture figures, ``street`` replaces the generated street (the
     test's plumbing run on a smaller one)."""
     from nerf2gs_plugin.capture.make_masks import MasksConfig, make_masks
+    from nerf2gs_plugin.data.process.export import DOWNSCALES
     from nerf2gs_plugin.eval.mask_eval import paired_mask_iou
 
+    if opts.video_scale != 1 and opts.video_scale not in DOWNSCALES:
+        raise ConfigError(f"--video-scale must be 1 or one of process's downscales {DOWNSCALES}, got {opts.video_scale}")
     root = Path(runs_root) / "real"
     root.mkdir(parents=True, exist_ok=True)
     t_all = time.perf_counter()
@@ -286,9 +318,18 @@ def run_real_bench(runs_root: Path, out_dir: Path, opts: RealBenchOptions = Real
     true_train = c2w_array(true_groups["train"])
     gt_local = attach_eval(gt, read_frames(street), true_train, true_train)  # identity: the same mapping code path
 
-    video = timed("video", lambda: write_video(root / "drive.avi", [f.image for f in true_groups["train"]]))
-    est = root / "estimated"
-    report = timed("process", lambda: process_capture(video, est, opts.frames, street_cfg.fov_deg, street_cfg.cam_height))
+    scale = opts.video_scale
+    if scale == 1:
+        video_frames = true_groups["train"]
+    else:  # the same drive at the dashcam's size: the same cameras, or the columns would not compare
+        video_frames = read_frames(timed("video street", lambda: make_street(root, opts, scale)))["train"][:opts.frames]
+        if not np.allclose(c2w_array(video_frames), true_train, atol=1e-9):
+            raise RuntimeError(f"the street at {scale}x its size has other training cameras than the ground-truth one")
+    video = timed("video", lambda: write_video(root / ("drive.avi" if scale == 1 else f"drive_x{scale}.avi"),
+                                               [f.image for f in video_frames]))
+    capture_dir = root / ("estimated" if scale == 1 else f"capture_x{scale}")
+    report = timed("process", lambda: process_capture(video, capture_dir, opts.frames, street_cfg.fov_deg, street_cfg.cam_height))
+    est = capture_dir if scale == 1 else training_view(capture_dir, root / f"estimated_x{scale}", scale)
     est_groups = read_frames(est)
     idx = [frame_index(f.image) for f in est_groups["train"]]
     est_train = c2w_array(est_groups["train"])
@@ -351,9 +392,12 @@ def results_md(doc: dict) -> str:
     lines = [
         "# Real-capture path on the synthetic street (`ns2gs-bench real`)", "",
         f"Machine: {machine_line(doc.get('machine'))}", "",
-        f"The street's forward drive ({o['frames']} frames, 200x112) as an MJPG video, poses and masks thrown away: "
-        f"process video (`--fov-deg 80 --camera-height 3 --no-refine-intrinsics --num-threads 1`) -> masks (auto, reference {o['reference_steps']} steps) -> "
-        f"StreetNeRF ({o['streetnerf_steps']} steps) -> Splatfacto ({o['splatfacto_steps']} steps) with and without NeRF views; "
+        f"The street's forward drive ({o['frames']} frames, rendered at {200 * o.get('video_scale', 1)}x{112 * o.get('video_scale', 1)}) "
+        "as an MJPG video, poses and masks thrown away: "
+        "process video (`--fov-deg 80 --camera-height 3 --no-refine-intrinsics --num-threads 1`) -> "
+        + (f"the capture's `images_{o['video_scale']}` (200x112, the ground-truth column's size: the masks and every model are made from them) -> "
+           if o.get("video_scale", 1) != 1 else "")
+        + f"masks (auto, reference {o['reference_steps']} steps) -> StreetNeRF ({o['streetnerf_steps']} steps) -> Splatfacto ({o['splatfacto_steps']} steps) with and without NeRF views; "
         + (f"StreetNeRF on the estimated poses refines them (camera optimizer {o['camera_optimizer']}); "
            if o.get("camera_optimizer", "off") != "off" else "")
         + "beside it the same frames with their true poses, scale and masks. The capture figures are taken after the "
@@ -382,7 +426,7 @@ def results_md(doc: dict) -> str:
         if res:
             lines += ["", markdown_table(res, target_groups(res), name)]
     lines += ["", "Time per stage (s): " + ", ".join(f"{k} {v}" for k, v in doc["stage_seconds"].items())
-              + "; SfM: " + ", ".join(f"{k} {v}" for k, v in doc["process"]["stage_seconds"].items())
+              + "; SfM: " + ", ".join(f"{k} {v:.1f}" for k, v in doc["process"]["stage_seconds"].items())
               + f"; masks: reference {doc['masks']['reference_seconds']}, masks {doc['masks']['mask_seconds']}"]
     if "train_seconds" in doc:
         lines += ["", "Training (s): " + ", ".join(f"{k} {_f(v, '{:.0f}')}" for k, v in doc["train_seconds"].items())]

@@ -145,6 +145,7 @@ def _fake_sfm(truth: Sim3, scale_bias: float):
     import cv2
 
     from nerf2gs_plugin.data.ply import read_ply_points, write_ply_points
+    from nerf2gs_plugin.data.process.export import write_downscaled
     from nerf2gs_plugin.data.process.pipeline import ProcessReport
 
     def process(video, out, n, fov_deg, camera_height):
@@ -162,7 +163,9 @@ def _fake_sfm(truth: Sim3, scale_bias: float):
         xyz, rgb = read_ply_points(street / meta["ply_file_path"])
         write_ply_points(out / "sparse_pc.ply", truth.apply(xyz).astype(np.float32), rgb)
         h, w = img.shape[:2]
-        doc = {"camera_model": "PINHOLE", "fl_x": meta["fl_x"], "fl_y": meta["fl_y"], "cx": w / 2, "cy": h / 2, "w": w, "h": h,
+        k = w / meta["w"]  # a video at another size than the street: the intrinsics follow it, as SfM's would
+        write_downscaled(out, [f"frame_{i:06d}.png" for i in range(n)])
+        doc = {"camera_model": "PINHOLE", "fl_x": meta["fl_x"] * k, "fl_y": meta["fl_y"] * k, "cx": w / 2, "cy": h / 2, "w": w, "h": h,
                "frames": frames, "ply_file_path": "sparse_pc.ply", "metres_per_unit": (1 + scale_bias) / truth.s,
                "up": (truth.R @ np.array([0.0, 0.0, 1.0])).tolist()}
         (out / "transforms.json").write_text(json.dumps(doc))
@@ -172,12 +175,24 @@ def _fake_sfm(truth: Sim3, scale_bias: float):
 
 
 @pytest.mark.timeout(120)
-def test_capture_plumbing_writes_the_required_keys(small_street, tmp_path, monkeypatch):
+@pytest.mark.parametrize("video_scale", [1, 2])
+def test_capture_plumbing_writes_the_required_keys(small_street, tmp_path, monkeypatch, video_scale):
     """The forward drive as a video -> (stand-in SfM in a known similarity frame) -> masks (a
-    3-step reference) -> capture figures and real.json/md; no training of the targets."""
+    3-step reference) -> capture figures and real.json/md; no training of the targets. At video
+    scale 2 the video is the street at twice its size and the estimated column is made from the
+    capture's ``images_2``: at the ground-truth column's size and intrinsics."""
+    from nerf2gs_plugin.data.synthetic_street import generate_street
+
     truth = Sim3(0.5, np.array([[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]), np.array([3.0, 1.0, -2.0]))
     monkeypatch.setattr(br, "process_capture", _fake_sfm(truth, 0.02))
-    opts = br.RealBenchOptions(frames=3, reference_steps=3)
+
+    def large_street(root, opts, scale):
+        out = Path(root) / f"street_x{scale}"
+        generate_street(small_config(out, width=SMALL["width"] * scale, height=SMALL["height"] * scale))
+        return out
+
+    monkeypatch.setattr(br, "make_street", large_street)
+    opts = br.RealBenchOptions(frames=3, reference_steps=3, video_scale=video_scale)
     doc = br.run_real_bench(tmp_path / "runs", tmp_path / "out", opts, log=lambda s: None, train=False, street=small_street)
     js = json.loads((tmp_path / "out" / "real.json").read_text())
     for key in ("registered_fraction", "ate_percent", "scale_error_percent", "mask_iou", "stage_seconds", "machine"):
@@ -190,10 +205,26 @@ def test_capture_plumbing_writes_the_required_keys(small_street, tmp_path, monke
     md = (tmp_path / "out" / "real.md").read_text()
     assert "registered_fraction" in md and "mask_iou.sky" in md
     # the eval cameras in the estimated frame are the true ones seen through the same similarity
-    est, gt = br.read_frames(tmp_path / "runs" / "real" / "estimated"), br.read_frames(tmp_path / "runs" / "real" / "gt")
+    est_dir = tmp_path / "runs" / "real" / ("estimated" if video_scale == 1 else f"estimated_x{video_scale}")
+    est, gt = br.read_frames(est_dir), br.read_frames(tmp_path / "runs" / "real" / "gt")
     assert set(est) == {"train", "street", "bev_1", "bev_2"} and doc["process"]["registered"] == len(est["train"]) == 3
     assert np.allclose(br.c2w_array(est["bev_2"]), truth.apply_poses(br.c2w_array(gt["bev_2"])), atol=1e-4)
-    assert all((tmp_path / "runs" / "real" / "estimated" / "masks" / k / "frame_000001.png").is_file() for k in ("sky", "ground"))
+    assert all((est_dir / "masks" / k / "frame_000001.png").is_file() for k in ("sky", "ground"))
+    # the estimated training frames at the ground-truth ones' size and intrinsics
+    from nerf2gs_plugin.data.images import image_size, load_mask
+
+    e0, g0 = est["train"][0], gt["train"][0]
+    assert (e0.intr.width, e0.intr.height) == (g0.intr.width, g0.intr.height) == image_size(e0.image)
+    assert e0.intr.fx == pytest.approx(g0.intr.fx) and e0.intr.cx == pytest.approx(g0.intr.cx)
+    assert tuple(load_mask(est_dir / "masks" / "sky" / "frame_000001.png").shape) == (g0.intr.height, g0.intr.width)
+    assert (f"images_{video_scale}" in str(e0.image)) == (video_scale != 1)
+
+
+def test_video_scale_must_be_a_downscale_that_process_writes(tmp_path):
+    from nerf2gs_plugin.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="video-scale"):
+        br.run_real_bench(tmp_path, tmp_path, br.RealBenchOptions(video_scale=3), train=False, street=tmp_path)
 
 
 def test_resample_mask_between_pinholes():
