@@ -268,10 +268,10 @@ RUN6 = ("real_run6", "real_run6_seed43")  # the real bench before the path clear
 RUN7 = ("real_run7", "real_run7_seed43")  # the real bench on the AMD host, before the empty-ray ground rule
 GE_OFF = ("real_ground_empty_off", "real_ground_empty_off_seed43")  # the Intel host, the rule off
 RUN8 = ("real_run8", "real_run8_seed43")  # the Intel host, the rule on, before Splatfacto's depth loss
-SEEDS3 = ("real", "real_seed43", "real_seed44")  # the Intel host with the depth loss, three training seeds
+SEEDS3 = ("real_depth_loss", "real_depth_loss_seed43", "real_depth_loss_seed44")  # the Intel host with the depth loss, three training seeds
 
 
-def _two_seed_gain(side: str, split: str, stems: tuple[str, str] = ("real", "real_seed43")) -> float:
+def _two_seed_gain(side: str, split: str, stems: tuple[str, str] = ("real_depth_loss", "real_depth_loss_seed43")) -> float:
     """The bird's-eye gain of NeRF views in ns2gs-bench real, mean over the committed seeds ``stems``."""
     g = [_real_psnr(stem, "splatfacto + NeRF views", split, side) - _real_psnr(stem, "splatfacto", split, side)
          for stem in stems]
@@ -1040,10 +1040,10 @@ PROSE = [
         _real_psnr("real_run8", "splatfacto + NeRF views", side="ground_truth"), _real_psnr("real_run8", "splatfacto", side="ground_truth")]),
     ("Everything estimated, seed 42: StreetNeRF 18.22 / 16.84 / 16.34 dB", "18.22 16.84 16.34",
      lambda: [_real_psnr("real_run8", "StreetNeRF", sp) for sp in ("street", "bev_1", "bev_2")]),
-    ("| bench street, seed 0 (camera 3 m, 80 deg FOV, 6 cars; `real.json`) | 0.745 | 0.7997 | 0.798 (`real_ground_empty_off.json`) | 0.375 |",
+    ("| bench street, seed 0 (camera 3 m, 80 deg FOV, 6 cars; `real_depth_loss.json`) | 0.745 | 0.7997 | 0.798 (`real_ground_empty_off.json`) | 0.375 |",
      "0.745 0.7997 0.798 0.375",
-     lambda: [_real("real")["mask_iou"]["sky"], _real("real")["mask_iou"]["ground"], _real(GE_OFF[0])["mask_iou"]["ground"],
-              _real("real")["mask_iou"]["transient"]]),
+     lambda: [_real("real_depth_loss")["mask_iou"]["sky"], _real("real_depth_loss")["mask_iou"]["ground"],
+              _real(GE_OFF[0])["mask_iou"]["ground"], _real("real_depth_loss")["mask_iou"]["transient"]]),
     *[(f"`auto_masks_seed{seed}.json`) | {sky} | {g} | {g_off} | {tr} |", f"{sky} {g} {g_off} {tr}",
        (lambda seed=seed: [_auto_masks(seed)["mask_iou"][k] for k in ("sky", "ground")] + [
            _auto_masks(seed)["without_ground_empty"]["mask_iou"]["ground"], _auto_masks(seed)["mask_iou"]["transient"]]))
@@ -1112,9 +1112,9 @@ PROSE = [
     ("Splatfacto + NeRF views on the streets'\n  validation views (one seed): 22.52 -> 22.73 and 22.41 -> 22.52", "22.52 22.73 22.41 22.52",
      lambda: [_table_row("depth_loss", f"splatfacto + NeRF views, {v}", sc, exact=True)["mean"]
               for sc in (STREET_E, STREET_7) for v in ("no depth loss", "depth loss 0.1 (default)")]),
-    ("A third seed (`real_seed44.md`): 0.05 / 0.11; over the three seeds the gain with everything estimated is\n"
+    ("A third seed (`real_depth_loss_seed44.md`): 0.05 / 0.11; over the three seeds the gain with everything estimated is\n"
      "0.40 / 0.38 dB against 1.08 / 0.86 with ground truth, a ratio of 0.37 / 0.45", "0.05 0.11 0.40 0.38 1.08 0.86 0.37 0.45",
-     lambda: [_real("real_seed44")["gain_ratio"][s] for s in ("bev_1", "bev_2")]
+     lambda: [_real("real_depth_loss_seed44")["gain_ratio"][s] for s in ("bev_1", "bev_2")]
      + [_two_seed_gain(side, s, SEEDS3) for side in ("estimated", "ground_truth") for s in ("bev_1", "bev_2")]
      + [_two_seed_gain("estimated", s, SEEDS3) / _two_seed_gain("ground_truth", s, SEEDS3) for s in ("bev_1", "bev_2")]),
     ("the sky\nIoU fell to 0.765 and ground to 0.780", "0.765 0.780",
@@ -1484,3 +1484,63 @@ def test_prune_margin_on_castle():
     assert text in README, text
     views = list(new["psnr_per_view"].values())[0], list(old["psnr_per_view"].values())[0]
     assert len(views[0]) == 4 and all(a > b for a, b in zip(*views))  # "every one of the 4 held-out photos better"
+
+
+def test_real_bench_with_the_video_at_800x448():
+    """The real bench's three seeds with the video at 4x the street's size: the README's table row
+    and paragraph are real{,_seed43,_seed44}.json's (the small video's figures: real_scene_budget.json)."""
+    stems = ["real", "real_seed43", "real_seed44"]
+    runs = [_real(st) for st in stems]
+    d, small = runs[0], _real("real_scene_budget")
+    assert [r["options"]["seed"] for r in runs] == [None, 43, 44] and all(r["options"]["video_scale"] == 4 for r in runs)
+    assert all(r["mask_iou"] == d["mask_iou"] and r["ate_percent"] == d["ate_percent"] for r in runs)  # one capture, one set of masks
+    flat = " ".join(README.split())
+    row = (f"| this run, Intel host, the video at 800x448 (`real.json`) | local | {d['registered_fraction']:.3f} | {d['ate_percent']:.2f} | "
+           f"{d['scale_error_percent']:+.1f} | {d['rotation_error_deg']:.1f} | {d['up_error_deg']:.1f} | {d['mask_iou']['sky']:.3f} | "
+           f"{d['mask_iou']['ground']:.3f} | {d['mask_iou']['transient']:.3f} | {d['gain_ratio']['bev_1']:.2f} | {d['gain_ratio']['bev_2']:.2f} |")
+    assert row in README, row
+    srow = (f"| Intel host, the video at 200x112, today's size defaults (`real_scene_budget.json`) | local | {small['registered_fraction']:.3f} | "
+            f"{small['ate_percent']:.2f} | {small['scale_error_percent']:+.1f} | {small['rotation_error_deg']:.1f} | {small['up_error_deg']:.1f} | "
+            f"{small['mask_iou']['sky']:.3f} | {small['mask_iou']['ground']:.3f} | {small['mask_iou']['transient']:.3f} | "
+            f"{small['gain_ratio']['bev_1']:.2f} | {small['gain_ratio']['bev_2']:.2f} |")
+    assert srow in README, srow
+    capture = (f"30/30 registered with {d['process']['points']:,} points ({small['process']['points']} from 200x112), ATE "
+               f"{d['ate_percent']:.2f}% ({small['ate_percent']:.2f}%), rotation error {d['rotation_error_deg']:.2f} deg "
+               f"({small['rotation_error_deg']:.2f}), up {d['up_error_deg']:.2f} deg ({small['up_error_deg']:.2f}), scale "
+               f"{d['scale_error_percent']:+.2f}% ({small['scale_error_percent']:+.2f}%), and an eval camera mapped from its neighbours "
+               f"misses its estimated pose by {d['eval_mapping_rotation_deg']:.2f} deg ({small['eval_mapping_rotation_deg']:.2f})")
+    assert capture in flat, capture
+    masks = (f"sky IoU {d['mask_iou']['sky']:.3f} ({small['mask_iou']['sky']:.3f}), ground {d['mask_iou']['ground']:.3f} "
+             f"({small['mask_iou']['ground']:.3f}), transient {d['mask_iou']['transient']:.3f} ({small['mask_iou']['transient']:.3f})")
+    assert masks in flat, masks
+    assert d["mask_iou"]["sky"] >= 0.8 and d["mask_iou"]["ground"] >= 0.8  # "sky and ground meet the 0.8 target"
+    ratios = ", ".join(f"{r['gain_ratio']['bev_1']:.2f} / {r['gain_ratio']['bev_2']:.2f}" for r in runs)
+    parts = ratios.split(", ")
+    assert f"Gain ratio {parts[0]}, {parts[1]} and {parts[2]} (bev_1 / bev_2, seeds 42 / 43 / 44)" in flat, ratios
+    gain = lambda st, side, s: _real_psnr(st, "splatfacto + NeRF views", s, side) - _real_psnr(st, "splatfacto", s, side)
+    mean = lambda sts, side, s: sum(gain(st, side, s) for st in sts) / len(sts)
+    ratio = lambda sts, s: mean(sts, "estimated", s) / mean(sts, "ground_truth", s)
+    smalls = ["real_scene_budget", "real_scene_budget_seed43", "real_scene_budget_seed44"]
+    three = (f"over the three seeds the bird's-eye gain with everything estimated is {mean(stems, 'estimated', 'bev_1'):.2f} / "
+             f"{mean(stems, 'estimated', 'bev_2'):.2f} dB against {mean(stems, 'ground_truth', 'bev_1'):.2f} / "
+             f"{mean(stems, 'ground_truth', 'bev_2'):.2f} with ground truth, a ratio of **{ratio(stems, 'bev_1'):.2f} / "
+             f"{ratio(stems, 'bev_2'):.2f}** ({ratio(smalls, 'bev_1'):.2f} / {ratio(smalls, 'bev_2'):.2f} from the 200x112 video)")
+    assert three in flat, three
+    psnrs = lambda st, label, side="estimated": " / ".join(f"{_real_psnr(st, label, s, side):.2f}" for s in ("street", "bev_1", "bev_2"))
+    assert f"StreetNeRF {psnrs('real', 'StreetNeRF', 'ground_truth')} dB, seed 42, as in `real_depth_loss.md`" in flat
+    assert psnrs("real", "StreetNeRF", "ground_truth") == psnrs("real_depth_loss", "StreetNeRF", "ground_truth")
+    est = d["results"]["estimated"]
+    text = (f"StreetNeRF {psnrs('real', 'StreetNeRF')} dB ({_real_psnr('real_scene_budget', 'StreetNeRF', 'bev_1'):.2f} bev_1 from the small "
+            f"video; the true capture's {_real_psnr('real', 'StreetNeRF', 'bev_1', 'ground_truth'):.2f}), Splatfacto {psnrs('real', 'splatfacto')} "
+            f"({est['splatfacto']['size']['primitives']:,} Gaussians; {d['results']['ground_truth']['splatfacto']['size']['primitives']:,} on the "
+            f"true capture), + NeRF views {psnrs('real', 'splatfacto + NeRF views')}")
+    assert text in flat, text
+    above = lambda sts: [" / ".join(f"{_real_psnr(st, 'StreetNeRF', s) - _real_psnr(st, 'splatfacto', s):.2f}" for s in ("bev_1", "bev_2"))
+                         for st in sts]
+    a, b = above(stems), above(smalls)
+    assert f"({a[0]}, {a[1]}, {a[2]} dB; from the small video {b[0]}, {b[1]}, {b[2]})" in flat, (a, b)
+    assert all(float(x) > 0 for x in " / ".join(a).split(" / "))  # "above Splatfacto from above on every seed"
+    drop = [_real_psnr(st, "StreetNeRF", "bev_1", "ground_truth") - _real_psnr(st, "StreetNeRF", "bev_1") for st in stems]
+    assert f"{min(drop):.2f}-{max(drop):.2f} dB below the true reference (bev_1, the three seeds)" in flat, drop
+    street = lambda side: mean(stems, side, "street")
+    assert f"the NeRF views cost the estimated target {-street('estimated'):.2f} dB (three-seed mean; the true one gains {street('ground_truth'):.2f})" in flat

@@ -5,11 +5,15 @@ eighth frame held out: no eval splits here), masks from its renders (default ``A
 pooled over the training frames against the street's exact masks (resampled onto the GT pixel grid
 as the bench does).
 
-Usage: python benchmarks/validation/auto_masks_scene.py SEED FOV_DEG CAM_HEIGHT CARS WORK OUT_STEM
+Usage: python benchmarks/validation/auto_masks_scene.py SEED FOV_DEG CAM_HEIGHT CARS WORK OUT_STEM [VIDEO_SCALE]
 (WORK keeps the street, the capture, the reference and the renders (renders.pt) between runs; the
-renders are reused, the plane and the masks are derived again). Produced
-benchmarks/results/auto_masks_seed7.{json,md} with 7 70 2 10, auto_masks_seed3 with 3 75 2.5 8 and
-auto_masks_seed0 (the bench's street, through this script) with 0 80 3 6.
+renders are reused, the plane and the masks are derived again). VIDEO_SCALE (default 1): the video is
+the street rendered at that multiple of its 200x112, processed at that size, and the reference and
+masks are made from the capture's ``images_<VIDEO_SCALE>`` (``bench_real.training_view``), as
+``ns2gs-bench real --video-scale`` does; the masks are scored against the 200x112 street's either way.
+Produced benchmarks/results/auto_masks_seed7.{json,md} with 7 70 2 10, auto_masks_seed3 with 3 75 2.5 8
+and auto_masks_seed0 (the bench's street, through this script) with 0 80 3 6; the ``*_video4`` ones with
+VIDEO_SCALE 4.
 """
 import json
 import sys
@@ -33,23 +37,36 @@ from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
 seed, fov, cam_h, cars = int(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])
 work, out = Path(sys.argv[5]), Path(sys.argv[6])
+scale = int(sys.argv[7]) if len(sys.argv) > 7 else 1
 work.mkdir(parents=True, exist_ok=True)
-street, est = work / "street", work / "estimated"
 t0 = time.time()
-if not (street / "transforms.json").is_file():
-    generate_street(SynthStreetConfig(out=street, seed=seed, fov_deg=fov, cam_height=cam_h, num_cars=cars, num_street=1, num_bev=1,
-                                      num_val_street=0, num_val_bev=0, progress=False, overwrite=True))
-meta = json.loads((street / "transforms.json").read_text())
-if not (est / "transforms.json").is_file():
-    video = br.write_video(work / "drive.avi", [street / f["file_path"] for f in meta["frames"][:30]])
-    br.process_capture(video, est, 30, fov, cam_h)
+
+
+def make_street(path: Path, k: int) -> dict:
+    if not (path / "transforms.json").is_file():
+        generate_street(SynthStreetConfig(out=path, seed=seed, fov_deg=fov, cam_height=cam_h, num_cars=cars, num_street=1, num_bev=1,
+                                          num_val_street=0, num_val_bev=0, width=200 * k, height=112 * k, progress=False,
+                                          overwrite=True))
+    return json.loads((path / "transforms.json").read_text())
+
+
+street = work / "street"
+meta = make_street(street, 1)
+video_street = street if scale == 1 else work / f"street_x{scale}"
+video_meta = meta if scale == 1 else make_street(video_street, scale)
+capture = work / ("estimated" if scale == 1 else f"capture_x{scale}")
+if not (capture / "transforms.json").is_file():
+    video = br.write_video(work / ("drive.avi" if scale == 1 else f"drive_x{scale}.avi"),
+                           [video_street / f["file_path"] for f in video_meta["frames"][:30]])
+    br.process_capture(video, capture, 30, fov, cam_h)
+est = capture if scale == 1 else br.training_view(capture, work / f"estimated_x{scale}", scale)
 view = maskless_view(est)
-cache = work / "renders.pt"
+cache = work / ("renders.pt" if scale == 1 else f"renders_x{scale}.pt")
 if cache.is_file():
     r = torch.load(cache, weights_only=False)
 else:
-    ensure_reference(est, work / "reference", 1000, progress=False)
-    r = render_views(view, work / "reference", ["train"], progress=False)
+    ensure_reference(est, work / ("reference" if scale == 1 else f"reference_x{scale}"), 1000, progress=False)
+    r = render_views(view, work / ("reference" if scale == 1 else f"reference_x{scale}"), ["train"], progress=False)
     torch.save(r, cache)
 train = parse_dataset(view, "train")
 r.up, r.height = ground_plane(train, [])  # the plane as the code now fits it
@@ -77,13 +94,15 @@ stats, n_train = mask_stats(AutoOptions())
 stats_off, _ = mask_stats(AutoOptions(ground_empty=False))
 cams = torch.stack([v["origin"] for v in r.views["train"]])
 heights = ((cams @ r.up - r.height) / r.metres_to_world).tolist()
-doc = {"scene": {"seed": seed, "fov_deg": fov, "cam_height": cam_h, "num_cars": cars, "frames": 30},
+doc = {"scene": {"seed": seed, "fov_deg": fov, "cam_height": cam_h, "num_cars": cars, "frames": 30, "video_scale": scale},
        "registered": len(em), "train_views": n_train, "mask_iou": {k: v["iou"] for k, v in stats.items()}, "stats": stats,
        "without_ground_empty": {"mask_iou": {k: v["iou"] for k, v in stats_off.items()}, "stats": stats_off},
        "camera_heights_m": heights, "options": vars(AutoOptions()), "machine": machine_line(), "seconds": time.time() - t0}
 atomic_write_text(out.with_suffix(".json"), json.dumps(doc, indent=1))
 md = [f"# `--segmenter auto` on another street (seed {seed}, camera {cam_h} m, {fov:g} deg FOV, {cars} cars)", "",
-      f"Machine: {machine_line()}. The 30-frame forward drive as a video -> process video -> 1000-step mask-less reference "
+      f"Machine: {machine_line()}. The 30-frame forward drive as a video ({200 * scale}x{112 * scale}"
+      + (f", the reference and masks made from the capture's `images_{scale}`" if scale != 1 else "")
+      + ") -> process video -> 1000-step mask-less reference "
       f"-> masks (default options); {len(em)}/30 frames registered, {n_train} training views (every 8th held out). "
       "Produced by `benchmarks/validation/auto_masks_scene.py`.", "",
       "| kind | IoU | precision | recall |", "|---|---|---|---|"]
