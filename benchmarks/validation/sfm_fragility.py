@@ -6,9 +6,11 @@ Why: the bench's capture figures (ATE 0.31%, 1.4 deg) come from one video; a sec
 same drive (the generator run with fewer eval views: same cameras, images a few grey levels apart) is
 a second video of the same kind, and exhaustive matching is what ``--matching auto`` picks for small unordered sets.
 
-Usage: python benchmarks/validation/sfm_fragility.py OUT_STEM WORK
+Usage: python benchmarks/validation/sfm_fragility.py OUT_STEM WORK [VIDEO_SCALE [BENCH_RUNS]]
 (WORK gets the second street and every processed capture; the bench's own video is read from
-benchmarks/runs/real). Produced benchmarks/results/sfm_fragility.{json,md}.
+BENCH_RUNS/real, default benchmarks/runs). VIDEO_SCALE (default 1): both drives rendered at that multiple of
+the street's 200x112, as ``ns2gs-bench real --video-scale`` makes its video. Produced
+benchmarks/results/sfm_fragility.{json,md} (VIDEO_SCALE 1) and sfm_fragility_video4.{json,md} (4).
 """
 import json
 import sys
@@ -31,13 +33,15 @@ VARIANTS = {"sequential (bench)": {}, "sequential, overlap 5": {"overlap": 5}, "
             "exhaustive": {"matching": "exhaustive"}}
 
 
-def second_drive(work: Path) -> tuple[Path, Path]:
-    street = work / "street_fewer_eval"
+def second_drive(work: Path, scale: int = 1) -> tuple[Path, Path]:
+    tag = "" if scale == 1 else f"_x{scale}"
+    street = work / f"street_fewer_eval{tag}"
     if not (street / "transforms.json").is_file():
+        base = SynthStreetConfig()
         generate_street(SynthStreetConfig(out=street, num_street=1, num_bev=1, num_val_street=0, num_val_bev=0, progress=False,
-                                          overwrite=True))
+                                          width=base.width * scale, height=base.height * scale, overwrite=True))
     frames = read_frames(street)["train"][:FRAMES]
-    return street, write_video(work / "drive_fewer_eval.avi", [f.image for f in frames])
+    return street, write_video(work / f"drive_fewer_eval{tag}.avi", [f.image for f in frames])
 
 
 def score(street: Path, video: Path, out: Path, sfm: dict) -> dict:
@@ -56,20 +60,22 @@ def score(street: Path, video: Path, out: Path, sfm: dict) -> dict:
 
 def main() -> None:
     out_stem, work = Path(sys.argv[1]), Path(sys.argv[2])
+    scale = int(sys.argv[3]) if len(sys.argv) > 3 else 1
+    bench = Path(sys.argv[4] if len(sys.argv) > 4 else "benchmarks/runs") / "real"
     work.mkdir(parents=True, exist_ok=True)
-    bench = Path("benchmarks/runs/real")
-    drives = {"bench video": (bench / "street", bench / "drive.avi"), "second render": second_drive(work)}
+    tag = "" if scale == 1 else f"_x{scale}"
+    drives = {"bench video": (bench / f"street{tag}", bench / f"drive{tag}.avi"), "second render": second_drive(work, scale)}
     rows = []
     for drive, (street, video) in drives.items():
         for name, sfm in VARIANTS.items():
-            out = work / f"{drive.replace(' ', '_')}-{name.replace(' ', '_').replace(',', '').replace('(', '').replace(')', '')}"
+            out = work / f"{drive.replace(' ', '_')}{tag}-{name.replace(' ', '_').replace(',', '').replace('(', '').replace(')', '')}"
             rows.append({"drive": drive, "variant": name, **score(street, video, out, sfm)})
             print(rows[-1], flush=True)
-    doc = {"machine": machine_line(), "frames": FRAMES, "fov_deg": FOV, "camera_height": HEIGHT, "rows": rows}
+    doc = {"machine": machine_line(), "frames": FRAMES, "video_scale": scale, "fov_deg": FOV, "camera_height": HEIGHT, "rows": rows}
     atomic_write_text(out_stem.with_suffix(".json"), json.dumps(doc, indent=1))
     lines = ["# SfM of the real-capture bench's drive, on two renders and with other matching", "",
              f"Machine: {doc['machine']}", "",
-             f"`ns2gs-data process video` as `ns2gs-bench real` runs it ({FRAMES} frames, 200x112, `--fov-deg {FOV:g} "
+             f"`ns2gs-data process video` as `ns2gs-bench real` runs it ({FRAMES} frames, {200 * scale}x{112 * scale}, `--fov-deg {FOV:g} "
              f"--camera-height {HEIGHT:g} --no-refine-intrinsics`, one thread), scored against the true cameras. "
              "\"second render\": the same generator with fewer eval views: the same cameras, images that differ by a few grey "
              "levels on average (render noise, the cars), so another video of the same drive.",
