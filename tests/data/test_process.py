@@ -4,6 +4,7 @@ made from the synthetic street's forward drive."""
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import cv2
@@ -13,6 +14,7 @@ import pytest
 from nerf2gs_plugin.cli.data import main
 from nerf2gs_plugin.data import folder_fingerprint
 from nerf2gs_plugin.data.process.frames import extract_video_frames, relative_blur_drop
+from nerf2gs_plugin.data.process.sfm import SfmOptions, match
 from nerf2gs_plugin.errors import DataError
 
 
@@ -28,6 +30,16 @@ def _write_video(path: Path, frames: list[np.ndarray], fps: float = 10.0) -> Pat
 def _textured(rng, n: int, w: int = 96, h: int = 64) -> list[np.ndarray]:
     base = cv2.resize(rng.integers(0, 255, (h // 4, w // 4 + n), dtype=np.uint8), ((w + 4 * n), h), interpolation=cv2.INTER_NEAREST)
     return [cv2.cvtColor(np.ascontiguousarray(base[:, 4 * i:4 * i + w]), cv2.COLOR_GRAY2BGR) for i in range(n)]
+
+
+def _pair_offsets(db: Path) -> set[int]:
+    """How many frames apart the matched pairs of a COLMAP database are (image ids follow the frame order)."""
+    import pycolmap
+
+    with pycolmap.Database.open(str(db)) as d:
+        ids = d.read_all_matches()[0]
+    big = 2147483647  # COLMAP's pair id: id1 * big + id2
+    return {abs(int(p) // big - int(p) % big) for p in ids}
 
 
 def test_blur_drop_is_relative_to_neighbours():
@@ -115,6 +127,17 @@ def test_process_video_end_to_end(tmp_path, make_config, monkeypatch):
     assert abs(est["metres_per_unit"] / pe.scale - 1) < 0.5
     train = parse_dataset(out, "train")
     assert len(train.image_filenames) > 10 and train.points3D_xyz is not None
+    # sequential matching's pairs: the quadratic hops by default, the linear window and the hops without them
+    assert _pair_offsets(out / "colmap" / "database.db") == {1, 2, 4, 8, 16}
+    import pycolmap
+
+    lin = tmp_path / "linear.db"
+    shutil.copy(out / "colmap" / "database.db", lin)
+    with pycolmap.Database.open(str(lin)) as d:
+        d.clear_matches()
+        d.clear_two_view_geometries()
+    assert match(lin, "sequential", SfmOptions(overlap=5, quadratic_overlap=False, num_threads=1), tmp_path / "marker.json")
+    assert _pair_offsets(lin) == {1, 2, 3, 4, 5, 8, 16}
     stamps = {p: (out / "colmap" / p).stat().st_mtime for p in ("matching.json", "distorted/done.json")}
     print_before = folder_fingerprint(out)
     main(args)  # resumed: features, matches and model reused

@@ -27,7 +27,12 @@ class SfmOptions:
     """auto: sequential for a video, exhaustive for up to ``exhaustive_max`` photos, sequential beyond."""
     exhaustive_max: int = 40
     overlap: int = 10
-    """Sequential matching: each frame is matched with this many following frames (plus quadratic hops)."""
+    """Sequential matching's window. With --quadratic-overlap (the default, as COLMAP's and nerfstudio's)
+    pycolmap 4 pairs each frame with the frames 1, 2, 4, ..., 2^(overlap-1) after it, so any overlap
+    above log2 of the frame count gives the same pairs (measured on 30 frames: overlap 5, 10 and 20 all
+    match the frames 1, 2, 4, 8 and 16 apart); --no-quadratic-overlap: the frames 1..overlap after it,
+    then those hops too."""
+    quadratic_overlap: bool = True
     vocab_tree: Optional[Path] = None
     """Sequential matching: a COLMAP vocabulary tree file turns on loop detection (none is shipped)."""
     loop_pairs: int = 0
@@ -134,21 +139,25 @@ def match(db: Path, method: str, opt: SfmOptions, marker: Path, progress=None) -
     with pycolmap.Database.open(str(db)) as d:
         names = sorted(im.name for im in d.read_all_images())
     key = {"images": hashlib.sha1("|".join(names).encode()).hexdigest(), "method": method, "overlap": opt.overlap, "vocab_tree": str(opt.vocab_tree or ""), "max_features": opt.max_features,
-           "max_image_size": opt.max_image_size, "loop_pairs": opt.loop_pairs if method == "sequential" and opt.vocab_tree is None else 0}
+           "max_image_size": opt.max_image_size, "loop_pairs": opt.loop_pairs if method == "sequential" and opt.vocab_tree is None else 0,
+           **({} if opt.quadratic_overlap or method != "sequential" else {"quadratic_overlap": False})}  # absent: earlier markers stay valid
     if _marker(marker, key):
         return False
     task = progress.add_task(f"matching ({method})", total=1, stats="") if progress else None
     m = pycolmap.FeatureMatchingOptions()
     m.num_threads = opt.num_threads
     if method == "sequential":
-        pair = pycolmap.SequentialPairingOptions()
-        pair.overlap = opt.overlap
-        if opt.vocab_tree is not None:
-            if not Path(opt.vocab_tree).is_file():
-                raise DataError("vocabulary tree file does not exist (--vocab-tree)", opt.vocab_tree)
-            pair.loop_detection = True
-            pair.vocab_tree_path = str(opt.vocab_tree)
-        pycolmap.match_sequential(db, matching_options=m, pairing_options=pair, device=pycolmap.Device.cpu)
+        if opt.vocab_tree is not None and not Path(opt.vocab_tree).is_file():
+            raise DataError("vocabulary tree file does not exist (--vocab-tree)", opt.vocab_tree)
+        # the linear window, then the quadratic hops (pairs matched already are skipped), or the hops alone
+        for quadratic in ([True] if opt.quadratic_overlap else [False, True]):
+            pair = pycolmap.SequentialPairingOptions()
+            pair.overlap = opt.overlap
+            pair.quadratic_overlap = quadratic
+            if opt.vocab_tree is not None and quadratic:
+                pair.loop_detection = True
+                pair.vocab_tree_path = str(opt.vocab_tree)
+            pycolmap.match_sequential(db, matching_options=m, pairing_options=pair, device=pycolmap.Device.cpu)
         if opt.vocab_tree is None and opt.loop_pairs > 0:
             _match_loop_pairs(db, names, opt, m, marker.with_name("loop_pairs.txt"))
     elif method == "exhaustive":
