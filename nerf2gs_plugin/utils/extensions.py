@@ -43,13 +43,14 @@ def compiler_available() -> bool:
 
 
 def extension_cache_dir() -> Path:
-    """Where compiled extensions are cached: ``$TORCH_EXTENSIONS_DIR`` or torch's default."""
+    """The folder torch builds each extension's folder in: ``$TORCH_EXTENSIONS_DIR``, or torch's default
+    with its ``py<ver>_<accelerator>`` level (where the built ``.so`` and torch's lock live)."""
     env = os.environ.get("TORCH_EXTENSIONS_DIR")
     if env:
         return Path(env)
     from torch.utils.cpp_extension import _get_build_directory  # noqa: PLC0415 - torch is heavy; only on first build
 
-    return Path(_get_build_directory("", verbose=False)).parent
+    return Path(_get_build_directory("", verbose=False))  # ".../py311_cpu/": Path drops the slash, not the level
 
 
 def _build_name(name: str, sources: Sequence[Path], headers: Sequence[Path]) -> str:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from nerf2gs_plugin.utils import extensions
@@ -100,3 +102,23 @@ def test_the_build_lock_is_released_when_its_holder_is_killed(tmp_path):
             assert held
     finally:
         child.kill()
+
+
+def test_cache_dir_is_where_torch_builds(monkeypatch, tmp_path):
+    """The folder holding each kernel's build folder, with or without $TORCH_EXTENSIONS_DIR: the check
+    for a built ``.so`` (no "compiling" line when there is one) and the stale-lock path read there. It
+    was once torch's default one level up, so every process said it was compiling a built kernel."""
+    import shutil
+
+    from torch.utils.cpp_extension import _get_build_directory
+
+    from nerf2gs_plugin.utils.extensions import extension_cache_dir
+
+    monkeypatch.delenv("TORCH_EXTENSIONS_DIR", raising=False)
+    probe = Path(_get_build_directory("nerf2gs_cache_dir_probe", verbose=False))  # torch makes the folder
+    try:
+        assert extension_cache_dir() / probe.name == probe
+    finally:
+        shutil.rmtree(probe, ignore_errors=True)
+    monkeypatch.setenv("TORCH_EXTENSIONS_DIR", str(tmp_path))
+    assert extension_cache_dir() / "probe" == Path(_get_build_directory("probe", verbose=False))
