@@ -1362,14 +1362,20 @@ def test_scene_budget_claims():
     assert f"is met in {saved['met']} of {saved['of']} cases" in README
 
 
+def _three_seeds(stems: list[str]) -> list[dict]:
+    """The real bench's runs at seeds 42 (the default) / 43 / 44: one capture and one set of masks."""
+    runs = [_real(st) for st in stems]
+    assert [r["options"]["seed"] for r in runs] == [None, 43, 44]
+    assert all(r["mask_iou"] == runs[0]["mask_iou"] and r["ate_percent"] == runs[0]["ate_percent"] for r in runs)
+    return runs
+
+
 def test_real_bench_with_todays_size_defaults():
     """The real bench's three seeds with the budget read from the scene: the README's figures are
     real_scene_budget{,_seed43,_seed44}.json's."""
     stems = [f"real_scene_budget{x}" for x in ("", "_seed43", "_seed44")]
-    runs = [_real(st) for st in stems]
+    runs = _three_seeds(stems)
     d = runs[0]
-    assert [r["options"]["seed"] for r in runs] == [None, 43, 44]
-    assert all(r["mask_iou"] == d["mask_iou"] and r["ate_percent"] == d["ate_percent"] for r in runs)  # one capture, one set of masks
     est, gt = d["results"]["estimated"], d["results"]["ground_truth"]
     psnrs = lambda r: " / ".join(f"{r['results'][s]['psnr']:.2f}" for s in ("street", "bev_1", "bev_2"))
     ratios = ", ".join(f"{r['gain_ratio']['bev_1']:.2f} / {r['gain_ratio']['bev_2']:.2f}" for r in runs[1:])
@@ -1516,20 +1522,19 @@ def test_real_bench_with_the_video_at_800x448():
     """The real bench's three seeds with the video at 4x the street's size: the README's table row
     and paragraph are real{,_seed43,_seed44}.json's (the small video's figures: real_scene_budget.json)."""
     stems = ["real", "real_seed43", "real_seed44"]
-    runs = [_real(st) for st in stems]
+    runs = _three_seeds(stems)
     d, small = runs[0], _real("real_scene_budget")
-    assert [r["options"]["seed"] for r in runs] == [None, 43, 44] and all(r["options"]["video_scale"] == 4 for r in runs)
-    assert all(r["mask_iou"] == d["mask_iou"] and r["ate_percent"] == d["ate_percent"] for r in runs)  # one capture, one set of masks
+    assert all(r["options"]["video_scale"] == 4 for r in runs)
     flat = " ".join(README.split())
-    row = (f"| this run, Intel host, the video at 800x448 (`real.json`) | local | {d['registered_fraction']:.3f} | {d['ate_percent']:.2f} | "
-           f"{d['scale_error_percent']:+.1f} | {d['rotation_error_deg']:.1f} | {d['up_error_deg']:.1f} | {d['mask_iou']['sky']:.3f} | "
-           f"{d['mask_iou']['ground']:.3f} | {d['mask_iou']['transient']:.3f} | {d['gain_ratio']['bev_1']:.2f} | {d['gain_ratio']['bev_2']:.2f} |")
-    assert row in README, row
-    srow = (f"| Intel host, the video at 200x112, today's size defaults (`real_scene_budget.json`) | local | {small['registered_fraction']:.3f} | "
-            f"{small['ate_percent']:.2f} | {small['scale_error_percent']:+.1f} | {small['rotation_error_deg']:.1f} | {small['up_error_deg']:.1f} | "
-            f"{small['mask_iou']['sky']:.3f} | {small['mask_iou']['ground']:.3f} | {small['mask_iou']['transient']:.3f} | "
-            f"{small['gain_ratio']['bev_1']:.2f} | {small['gain_ratio']['bev_2']:.2f} |")
-    assert srow in README, srow
+
+    def row(label: str, r: dict) -> str:  # a row of the capture-figures table
+        return (f"| {label} | local | {r['registered_fraction']:.3f} | {r['ate_percent']:.2f} | {r['scale_error_percent']:+.1f} | "
+                f"{r['rotation_error_deg']:.1f} | {r['up_error_deg']:.1f} | {r['mask_iou']['sky']:.3f} | {r['mask_iou']['ground']:.3f} | "
+                f"{r['mask_iou']['transient']:.3f} | {r['gain_ratio']['bev_1']:.2f} | {r['gain_ratio']['bev_2']:.2f} |")
+
+    for text in (row("this run, Intel host, the video at 800x448 (`real.json`)", d),
+                 row("Intel host, the video at 200x112, today's size defaults (`real_scene_budget.json`)", small)):
+        assert text in README, text
     capture = (f"30/30 registered with {d['process']['points']:,} points ({small['process']['points']} from 200x112), ATE "
                f"{d['ate_percent']:.2f}% ({small['ate_percent']:.2f}%), rotation error {d['rotation_error_deg']:.2f} deg "
                f"({small['rotation_error_deg']:.2f}), up {d['up_error_deg']:.2f} deg ({small['up_error_deg']:.2f}), scale "
