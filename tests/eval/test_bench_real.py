@@ -218,6 +218,16 @@ def test_capture_plumbing_writes_the_required_keys(small_street, tmp_path, monke
     assert e0.intr.fx == pytest.approx(g0.intr.fx) and e0.intr.cx == pytest.approx(g0.intr.cx)
     assert tuple(load_mask(est_dir / "masks" / "sky" / "frame_000001.png").shape) == (g0.intr.height, g0.intr.width)
     assert (f"images_{video_scale}" in str(e0.image)) == (video_scale != 1)
+    # the third column: the true cameras, eval splits and masks, the capture's points carried into the true frame
+    from nerf2gs_plugin.data.ply import read_ply_points
+
+    pts = tmp_path / "runs" / "real" / "gt_capture_points"
+    sfm = br.read_frames(pts)
+    assert set(sfm) == set(gt) and np.allclose(br.c2w_array(sfm["train"]), br.c2w_array(gt["train"]))
+    assert np.allclose(br.c2w_array(sfm["bev_1"]), br.c2w_array(gt["bev_1"]), atol=1e-6)
+    est_xyz, _ = read_ply_points(est_dir / json.loads((est_dir / "transforms.json").read_text())["ply_file_path"])
+    got, _ = read_ply_points(pts / "sparse_pc.ply")
+    assert not (pts / "sparse_pc.ply").is_symlink() and np.allclose(got, truth.inverse().apply(est_xyz), atol=1e-3)
 
 
 def test_video_scale_must_be_a_downscale_that_process_writes(tmp_path):
