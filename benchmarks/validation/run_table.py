@@ -16,7 +16,8 @@ benchmarks/results/depth_loss.{json,md} (rows: benchmarks/validation/depth_loss_
 benchmarks/results/views_budget/castle_val.{json,md} (rows: benchmarks/validation/views_budget_castle_rows.json),
 benchmarks/results/prune_margin/castle_val.{json,md} (rows: benchmarks/validation/prune_margin_castle_rows.json),
 benchmarks/results/augment_weight_val.{json,md} (rows: benchmarks/validation/augment_weight_rows.json),
-benchmarks/results/reference_length_val.{json,md} (rows: benchmarks/validation/reference_length_rows.json).
+benchmarks/results/reference_length_val.{json,md} (rows: benchmarks/validation/reference_length_rows.json),
+benchmarks/results/castle_bev_geometry_val.{json,md} (rows: benchmarks/validation/castle_bev_geometry_rows.json).
 """
 import json
 import sys

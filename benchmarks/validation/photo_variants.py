@@ -1,0 +1,49 @@
+"""Splatfacto (or 2DGS) variants on a processed photo capture at the real-photos bench's settings (StreetNeRF
+600 steps, targets 1000, downscale 4), one line of JSON each (held-out PSNR per photo, primitives).
+
+Usage: python benchmarks/validation/photo_variants.py DATA RUNS LABEL=JSON [...]
+JSON: model overrides ({"strategy": {...}}), with "seed": N and "augment": {--augment.* overrides} at its top.
+A label starting with 'aug:' trains with NeRF views (the bench's `--augment.delta-h 3 --augment.theta-pitch 30
+--augment.every-n 2` unless "augment" says otherwise) from the StreetNeRF of the same runs folder; '2dgs:'
+trains 2DGS. Made: benchmarks/results/castle_bev_geometry_val.* (through run_table.py, rows
+benchmarks/validation/castle_bev_geometry_rows.json).
+"""
+import json
+import sys
+from pathlib import Path
+
+from nerf2gs_plugin.eval.bench_io import BenchRunner, failure_reason
+from nerf2gs_plugin.eval.bench_paper import _merge
+from nerf2gs_plugin.eval.bench_real_photos import RealPhotosOptions, augment_overrides, run_overrides
+from nerf2gs_plugin.eval.bench_runs import RunSpec
+
+
+def main(data: Path, runs: Path, args: list[str]) -> None:
+    opts = RealPhotosOptions(images=Path("."), streetnerf_steps=600, splatfacto_steps=1000, every_n=2)  # the bench run of castle-P30
+    runner = BenchRunner(runs, log=lambda s: None)
+    ref = None
+    for arg in args:
+        label, ov = arg.split("=", 1)
+        ov = json.loads(ov)
+        seed, aug_extra = ov.pop("seed", None), ov.pop("augment", {})
+        method = "2dgs" if label.startswith("2dgs:") else "splatfacto"
+        o = run_overrides(opts, method, opts.splatfacto_steps)
+        o["pipeline"]["model"] = _merge(o["pipeline"].get("model", {}), ov)
+        if seed is not None:
+            o["seed"] = seed
+        aug = label.startswith("aug:")
+        if aug and ref is None:
+            sn = runner.run(RunSpec("StreetNeRF", "streetnerf", run_overrides(opts, "streetnerf", opts.streetnerf_steps)), data)
+            ref = (Path(sn.run_dir), sn.key)
+            print(json.dumps({"label": "StreetNeRF", "run": str(sn.run_dir)}), flush=True)
+        spec = RunSpec(label, method, o, augment_from="StreetNeRF" if aug else None,
+                       augment={**augment_overrides(opts), **aug_extra} if aug else {})
+        out = runner.run(spec, data, reference=ref if aug else None)
+        r = out.result if isinstance(out.result, dict) else {}
+        test = (r.get("results") or {}).get("test", {})
+        print(json.dumps({"label": label, "run": str(out.run_dir), "error": failure_reason(out), "psnr": test.get("psnr"),
+                          "per_image": test.get("psnr_per_image"), "primitives": (r.get("size") or {}).get("primitives")}), flush=True)
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1]), Path(sys.argv[2]), sys.argv[3:])
