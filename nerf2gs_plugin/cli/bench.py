@@ -317,13 +317,15 @@ class Real:
     """SO3xR3: StreetNeRF refines the estimated training poses (the ground-truth side stays unrefined)."""
     seed: Optional[int] = None
     """Training seed of every run (None: each method's own); the capture and its masks stay the same."""
+    street_seed: int = 0
+    """The synthetic street's seed (0: the embedded street); another street is another capture."""
 
     def main(self) -> None:
         from nerf2gs_plugin.eval.bench_real import RealBenchOptions, results_md, run_real_bench
 
         opts = RealBenchOptions(frames=self.frames, video_scale=self.video_scale, reference_steps=self.reference_steps,
                                 streetnerf_steps=self.streetnerf_steps, splatfacto_steps=self.splatfacto_steps,
-                                camera_optimizer=self.camera_optimizer, seed=self.seed)
+                                camera_optimizer=self.camera_optimizer, seed=self.seed, street_seed=self.street_seed)
         doc = run_real_bench(self.runs, self.out, opts, rerun=self.rerun)
         print(results_md(doc))
         print(f"results: {self.out}/real.md")

@@ -71,6 +71,9 @@ class RealBenchOptions:
     seed: Optional[int] = None
     """The training seed of every run, both columns (None: each method's own); the capture (SfM,
     masks) is the same: a second seed measures how much of a gain ratio is the training's noise."""
+    street_seed: int = 0
+    """The synthetic street's seed (its layout, colours, cars and exposures; 0: the embedded street): another
+    street is another capture, made under ``RUNS/real-street<seed>``."""
 
 
 # ----------------------------------------------------------------------------- pure parts
@@ -181,7 +184,7 @@ def make_street(root: Path, opts: RealBenchOptions, scale: int = 1) -> Path:
 
     path = Path(root) / ("street" if scale == 1 else f"street_x{scale}")
     base = SynthStreetConfig()
-    cfg = SynthStreetConfig(out=path, num_street=opts.num_street, num_bev=opts.num_bev, num_val_street=0, num_val_bev=0,
+    cfg = SynthStreetConfig(out=path, seed=opts.street_seed, num_street=opts.num_street, num_bev=opts.num_bev, num_val_street=0, num_val_bev=0,
                             width=base.width * scale, height=base.height * scale, progress=False, overwrite=True)
     if not (path / "transforms.json").is_file() or read_generator_version(path) != GENERATOR_VERSION:
         generate_street(cfg)
@@ -325,7 +328,7 @@ def run_real_bench(runs_root: Path, out_dir: Path, opts: RealBenchOptions = Real
 
     if opts.video_scale != 1 and opts.video_scale not in DOWNSCALES:
         raise ConfigError(f"--video-scale must be 1 or one of process's downscales {DOWNSCALES}, got {opts.video_scale}")
-    root = Path(runs_root) / "real"
+    root = Path(runs_root) / ("real" if opts.street_seed == 0 else f"real-street{opts.street_seed}")
     root.mkdir(parents=True, exist_ok=True)
     t_all = time.perf_counter()
     stages: dict[str, float] = {}
@@ -425,7 +428,7 @@ def results_md(doc: dict) -> str:
     lines = [
         "# Real-capture path on the synthetic street (`ns2gs-bench real`)", "",
         f"Machine: {machine_line(doc.get('machine'))}", "",
-        f"The street's forward drive ({o['frames']} frames, rendered at {200 * o.get('video_scale', 1)}x{112 * o.get('video_scale', 1)}) "
+        f"The street's (seed {o.get('street_seed', 0)}) forward drive ({o['frames']} frames, rendered at {200 * o.get('video_scale', 1)}x{112 * o.get('video_scale', 1)}) "
         "as an MJPG video, poses and masks thrown away: "
         "process video (`--fov-deg 80 --camera-height 3 --no-refine-intrinsics --num-threads 1`) -> "
         + (f"the capture's `images_{o['video_scale']}` (200x112, the ground-truth column's size: the masks and every model are made from them) -> "

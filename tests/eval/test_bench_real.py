@@ -322,3 +322,15 @@ def test_seed_option_reaches_every_run_and_is_absent_by_default():
     seeded = br.real_plan(dataclasses.replace(br.RealBenchOptions(), seed=43))
     for spec in seeded:
         assert apply_plain(get_method(spec.method).config, spec.overrides).seed == 43
+
+
+def test_street_seed_makes_another_street_under_its_own_folder(tmp_path, monkeypatch):
+    """--street-seed N: the generator gets the seed (another layout, other cars), at every size the bench asks for."""
+    import nerf2gs_plugin.data.synthetic_street as synth
+
+    made = []
+    monkeypatch.setattr(synth, "generate_street", lambda cfg: made.append(cfg))
+    opts = br.RealBenchOptions(street_seed=7)
+    assert br.make_street(tmp_path, opts).name == "street" and br.make_street(tmp_path, opts, 4).name == "street_x4"
+    assert [(c.seed, c.width) for c in made] == [(7, 200), (7, 800)]
+    assert br.RealBenchOptions().street_seed == 0
