@@ -12,10 +12,11 @@ import json
 import sys
 from pathlib import Path
 
-from nerf2gs_plugin.eval.bench_io import BenchRunner, failure_reason
+from nerf2gs_plugin.eval.bench_io import BenchRunner
 from nerf2gs_plugin.eval.bench_paper import _merge
 from nerf2gs_plugin.eval.bench_real_photos import RealPhotosOptions, augment_overrides, run_overrides
 from nerf2gs_plugin.eval.bench_runs import RunSpec
+from reference_length import show  # the same JSON line per run (this folder is the script's sys.path[0])
 
 
 def main(data: Path, runs: Path, args: list[str]) -> None:
@@ -35,14 +36,10 @@ def main(data: Path, runs: Path, args: list[str]) -> None:
         if aug and ref is None:
             sn = runner.run(RunSpec("StreetNeRF", "streetnerf", run_overrides(opts, "streetnerf", opts.streetnerf_steps)), data)
             ref = (Path(sn.run_dir), sn.key)
-            print(json.dumps({"label": "StreetNeRF", "run": str(sn.run_dir)}), flush=True)
+            show("StreetNeRF", sn)
         spec = RunSpec(label, method, o, augment_from="StreetNeRF" if aug else None,
                        augment={**augment_overrides(opts), **aug_extra} if aug else {})
-        out = runner.run(spec, data, reference=ref if aug else None)
-        r = out.result if isinstance(out.result, dict) else {}
-        test = (r.get("results") or {}).get("test", {})
-        print(json.dumps({"label": label, "run": str(out.run_dir), "error": failure_reason(out), "psnr": test.get("psnr"),
-                          "per_image": test.get("psnr_per_image"), "primitives": (r.get("size") or {}).get("primitives")}), flush=True)
+        show(label, runner.run(spec, data, reference=ref if aug else None))
 
 
 if __name__ == "__main__":

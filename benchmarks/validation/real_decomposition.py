@@ -7,8 +7,8 @@ the capture and the masks). Variants, each a dataset built under ``RUNS/real/dec
 - "estimated, true transient masks": the estimated capture with the true car masks;
 - "estimated, true masks": the estimated capture with the true sky, ground and car masks;
 - "true, video images": the ground-truth column trained on the capture's ``images_4`` (the video's frames);
-- "true, capture's points": the ground-truth column with the capture's sparse points carried into the
-  true frame (the bench's third column, built here the same way).
+- "true, capture's points": the bench's third column (``RUNS/real/gt_capture_points``: the ground-truth
+  column with the capture's sparse points carried into the true frame); its runs are the bench's when they exist.
 Produced benchmarks/results/real_decomposition.{json,md}.
 """
 import json
@@ -18,7 +18,6 @@ from pathlib import Path
 
 from nerf2gs_plugin.eval import bench_real as br
 from nerf2gs_plugin.eval.machine import machine_line
-from nerf2gs_plugin.eval.pose_eval import LocalAlignment
 from nerf2gs_plugin.utils.io import atomic_write_text
 
 SCALE = 4
@@ -59,18 +58,11 @@ def main(runs: Path, out_stem: Path) -> None:
     real = runs / "real"
     work = real / "decomposition"
     work.mkdir(exist_ok=True)
-    est = real / f"estimated_x{SCALE}"
-    true_train = br.c2w_array(br.read_frames(real / "gt")["train"])
-    est_frames = br.read_frames(est)["train"]
-    local = LocalAlignment.fit(br.c2w_array(est_frames), true_train[[br.frame_index(f.image) for f in est_frames]])
-    points = work / "truth_capture_points"
-    br.ground_truth_dataset(real / "street", points, len(true_train), br.capture_points(est, local.global_sim))
-    br.attach_eval(points, br.read_frames(real / "street"), true_train, true_train)
     variants = {
         "estimated, true transient masks": estimated_with_true_masks(real, work / "estimated_true_transient", ("transient",)),
         "estimated, true masks": estimated_with_true_masks(real, work / "estimated_true_masks", ("sky", "ground", "transient")),
         "true, video images": truth_with_video_images(real, work / "truth_video_images"),
-        "true, capture's points": points,
+        "true, capture's points": real / "gt_capture_points",
     }
     opts = br.RealBenchOptions()
     rows = {}

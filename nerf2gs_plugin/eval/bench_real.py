@@ -209,9 +209,7 @@ def ground_truth_dataset(street: Path, out: Path, n: int, points: Optional[tuple
         link.symlink_to(item.resolve())
     if points is not None:
         meta["ply_file_path"] = meta.get("ply_file_path", "sparse_pc.ply")
-        tmp = out / f".{meta['ply_file_path']}.tmp.ply"
-        write_ply_points(tmp, *points)
-        os.replace(tmp, out / meta["ply_file_path"])
+        write_ply_points(out / meta["ply_file_path"], *points)  # atomic
     meta["frames"] = meta["frames"][:n]
     meta.pop("eval_splits", None)
     atomic_write_text(out / "transforms.json", json.dumps(meta, indent=1))
@@ -231,14 +229,13 @@ def training_view(capture: Path, out: Path, factor: int) -> Path:
     """``out/transforms.json``: the processed ``capture`` at 1/``factor`` of its size - its
     ``images_<factor>`` copies (absolute paths) with the intrinsics scaled by the parser's rule - so the
     estimated column trains, makes its masks and is scored at the size of the ground-truth one."""
-    from nerf2gs_plugin.data.images import scaled_size
+    from nerf2gs_plugin.data.undistort import Intrinsics, output_intrinsics
 
     meta = json.loads((Path(capture) / "transforms.json").read_text())
     for frame in [meta, *meta["frames"]]:
-        if "w" in frame:
-            w, h = scaled_size(int(frame["w"]), int(frame["h"]), factor)
-            sx, sy = w / frame["w"], h / frame["h"]
-            frame.update(w=w, h=h, fl_x=frame["fl_x"] * sx, fl_y=frame["fl_y"] * sy, cx=frame["cx"] * sx, cy=frame["cy"] * sy)
+        if "w" in frame:  # process writes PINHOLE: no distortion to undo, only the downscale
+            i = output_intrinsics(Intrinsics(frame["fl_x"], frame["fl_y"], frame["cx"], frame["cy"], int(frame["w"]), int(frame["h"])), factor)
+            frame.update(w=i.width, h=i.height, fl_x=i.fx, fl_y=i.fy, cx=i.cx, cy=i.cy)
     for frame in meta["frames"]:
         frame["file_path"] = str((Path(capture) / f"images_{factor}" / Path(frame["file_path"]).name).resolve())
     if "ply_file_path" in meta:
