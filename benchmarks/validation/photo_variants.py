@@ -2,7 +2,8 @@
 600 steps, targets 1000, downscale 4), one line of JSON each (held-out PSNR per photo, primitives).
 
 Usage: python benchmarks/validation/photo_variants.py DATA RUNS LABEL=JSON [...]
-JSON: model overrides ({"strategy": {...}}), with "seed": N and "augment": {--augment.* overrides} at its top.
+JSON: model overrides ({"strategy": {...}}), with "seed": N, "steps": N (the target's length, default 1000) and
+"augment": {--augment.* overrides} at its top.
 A label starting with 'aug:' trains with NeRF views (the bench's `--augment.delta-h 3 --augment.theta-pitch 30
 --augment.every-n 2` unless "augment" says otherwise) from the StreetNeRF of the same runs folder; '2dgs:'
 trains 2DGS. Made: benchmarks/results/castle_bev_geometry_val.* (through run_table.py, rows
@@ -26,9 +27,9 @@ def main(data: Path, runs: Path, args: list[str]) -> None:
     for arg in args:
         label, ov = arg.split("=", 1)
         ov = json.loads(ov)
-        seed, aug_extra = ov.pop("seed", None), ov.pop("augment", {})
+        seed, aug_extra, steps = ov.pop("seed", None), ov.pop("augment", {}), ov.pop("steps", opts.splatfacto_steps)
         method = "2dgs" if label.startswith("2dgs:") else "splatfacto"
-        o = run_overrides(opts, method, opts.splatfacto_steps)
+        o = run_overrides(opts, method, steps)
         o["pipeline"]["model"] = _merge(o["pipeline"].get("model", {}), ov)
         if seed is not None:
             o["seed"] = seed

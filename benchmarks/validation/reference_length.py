@@ -2,7 +2,7 @@
 otherwise), and Splatfacto + NeRF views from each: does a longer reference give the target more?
 
 Usage: python benchmarks/validation/reference_length.py DATA RUNS LABEL=JSON [LABEL=JSON ...]
-JSON: {"steps": N, "model": {StreetNeRF model overrides}, "aug": true}. One line of JSON per run (held-out
+JSON: {"steps": N, "model": {StreetNeRF model overrides}, "aug": true, "target_steps": N (default 1000)}. One line of JSON per run (held-out
 PSNR per photo, primitives). Made: benchmarks/results/reference_length_val.* (through run_table.py, rows
 benchmarks/validation/reference_length_rows.json), on castle-P30's validation photos.
 """
@@ -33,7 +33,8 @@ def main(data: Path, runs: Path, args: list[str]) -> None:
         sn = runner.run(RunSpec(label, "streetnerf", o), data)
         show(label, sn)
         if ov.get("aug"):
-            spec = RunSpec("aug:" + label, "splatfacto", run_overrides(opts, "splatfacto", opts.splatfacto_steps), augment_from=label,
+            spec = RunSpec("aug:" + label, "splatfacto", run_overrides(opts, "splatfacto", ov.get("target_steps", opts.splatfacto_steps)),
+                           augment_from=label,
                            augment=augment_overrides(opts))
             show("aug:" + label, runner.run(spec, data, reference=(Path(sn.run_dir), sn.key)))
 

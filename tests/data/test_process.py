@@ -140,8 +140,12 @@ def test_process_video_end_to_end(tmp_path, make_config, monkeypatch):
     assert _pair_offsets(lin) == {1, 2, 3, 4, 5, 8, 16}
     stamps = {p: (out / "colmap" / p).stat().st_mtime for p in ("matching.json", "distorted/done.json")}
     print_before = folder_fingerprint(out)
+    first = Path(est["frames"][0]["file_path"]).name
+    inodes = {d: (out / d / first).stat().st_ino for d in ("images", "images_4")}
     main(args)  # resumed: features, matches and model reused
     assert {p: (out / "colmap" / p).stat().st_mtime for p in stamps} == stamps
+    # the images are the same bytes: left in place (a run reading them meanwhile never finds one missing)
+    assert {d: (out / d / first).stat().st_ino for d in inodes} == inodes
     # the times of a re-run live beside transforms.json: the data a run reads (its fingerprint) is unchanged
     assert set(json.loads((out / "colmap" / "stage_seconds.json").read_text())) >= {"features", "matching", "mapping"}
     assert folder_fingerprint(out) == print_before
@@ -214,3 +218,27 @@ def test_mapping_retries_loosen_the_initialisation_before_moving_the_pair(tmp_pa
     assert runs[0][2] == 16.0 and runs[1][2] == runs[2][2] == 8.0 and runs[1][3] == 0.99
     assert runs[1][:2] == default_pair  # COLMAP still chooses the pair
     assert runs[2][:2] != default_pair and runs[3][:2] not in (default_pair, runs[2][:2])  # then pairs at other points
+
+
+def test_install_images_replaces_only_what_changed(tmp_path):
+    """Unchanged images stay (same inode, copies kept); a changed one is replaced and loses its copies; a
+    gone one is removed; write_downscaled then remakes the missing copies and drops the stale ones."""
+    from nerf2gs_plugin.data.process.export import install_images, write_downscaled
+
+    root, src = tmp_path / "data", tmp_path / "und"
+    src.mkdir()
+    imgs = {n: np.full((16, 16, 3), v, np.uint8) for n, v in (("a.png", 10), ("b.png", 20), ("c.png", 30))}
+    for n, im in imgs.items():
+        cv2.imwrite(str(src / n), im)
+    install_images(src, root)
+    write_downscaled(root, sorted(imgs))
+    ino = {n: (root / "images" / n).stat().st_ino for n in imgs}
+    for n, v in (("a.png", 10), ("b.png", 99)):  # a: same bytes, b: changed, c: gone
+        cv2.imwrite(str(src / n), np.full((16, 16, 3), v, np.uint8))
+    install_images(src, root)
+    assert (root / "images" / "a.png").stat().st_ino == ino["a.png"] and (root / "images_4" / "a.png").is_file()
+    assert cv2.imread(str(root / "images" / "b.png"))[0, 0, 0] == 99 and not (root / "images_4" / "b.png").exists()
+    assert sorted(p.name for p in (root / "images").iterdir()) == ["a.png", "b.png"]
+    write_downscaled(root, ["a.png", "b.png"])
+    assert sorted(p.name for p in (root / "images_4").iterdir()) == ["a.png", "b.png"]
+    assert cv2.imread(str(root / "images_2" / "b.png"))[0, 0, 0] == 99

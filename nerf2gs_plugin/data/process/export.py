@@ -74,12 +74,42 @@ def observed_points(rec, names: list[str]) -> list[np.ndarray]:
     return out
 
 
+def install_images(src: Path, root: Path) -> None:
+    """The undistorted images of ``src`` into ``root/images``, one atomic rename per changed file.
+
+    A re-run of ``process`` on the same model writes the same bytes: those files are left as they are
+    (with their ``images_{2,4,8}`` copies), so a run reading the capture meanwhile never finds a file
+    missing (the folder used to be removed and written again). A changed image loses its copies, which
+    :func:`write_downscaled` makes again; an image no longer in ``src`` is removed with its copies.
+    """
+    import filecmp
+
+    dst = root / "images"
+    dst.mkdir(parents=True, exist_ok=True)
+    derived = [root / f"images_{d}" for d in DOWNSCALES]
+    new = {p.name for p in src.iterdir() if p.is_file()}
+    for name in sorted(new):
+        if (dst / name).is_file() and filecmp.cmp(src / name, dst / name, shallow=False):
+            continue
+        for k in derived:
+            (k / name).unlink(missing_ok=True)
+        os.replace(src / name, dst / name)
+    for p in dst.iterdir():
+        if p.is_file() and p.name not in new:
+            p.unlink()
+
+
 def write_downscaled(root: Path, names: list[str], progress=None) -> None:
-    """``images_{2,4,8}/`` copies of ``images/`` (skipped per file when already there)."""
+    """``images_{2,4,8}/`` copies of ``images/`` for ``names`` (kept per file when already there; copies of
+    other names removed)."""
     task = progress.add_task("downscaled copies", total=len(names) * len(DOWNSCALES), stats="") if progress else None
+    keep = set(names)
     for d in DOWNSCALES:
         out = root / f"images_{d}"
         out.mkdir(exist_ok=True)
+        for p in out.iterdir():
+            if p.is_file() and p.name not in keep and not p.name.startswith("."):
+                p.unlink()
         for n in names:
             dst = out / n
             if not dst.is_file():

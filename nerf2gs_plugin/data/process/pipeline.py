@@ -120,12 +120,12 @@ def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=Non
                             f"{opts.min_registered_fraction:.0%}); try --matching exhaustive, more overlap, or less blur", root)
         t = time.perf_counter()
         und = export.undistort(mapped.model_dir, frame_dir, work / "undistorted", progress)
-        for sub, dst in (("images", root / "images"), ("sparse", root / "sparse" / "0")):
-            shutil.rmtree(dst, ignore_errors=True)
-            dst.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(und / sub, dst)
-        for d in export.DOWNSCALES:
-            shutil.rmtree(root / f"images_{d}", ignore_errors=True)
+        export.install_images(und / "images", root)
+        dst = root / "sparse" / "0"
+        shutil.rmtree(dst, ignore_errors=True)
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        os.replace(und / "sparse", dst)
+        shutil.rmtree(und, ignore_errors=True)  # the images left there are those already in place
         times["undistort"] = time.perf_counter() - t
         t = time.perf_counter()
         import pycolmap
