@@ -6,8 +6,8 @@ JSON: model overrides ({"strategy": {...}}), with "seed": N, "steps": N (the tar
 "augment": {--augment.* overrides} at its top.
 A label starting with 'aug:' trains with NeRF views (the bench's `--augment.delta-h 3 --augment.theta-pitch 30
 --augment.every-n 2` unless "augment" says otherwise) from the StreetNeRF of the same runs folder; '2dgs:'
-trains 2DGS. Made: benchmarks/results/castle_bev_geometry_val.* (through run_table.py, rows
-benchmarks/validation/castle_bev_geometry_rows.json).
+trains 2DGS. Made: benchmarks/results/castle_bev_geometry_val.* and castle_steps_capacity_val.* (through
+run_table.py, rows benchmarks/validation/castle_bev_geometry_rows.json and castle_steps_capacity_rows.json).
 """
 import json
 import sys

@@ -17,7 +17,8 @@ benchmarks/results/views_budget/castle_val.{json,md} (rows: benchmarks/validatio
 benchmarks/results/prune_margin/castle_val.{json,md} (rows: benchmarks/validation/prune_margin_castle_rows.json),
 benchmarks/results/augment_weight_val.{json,md} (rows: benchmarks/validation/augment_weight_rows.json),
 benchmarks/results/reference_length_val.{json,md} (rows: benchmarks/validation/reference_length_rows.json),
-benchmarks/results/castle_bev_geometry_val.{json,md} (rows: benchmarks/validation/castle_bev_geometry_rows.json).
+benchmarks/results/castle_bev_geometry_val.{json,md} (rows: benchmarks/validation/castle_bev_geometry_rows.json),
+benchmarks/results/castle_steps_capacity_val.{json,md} (rows: benchmarks/validation/castle_steps_capacity_rows.json).
 """
 import json
 import sys
