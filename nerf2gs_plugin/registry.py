@@ -12,7 +12,7 @@ from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.utils.plugins import load_entry_points, load_ref
 
 if TYPE_CHECKING:  # the registry imports no layer at import time: methods' configs import it
-    from nerf2gs_plugin.engine.trainer import TrainerConfig
+    from nerf2gs_plugin.engine.trainer_config import TrainerConfig
 
 ENTRY_POINT_GROUP = "nerf2gs.methods"
 

@@ -22,7 +22,7 @@ from nerf2gs_plugin.errors import CheckpointError, ConfigError
 from nerf2gs_plugin.registry import get_method
 
 if TYPE_CHECKING:  # the trainer builds the augmentation from here: no arrow back at run time
-    from nerf2gs_plugin.engine.trainer import TrainerConfig
+    from nerf2gs_plugin.engine.trainer_config import TrainerConfig
 
 
 @dataclass

@@ -8,7 +8,6 @@ import math
 import random
 import time
 from collections import deque
-from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
 from typing import Any, Optional
@@ -16,7 +15,6 @@ from typing import Any, Optional
 import numpy as np
 import torch
 
-from nerf2gs_plugin.datamanagers.augmented import AugmentConfig
 from nerf2gs_plugin.engine.callbacks import TrainingCallbackAttributes, TrainingCallbackLocation as Loc
 from nerf2gs_plugin.engine.checkpoints import (
     checkpoint_path,
@@ -28,15 +26,14 @@ from nerf2gs_plugin.engine.checkpoints import (
 )
 from nerf2gs_plugin.engine.config import save_config
 from nerf2gs_plugin.engine.divergence import describe, nonfinite_counts, nonfinite_outputs
-from nerf2gs_plugin.engine.launch import MachineConfig
 from nerf2gs_plugin.engine.run_dir import RunDirLock, unique_run_dir
 from nerf2gs_plugin.engine.validate import check_trainer_config
-from nerf2gs_plugin.engine.optimizers import OptimizerConfig, Optimizers
-from nerf2gs_plugin.engine.pipeline import Pipeline, PipelineConfig
+from nerf2gs_plugin.engine.optimizers import Optimizers
+from nerf2gs_plugin.engine.pipeline import Pipeline
+from nerf2gs_plugin.engine.trainer_config import TrainerConfig  # also imported from here by plugins
 from nerf2gs_plugin.errors import CheckpointError, ConfigError, TrainingDiverged
 from nerf2gs_plugin.utils import collectives
 from nerf2gs_plugin.utils.io import atomic_write_text
-from nerf2gs_plugin.utils.schedule import scheduled
 
 
 def pick_device(name: str = "auto") -> torch.device:
@@ -46,60 +43,6 @@ def pick_device(name: str = "auto") -> torch.device:
     if name.startswith("cuda") and not torch.cuda.is_available():
         raise ConfigError(f"device '{name}' requested but CUDA is not available")
     return torch.device(name)
-
-
-@dataclass
-class TrainerConfig:
-    """Everything one training run needs; ``ns2gs-train <method>`` exposes every field as a flag."""
-
-    method_name: str = "unnamed"
-    """Name of the method; set by the subcommand, names the run folder."""
-    data: Path = Path("data/street")
-    """Dataset folder (nerfstudio transforms.json or a COLMAP model)."""
-    output_dir: Path = Path("outputs")
-    """Root folder of the runs."""
-    experiment_name: Optional[str] = None
-    """Defaults to the dataset folder's name: runs go to output_dir/experiment/method/timestamp."""
-    timestamp: str = "{timestamp}"
-    """Name of the run folder; the default is the start time (YYYY-MM-DD_HHMMSS)."""
-    run_dir: Optional[Path] = None
-    """Write the run into exactly this folder instead of output_dir/experiment/method/timestamp
-    (for tools that own their run's place, e.g. the masks' reference); locked like an explicit
-    timestamp: a folder that holds another run's checkpoints is an error unless resumed."""
-    max_num_iterations: int = scheduled(2000, "total")
-    """Number of training steps."""
-    steps_per_eval_image: int = 250
-    """Every this many steps, render one eval view (the next in turn) and log its PSNR as
-    eval_psnr_1view: a cheap signal, not ns2gs-eval's PSNR over all views (0 = never)."""
-    steps_per_save: int = scheduled(1000, "cap")
-    """Write a checkpoint every this many steps (and always at the end)."""
-    keep_all_checkpoints: bool = False
-    """Keep every checkpoint instead of only the latest."""
-    seed: int = 42
-    """Random seed (torch, numpy, python)."""
-    device: str = "auto"
-    """auto (CUDA when present, else CPU), cpu, cuda or cuda:N."""
-    load_checkpoint: Optional[Path] = None
-    """Resume from this run directory or .ckpt file (same method)."""
-    augment_from: Optional[Path] = None
-    """Reference run directory or .ckpt: train on its composites and bird's-eye views."""
-    augment: AugmentConfig = field(default_factory=AugmentConfig)
-    pipeline: PipelineConfig = field(default_factory=PipelineConfig)
-    optimizers: dict[str, OptimizerConfig] = field(default_factory=dict)
-    progress: bool = True
-    """A live progress bar on a terminal; False (and whenever the output is not a terminal): one
-    plain line every 10 s with step, rate, ETA and loss."""
-    viewer: bool = False
-    """Serve the live viewer (viser) while training."""
-    machine: MachineConfig = field(default_factory=MachineConfig)
-    """Data-parallel training: several ranks on one run (torchrun, or --machine.num-devices N)."""
-
-    def get_run_dir(self) -> Path:
-        """The run folder: ``run_dir`` when set, else output_dir/experiment/method/timestamp."""
-        if self.run_dir is not None:
-            return Path(self.run_dir)
-        name = self.experiment_name or Path(self.data).name
-        return Path(self.output_dir) / name / self.method_name / self.timestamp
 
 
 class Trainer:

@@ -36,3 +36,20 @@ def test_the_example_plugin_method_implements_the_contract():
     ns2gs_example_method = pytest.importorskip("ns2gs_example_method")
     models = [v for v in vars(ns2gs_example_method).values() if inspect.isclass(v) and issubclass(v, Model) and v is not Model]
     assert models and not any(inspect.isabstract(m) for m in models)
+
+
+def test_what_reads_a_run_config_does_not_import_the_training_loop():
+    """The registry and the reference loader read TrainerConfig from its own module: importing them
+    loads no Trainer (the loop imports them; the other way round was an import circle). Plugins that
+    import TrainerConfig from engine.trainer get the same class."""
+    import subprocess
+    import sys
+
+    code = ("import sys, nerf2gs_plugin.engine.reference, nerf2gs_plugin.registry, nerf2gs_plugin.engine.trainer_config; "
+            "print('nerf2gs_plugin.engine.trainer' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    assert out == "False"
+    from nerf2gs_plugin.engine.trainer import TrainerConfig as from_loop
+    from nerf2gs_plugin.engine.trainer_config import TrainerConfig
+
+    assert from_loop is TrainerConfig

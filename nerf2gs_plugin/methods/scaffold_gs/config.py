@@ -21,7 +21,7 @@ import dataclasses
 from nerf2gs_plugin.datamanagers.full_image import FullImageDataManagerConfig
 from nerf2gs_plugin.engine.optimizers import OptimizerConfig
 from nerf2gs_plugin.engine.pipeline import PipelineConfig
-from nerf2gs_plugin.engine.trainer import TrainerConfig
+from nerf2gs_plugin.engine.trainer_config import TrainerConfig
 from nerf2gs_plugin.methods.scaffold_gs.model import ScaffoldGSModelConfig
 from nerf2gs_plugin.registry import MethodSpecification
 

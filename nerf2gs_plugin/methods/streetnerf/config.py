@@ -20,7 +20,7 @@ import dataclasses
 from nerf2gs_plugin.datamanagers.rays import RayDataManagerConfig
 from nerf2gs_plugin.engine.optimizers import OptimizerConfig
 from nerf2gs_plugin.engine.pipeline import PipelineConfig
-from nerf2gs_plugin.engine.trainer import TrainerConfig
+from nerf2gs_plugin.engine.trainer_config import TrainerConfig
 from nerf2gs_plugin.methods.streetnerf.model import StreetNeRFModelConfig
 from nerf2gs_plugin.registry import MethodSpecification
 

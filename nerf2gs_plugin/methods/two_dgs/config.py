@@ -14,7 +14,7 @@ import dataclasses
 
 from nerf2gs_plugin.datamanagers.full_image import FullImageDataManagerConfig
 from nerf2gs_plugin.engine.pipeline import PipelineConfig
-from nerf2gs_plugin.engine.trainer import TrainerConfig
+from nerf2gs_plugin.engine.trainer_config import TrainerConfig
 from nerf2gs_plugin.methods.splatfacto.config import gaussian_optimizers
 from nerf2gs_plugin.methods.splatfacto.config import paper_scale as splatfacto_paper_scale
 from nerf2gs_plugin.methods.two_dgs.model import TwoDGSModelConfig

@@ -16,7 +16,7 @@ from nerf2gs_plugin.engine.losses import masked_mean
 from nerf2gs_plugin.engine.model import Model, ModelConfig
 from nerf2gs_plugin.engine.optimizers import OptimizerConfig
 from nerf2gs_plugin.engine.pipeline import PipelineConfig
-from nerf2gs_plugin.engine.trainer import TrainerConfig
+from nerf2gs_plugin.engine.trainer_config import TrainerConfig
 from nerf2gs_plugin.registry import MethodSpecification
 
 
