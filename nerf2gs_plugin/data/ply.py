@@ -20,11 +20,13 @@ _TYPES = {
 }
 
 
-def read_ply_points(path: Union[str, Path]) -> tuple[np.ndarray, np.ndarray]:
-    """PLY -> (xyz ``[P, 3]`` float32, rgb ``[P, 3]`` uint8; grey 128 where the file has no colour)."""
+def read_ply_vertices(path: Union[str, Path]) -> dict[str, np.ndarray]:
+    """The vertex element of a PLY (ASCII or binary, either byte order): property name -> ``[P]`` column,
+    in file order. The one PLY parser: point clouds (:func:`read_ply_points`) and 3DGS files
+    (``methods/gaussian_utils.read_gaussian_ply``) both read through it."""
     path = Path(path)
     if not path.is_file():
-        raise DataError("point cloud file does not exist", path)
+        raise DataError("PLY file does not exist", path)
     raw = path.read_bytes()
     end = raw.find(b"end_header")
     if not raw.startswith(b"ply") or end < 0:
@@ -57,16 +59,22 @@ def read_ply_points(path: Union[str, Path]) -> tuple[np.ndarray, np.ndarray]:
         if fmt == "ascii":
             text = raw[body_start:].decode("ascii").split("\n")[:count]
             arr = np.loadtxt(text, dtype=np.float64, ndmin=2) if count else np.zeros((0, len(props)))
-            cols = {n: arr[:, i] for i, n in enumerate(names)}
-        elif fmt in ("binary_little_endian", "binary_big_endian"):
+            return {n: arr[:, i] for i, n in enumerate(names)}
+        if fmt in ("binary_little_endian", "binary_big_endian"):
             order = "<" if fmt == "binary_little_endian" else ">"
             dt = np.dtype([(n, order + t) for n, t in props])
+            if len(raw) - body_start < count * dt.itemsize:
+                raise DataError(f"PLY file is truncated ({count} vertices declared, {(len(raw) - body_start) // dt.itemsize} present)", path)
             rec = np.frombuffer(raw, dtype=dt, count=count, offset=body_start)
-            cols = {n: rec[n] for n in names}
-        else:
-            raise DataError(f"unknown PLY format '{fmt}'", path)
+            return {n: rec[n] for n in names}
+        raise DataError(f"unknown PLY format '{fmt}'", path)
     except (ValueError, UnicodeDecodeError) as e:
         raise DataError(f"malformed PLY body ({e})", path) from None
+
+
+def read_ply_points(path: Union[str, Path]) -> tuple[np.ndarray, np.ndarray]:
+    """PLY -> (xyz ``[P, 3]`` float32, rgb ``[P, 3]`` uint8; grey 128 where the file has no colour)."""
+    cols = read_ply_vertices(path)
     xyz = np.stack([cols["x"], cols["y"], cols["z"]], axis=1).astype(np.float32)
     if all(k in cols for k in ("red", "green", "blue")):
         rgb = np.stack([cols["red"], cols["green"], cols["blue"]], axis=1)

@@ -15,6 +15,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from nerf2gs_plugin.data.ply import read_ply_vertices
 from nerf2gs_plugin.errors import DataError
 from nerf2gs_plugin.utils.io import atomic_write_bytes
 from nerf2gs_plugin.utils.quaternions import quat_to_rotmat
@@ -85,34 +86,11 @@ def write_gaussian_ply(
 
 
 def read_gaussian_ply(path: Union[str, Path]) -> dict[str, Tensor]:
-    """Read a 3DGS PLY (binary little endian, float properties) -> ``means [N,3]``,
+    """Read a 3DGS PLY (the 3DGS vertex properties, any PLY encoding) -> ``means [N,3]``,
     ``log_scales [N,S]``, ``quats [N,4]``, ``opacity_logits [N]``, ``features_dc [N,3]``,
     ``features_rest [N,K-1,3]``."""
-    path = Path(path)
-    if not path.is_file():
-        raise DataError("PLY file does not exist", path)
-    raw = path.read_bytes()
-    end = raw.find(b"end_header\n")
-    if not raw.startswith(b"ply") or end < 0:
-        raise DataError("not a PLY file", path)
-    names, count, fmt = [], 0, None
-    for line in raw[:end].decode("ascii", errors="replace").splitlines():
-        tok = line.split()
-        if tok[:1] == ["format"]:
-            fmt = tok[1]
-        elif tok[:2] == ["element", "vertex"]:
-            count = int(tok[2])
-        elif tok[:1] == ["property"]:
-            if tok[1] not in ("float", "float32"):
-                raise DataError(f"unsupported property type {tok[1]} (3DGS PLYs are float)", path)
-            names.append(tok[2])
-    if fmt != "binary_little_endian":
-        raise DataError(f"unsupported PLY format {fmt}", path)
-    body = raw[end + len(b"end_header\n"):]
-    dtype = np.dtype([(n, "<f4") for n in names])
-    if len(body) < count * dtype.itemsize:
-        raise DataError("PLY file is truncated", path)
-    data = np.frombuffer(body, dtype=dtype, count=count)
+    data = read_ply_vertices(path)
+    names, count = list(data), len(data["x"])
 
     def stack(prefix: str) -> Tensor:
         cols = sorted((n for n in names if n.startswith(prefix)), key=lambda s: int(s[len(prefix):]))

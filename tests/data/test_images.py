@@ -59,6 +59,11 @@ def test_ascii_ply_and_bad_ply(tmp_path):
     (tmp_path / "b.ply").write_text("hello")
     with pytest.raises(DataError, match="b.ply: not a PLY file"):
         read_ply_points(tmp_path / "b.ply")
+    write_ply_points(tmp_path / "c.ply", np.zeros((10, 3), np.float32), np.zeros((10, 3), np.uint8))
+    raw = (tmp_path / "c.ply").read_bytes()
+    (tmp_path / "c.ply").write_bytes(raw[:-20])  # the last vertices cut off
+    with pytest.raises(DataError, match=r"c.ply: PLY file is truncated \(10 vertices declared, 8 present\)"):
+        read_ply_points(tmp_path / "c.ply")
 
 
 def test_written_png_follows_umask(tmp_path):

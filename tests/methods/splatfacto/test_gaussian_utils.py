@@ -62,3 +62,10 @@ def test_ply_errors(tmp_path):
         read_gaussian_ply(bad)
     with pytest.raises(DataError):
         read_gaussian_ply(tmp_path / "missing.ply")
+    # one parser for every PLY (data/ply.py): a cut-off 3DGS file says so, naming the file
+    good = tmp_path / "g.ply"
+    write_gaussian_ply(good, means=torch.zeros(4, 3), log_scales=torch.zeros(4, 3), quats=torch.zeros(4, 4),
+                       opacity_logits=torch.zeros(4), features_dc=torch.zeros(4, 3), features_rest=torch.zeros(4, 0, 3))
+    good.write_bytes(good.read_bytes()[:-8])
+    with pytest.raises(DataError, match=r"g.ply: PLY file is truncated \(4 vertices declared, 3 present\)"):
+        read_gaussian_ply(good)
