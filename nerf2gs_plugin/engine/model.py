@@ -110,6 +110,14 @@ class Model(nn.Module, metaclass=ABCMeta):
         the model's (the default). The augmentation renders the input views from these."""
         return None
 
+    def training_state(self) -> dict[str, Tensor]:
+        """What a resumed run needs besides the parameters and the optimizers' moments (a densification
+        strategy's accumulated statistics); written into every checkpoint. None by default."""
+        return {}
+
+    def load_training_state(self, state: dict[str, Tensor]) -> None:
+        """Restore :meth:`training_state` on resume (empty: a checkpoint without it)."""
+
     def num_primitives(self) -> int:
         """Gaussians, anchors or surfels; grid cells or hash entries for fields."""
         return 0

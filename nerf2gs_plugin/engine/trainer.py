@@ -136,6 +136,8 @@ class Trainer:
         if ckpt.get("dataset") is not None and ckpt["dataset"] != here:
             raise CheckpointError(f"was trained on another dataset than {self.config.data} (its training images differ)", ckpt_file)
         self.pipeline.model.load_model_state(ckpt["model"])
+        # with several ranks the statistics saved are rank 0's: the others start theirs afresh (no double count)
+        self.pipeline.model.load_training_state(ckpt.get("training_state", {}) if self.rank == 0 else {})
         # parameters may have been re-created (densified): rebuild optimizers on the loaded tensors
         self.optimizers = Optimizers(self.config.optimizers, self.pipeline.model.get_param_groups())
         self.optimizers.load_state_dict(ckpt.get("optimizers", {}))
@@ -239,6 +241,7 @@ class Trainer:
                 "step": step,
                 "model": self.pipeline.model.state_dict(),
                 "optimizers": self.optimizers.state_dict(),
+                "training_state": self.pipeline.model.training_state(),
                 "datamanager": dm.state_dict() if streams is None else streams[0],
                 **({"datamanager_streams": streams} if streams is not None else {}),
                 "torch_rng": torch.get_rng_state(),

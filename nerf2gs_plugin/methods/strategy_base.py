@@ -43,6 +43,18 @@ class Strategy(ABC):
     def initialize_state(self) -> None:
         """Forget every accumulated statistic."""
 
+    def state_dict(self) -> dict[str, Tensor]:
+        """The accumulated statistics (:attr:`reduced_stats`), for a checkpoint: a run resumed between two
+        refinements then decides the next one on the same evidence as a run never stopped."""
+        return {path: value for path in self.reduced_stats if (value := self._stat(path)) is not None}
+
+    def load_state_dict(self, state: dict[str, Tensor]) -> None:
+        """What :meth:`state_dict` gave (empty: no statistics yet, as in a checkpoint that predates them)."""
+        self.initialize_state()
+        for path, value in state.items():
+            if path in self.reduced_stats:
+                self._set_stat(path, value)
+
     def grad_tensor(self, info: Optional[dict[str, Any]]) -> Optional[Tensor]:
         """The tensor of ``info`` whose gradient this strategy reads (``info[grad_key]``)."""
         return None if info is None else info.get(self.grad_key)

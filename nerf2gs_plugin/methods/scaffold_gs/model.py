@@ -276,6 +276,12 @@ class ScaffoldGSModel(Model):
         return self.strategy.stats
 
     # ------------------------------------------------------------------ bookkeeping
+    def training_state(self) -> dict[str, Tensor]:
+        return self.strategy.state_dict()
+
+    def load_training_state(self, state: dict[str, Tensor]) -> None:
+        self.strategy.load_state_dict(state)
+
     def num_primitives(self) -> int:
         return int(self.anchor["anchors"].shape[0])
 

@@ -344,6 +344,12 @@ class SplatfactoModel(Model):
                 TrainingCallback([Loc.AFTER_BATCH], after_batch)]
 
     # ------------------------------------------------------------------ bookkeeping
+    def training_state(self) -> dict[str, Tensor]:
+        return self.strategy.state_dict()
+
+    def load_training_state(self, state: dict[str, Tensor]) -> None:
+        self.strategy.load_state_dict(state)
+
     def num_primitives(self) -> int:
         return int(self.gauss["means"].shape[0])
 

@@ -38,7 +38,7 @@ def test_resume_densified_checkpoint_and_eval(tmp_path):
     first = list_checkpoints(run_dir)[0]  # step 5, after a refinement
     resumed = Trainer(dataclasses.replace(_config(data, tmp_path / "out", 10), load_checkpoint=first, timestamp="resumed"))
     resumed.setup()
-    assert resumed.step == 6
+    assert resumed.step == 6 and resumed.pipeline.model.strategy.count is not None
     resumed.train()  # optimizer moments of the densified parameters load and step
     loaded = load_run(run_dir)
     assert loaded.model.num_primitives() == n1
@@ -48,6 +48,26 @@ def test_resume_densified_checkpoint_and_eval(tmp_path):
     # on a GPU the run trained through gsplat and reloads onto the CPU kernel: same image, not same bits
     atol = 1e-6 if a.device == b.device else 1e-4
     assert torch.allclose(a.cpu(), b.cpu(), atol=atol)
+
+
+def test_a_run_resumed_between_refinements_densifies_as_one_never_stopped(tmp_path):
+    """The checkpoint carries the densification statistics: resumed at step 5 (accumulated since the
+    refinement at step 3), the refinement at step 6 decides on steps 4-6 as in the run never
+    stopped, so both end with the same Gaussians (they used to decide on step 6 alone)."""
+    data = write_dataset(tmp_path / "data")
+    whole = Trainer(_config(data, tmp_path / "out", 12))
+    whole.setup()
+    run_dir = whole.train()
+    first = list_checkpoints(run_dir)[0]
+    assert "training_state" in torch.load(first, weights_only=True)
+    resumed = Trainer(dataclasses.replace(_config(data, tmp_path / "out", 12), load_checkpoint=first, timestamp="resumed"))
+    resumed.setup()
+    assert resumed.step == 6 and resumed.pipeline.model.strategy.count is not None
+    resumed.train()
+    a, b = whole.pipeline.model.gauss, resumed.pipeline.model.gauss
+    assert a["means"].shape == b["means"].shape
+    for k in a:
+        assert torch.allclose(a[k], b[k], atol=1e-5), k
 
 
 def _train_psnr(trainer: Trainer) -> float:
