@@ -112,7 +112,7 @@ class Model(nn.Module, metaclass=ABCMeta):
 
     def training_state(self) -> dict[str, Tensor]:
         """What a resumed run needs besides the parameters and the optimizers' moments (a densification
-        strategy's accumulated statistics); written into every checkpoint. None by default."""
+        strategy's accumulated statistics); written into every checkpoint. Nothing by default."""
         return {}
 
     def load_training_state(self, state: dict[str, Tensor]) -> None:
