@@ -92,11 +92,14 @@ def mask_stats(opts: AutoOptions) -> tuple[dict, int]:
 stats, n_train = mask_stats(AutoOptions())
 # the same renders without the empty-ray ground rule (AutoOptions.ground_empty, 2026-11-25): what it changed
 stats_off, _ = mask_stats(AutoOptions(ground_empty=False))
+# the sky mask's holes filled (AutoOptions.sky_fill_holes, off by default, 2026-11-26)
+stats_fill, _ = mask_stats(AutoOptions(sky_fill_holes=True))
 cams = torch.stack([v["origin"] for v in r.views["train"]])
 heights = ((cams @ r.up - r.height) / r.metres_to_world).tolist()
 doc = {"scene": {"seed": seed, "fov_deg": fov, "cam_height": cam_h, "num_cars": cars, "frames": 30, "video_scale": scale},
        "registered": len(em), "train_views": n_train, "mask_iou": {k: v["iou"] for k, v in stats.items()}, "stats": stats,
        "without_ground_empty": {"mask_iou": {k: v["iou"] for k, v in stats_off.items()}, "stats": stats_off},
+       "with_sky_fill_holes": {"mask_iou": {k: v["iou"] for k, v in stats_fill.items()}, "stats": stats_fill},
        "camera_heights_m": heights, "options": vars(AutoOptions()), "machine": machine_line(), "seconds": time.time() - t0}
 atomic_write_text(out.with_suffix(".json"), json.dumps(doc, indent=1))
 md = [f"# `--segmenter auto` on another street (seed {seed}, camera {cam_h} m, {fov:g} deg FOV, {cars} cars)", "",
@@ -110,6 +113,9 @@ md += [f"| {k} | {v['iou']:.3f} | {v['precision']:.3f} | {v['recall']:.3f} |" fo
 md += ["", "The same renders without the empty-ray ground rule (`--auto.ground-empty False`):", "",
        "| kind | IoU | precision | recall |", "|---|---|---|---|"]
 md += [f"| {k} | {v['iou']:.3f} | {v['precision']:.3f} | {v['recall']:.3f} |" for k, v in stats_off.items()]
+md += ["", "The same renders with the sky mask's holes filled (`--auto.sky-fill-holes`, off by default):", "",
+       "| kind | IoU | precision | recall |", "|---|---|---|---|"]
+md += [f"| {k} | {v['iou']:.3f} | {v['precision']:.3f} | {v['recall']:.3f} |" for k, v in stats_fill.items()]
 md += ["", "Camera heights above the levelled plane (m): " + ", ".join(f"{h:.2f}" for h in heights)]
 atomic_write_text(out.with_suffix(".md"), "\n".join(md) + "\n")
 print("\n".join(md))

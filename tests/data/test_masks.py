@@ -359,6 +359,28 @@ def test_sky_rules_drop_speckle_and_see_through_patches():
     assert mask_iou(sky, sky_true) > 0.95
 
 
+def test_sky_holes_are_filled_but_not_what_reaches_a_side_or_the_bottom():
+    """A cloud the reference gave density (a hole in the sky, here touching the top row too) is filled;
+    a facade reaching the image's side and a tree standing on the bottom row stay out of the sky."""
+    sky = torch.zeros(20, 30, dtype=torch.bool)
+    sky[:8, 5:25] = True
+    cloud = torch.zeros_like(sky)
+    cloud[0:3, 10:14] = True  # touches the top row: the sky goes on above the frame
+    inner = torch.zeros_like(sky)
+    inner[4:6, 16:19] = True
+    sky &= ~(cloud | inner)
+    filled = fr.enclosed_holes(sky)
+    assert filled[cloud].all() and filled[inner].all()
+    assert not filled[:, :5].any() and not filled[:, 25:].any() and not filled[8:].any()  # facades, street
+    tree = sky.clone()
+    tree[3:, 20:22] = False  # a trunk from the bottom row up into the sky
+    assert not fr.enclosed_holes(tree)[3:8, 20:22].any()
+    up, origin, dirs, road, wall, depth = _street_scene(wall_h=4.0, pitch_deg=-5.0)
+    acc = (road | wall).float()
+    plain = fr.sky_from_render(acc, dirs, up, from_top=True)
+    assert torch.equal(fr.sky_from_render(acc, dirs, up, from_top=True, fill_holes=True), fr.enclosed_holes(plain))
+
+
 def test_ground_median_ignores_floater_speckle():
     """Floaters in front of the road (a tenth of the pixels at half the distance) flip single pixels;
     the height median over a window keeps the road whole and still stops at the wall."""

@@ -54,19 +54,40 @@ def top_connected(mask: Tensor) -> Tensor:
     return torch.from_numpy(keep[labels]).to(mask.device)
 
 
+def enclosed_holes(mask: Tensor) -> Tensor:
+    """``mask`` with its holes filled: the regions outside it (4-neighbours) that touch neither the left,
+    the right nor the bottom row of the image (the top row counts as more of the mask: the sky goes on
+    above the frame)."""
+    import cv2
+
+    m = mask.cpu().numpy().astype(bool)
+    n, labels = cv2.connectedComponents((~m).astype(np.uint8), connectivity=4)
+    open_ = np.zeros(n, dtype=bool)
+    for border in (labels[:, 0], labels[:, -1], labels[-1, :]):
+        open_[np.unique(border)] = True
+    hole = ~open_
+    hole[0] = False  # label 0: the mask's own pixels
+    filled = m | hole[labels]
+    return torch.from_numpy(filled).to(mask.device)
+
+
 def sky_from_render(acc: Tensor, directions: Tensor, up: Tensor, acc_max: float = 0.5, margin_deg: float = 2.0,
-                    depth: Optional[Tensor] = None, far: float = float("inf"), vote: int = 0, from_top: bool = False) -> Tensor:
+                    depth: Optional[Tensor] = None, far: float = float("inf"), vote: int = 0, from_top: bool = False,
+                    fill_holes: bool = False) -> Tensor:
     """Low accumulation, or a depth beyond ``far`` (mass pushed to the contraction boundary), above
     the horizon (see the module docstring); then, optionally, RobustNeRF's ``vote`` x ``vote`` box
-    vote (speckle out) and only the regions that reach the top of the image (``from_top``: what a
-    see-through patch inside a facade or a floater hole below the skyline is not)."""
+    vote (speckle out), only the regions that reach the top of the image (``from_top``: what a
+    see-through patch inside a facade or a floater hole below the skyline is not) and the holes
+    filled (``fill_holes``: clouds a mask-less reference gave density, enclosed by sky)."""
     empty = acc < acc_max
     if depth is not None:
         empty = empty | (depth > far)
     sky = empty & horizon_mask(directions, up, margin_deg)
     if vote > 1:
         sky = box_vote(sky, vote)
-    return top_connected(sky) if from_top else sky
+    if from_top:
+        sky = top_connected(sky)
+    return enclosed_holes(sky) if fill_holes else sky
 
 
 def surface_points(origin: Tensor, directions: Tensor, depth: Tensor) -> Tensor:
