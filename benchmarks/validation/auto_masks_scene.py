@@ -65,8 +65,9 @@ cache = work / ("renders.pt" if scale == 1 else f"renders_x{scale}.pt")
 if cache.is_file():
     r = torch.load(cache, weights_only=False)
 else:
-    ensure_reference(est, work / ("reference" if scale == 1 else f"reference_x{scale}"), 1000, progress=False)
-    r = render_views(view, work / ("reference" if scale == 1 else f"reference_x{scale}"), ["train"], progress=False)
+    reference = work / ("reference" if scale == 1 else f"reference_x{scale}")
+    ensure_reference(est, reference, 1000, progress=False)
+    r = render_views(view, reference, ["train"], progress=False)
     torch.save(r, cache)
 train = parse_dataset(view, "train")
 r.up, r.height = ground_plane(train, [])  # the plane as the code now fits it
@@ -107,15 +108,17 @@ md = [f"# `--segmenter auto` on another street (seed {seed}, camera {cam_h} m, {
       + (f", the reference and masks made from the capture's `images_{scale}`" if scale != 1 else "")
       + ") -> process video -> 1000-step mask-less reference "
       f"-> masks (default options); {len(em)}/30 frames registered, {n_train} training views (every 8th held out). "
-      "Produced by `benchmarks/validation/auto_masks_scene.py`.", "",
-      "| kind | IoU | precision | recall |", "|---|---|---|---|"]
-md += [f"| {k} | {v['iou']:.3f} | {v['precision']:.3f} | {v['recall']:.3f} |" for k, v in stats.items()]
-md += ["", "The same renders without the empty-ray ground rule (`--auto.ground-empty False`):", "",
-       "| kind | IoU | precision | recall |", "|---|---|---|---|"]
-md += [f"| {k} | {v['iou']:.3f} | {v['precision']:.3f} | {v['recall']:.3f} |" for k, v in stats_off.items()]
-md += ["", "The same renders with the sky mask's holes filled (`--auto.sky-fill-holes`, off by default):", "",
-       "| kind | IoU | precision | recall |", "|---|---|---|---|"]
-md += [f"| {k} | {v['iou']:.3f} | {v['precision']:.3f} | {v['recall']:.3f} |" for k, v in stats_fill.items()]
+      "Produced by `benchmarks/validation/auto_masks_scene.py`.", ""]
+
+
+def table(st: dict) -> list[str]:
+    return (["| kind | IoU | precision | recall |", "|---|---|---|---|"]
+            + [f"| {k} | {v['iou']:.3f} | {v['precision']:.3f} | {v['recall']:.3f} |" for k, v in st.items()])
+
+
+md += table(stats)
+md += ["", "The same renders without the empty-ray ground rule (`--auto.ground-empty False`):", ""] + table(stats_off)
+md += ["", "The same renders with the sky mask's holes filled (`--auto.sky-fill-holes`, off by default):", ""] + table(stats_fill)
 md += ["", "Camera heights above the levelled plane (m): " + ", ".join(f"{h:.2f}" for h in heights)]
 atomic_write_text(out.with_suffix(".md"), "\n".join(md) + "\n")
 print("\n".join(md))

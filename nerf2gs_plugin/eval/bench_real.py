@@ -201,14 +201,15 @@ def ground_truth_dataset(street: Path, out: Path, n: int, points: Optional[tuple
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     meta = json.loads((Path(street) / "transforms.json").read_text())
-    own = {"transforms.json"} | ({meta.get("ply_file_path", "sparse_pc.ply")} if points is not None else set())
+    if points is not None:
+        meta.setdefault("ply_file_path", "sparse_pc.ply")
+    own = {"transforms.json"} | ({meta["ply_file_path"]} if points is not None else set())
     for item in Path(street).iterdir():
         link = out / item.name
         if item.name in own or link.exists() or link.is_symlink():
             continue
         link.symlink_to(item.resolve())
     if points is not None:
-        meta["ply_file_path"] = meta.get("ply_file_path", "sparse_pc.ply")
         write_ply_points(out / meta["ply_file_path"], *points)  # atomic
     meta["frames"] = meta["frames"][:n]
     meta.pop("eval_splits", None)
