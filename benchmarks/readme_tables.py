@@ -1,10 +1,11 @@
-"""Rewrite the numbers of the README's results tables from the JSON each table cites.
+"""Rewrite the numbers of the README's results table from the JSON it cites.
 
 Usage: python benchmarks/readme_tables.py [--check]
 Every README table whose first column is ``method`` is read exactly as tests/test_readme_numbers.py
 reads it (same citation rule, same column mapping); each number is replaced by its JSON value at
 the cell's own decimals; where a column marks its best cell bold, the bold moves to the new best
-(highest PSNR / FPS, lowest LPIPS). Prose is left alone: the test names every sentence that moved.
+(highest PSNR / FPS, lowest LPIPS). The result pages under docs/results are rewritten by
+``python docs/results/generate.py``.
 """
 from __future__ import annotations
 
