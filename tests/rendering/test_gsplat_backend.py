@@ -52,7 +52,7 @@ def _run(fn, scene: dict, device: str, backend: str, grad_key: str, **kw):
 
 # 3DGS: the kernels compute the same thing up to float summation order (measured on an H100: images
 # max |diff| 1.1e-5, gradients relative error 1.6e-5..3.6e-5, benchmarks/results/gpu/gpu_checks_log.txt);
-# the README cites these bounds. 2DGS: our surfel kernel and gsplat's differ in the low-pass blend, so
+# docs/methods.md cites these bounds. 2DGS: our surfel kernel and gsplat's differ in the low-pass blend, so
 # only mean agreement and gradient direction are claimed.
 TIGHT = dict(mean=1e-6, q999=2e-5, max=5e-5)
 LOOSE = dict(mean=2e-3, q999=5e-2, max=None)

@@ -1,4 +1,4 @@
-"""`ns2gs-viewer RUN --screenshot PNG`: the command that makes the README's image, and its bad input."""
+"""`ns2gs-viewer RUN --screenshot PNG`: the command that makes the viewer image in docs/, and its bad input."""
 
 import dataclasses
 import socket
