@@ -218,7 +218,8 @@ def page_stability() -> str:
         "# Stability to the breaking point", "",
         "`ns2gs-bench stability` trains each method unstressed (the seeds), then walks each stress mild -> harsh "
         "and stops at the first failure: street or bird's-eye PSNR more than 3 dB below the method's seed mean, "
-        "divergence, NaN or an error.", "",
+        "divergence, NaN or an error. To fit a budget: `--methods`, `--stresses`, `--seeds`, `--steps-fraction`; "
+        "runs already trained (same dataset copy and config) are reused.", "",
         "## The splatting methods", "", stability_section("stability.json"), "",
         "## Transients and mask errors", "", stability_section("stability_masks/stability.json"), "",
         "## The augmented pipeline (Splatfacto + NeRF views) under every stress", "",
@@ -396,7 +397,7 @@ def page_index() -> str:
     rows = ["| page | what it holds |", "|---|---|"] + [f"| [{name.removesuffix('.md')}]({name}) | {what} |"
                                                           for name, (what, _, _) in PAGES.items()]
     others = sorted(p.relative_to(RESULTS).as_posix() for p in RESULTS.rglob("*.md")
-                    if p.relative_to(RESULTS).with_suffix("").as_posix() not in current and p.name != "README.md")
+                    if p.relative_to(RESULTS).with_suffix("").as_posix() not in current)
     return "\n".join([
         "# Results", "",
         "Each page is generated from the committed bench JSON in `benchmarks/results/` by "
