@@ -1,8 +1,8 @@
 """Layers import only downward, and no two modules import each other (directly or around a loop).
 
-Every module of ``nerf2gs_plugin`` is read with ``ast`` (imports at the top and inside functions
-alike), mapped to its layer, and each import of the package's own modules is checked. The layers,
-bottom up (a module may import its own layer and those below):
+Every module of ``nerf2gs_plugin`` is read with ``ast`` (imports at the top, inside functions and
+under ``if TYPE_CHECKING:`` alike), mapped to its layer, and each import of the package's own
+modules is checked. The layers, bottom up (a module may import its own layer and those below):
 """
 
 from __future__ import annotations
@@ -13,23 +13,29 @@ from pathlib import Path
 PACKAGE = "nerf2gs_plugin"
 ROOT = Path(__file__).resolve().parents[1] / PACKAGE
 
-# bottom up; a module's layer is that of its first name under the package (the package's own
-# __init__ is the ground floor). errors, progress and warn import nothing of the package.
+# bottom up; a module's layer is that of the longest of these names that its dotted path under the
+# package starts with (the package's own __init__ is the ground floor): a layer names a package, or
+# one module of a package that sits on another floor than the rest of it.
 LAYERS: list[tuple[str, ...]] = [
     ("", "utils", "errors", "progress", "warn"),
     ("cameras", "data"),
-    ("rendering", "fields", "enhancers"),  # enhancers: image in, image out (ONNX, identity)
-    ("datamanagers",),
+    ("masks", "rendering", "fields"),  # masks: mask files, segmenters, masks from renders, their evaluation
+    # the image metrics (images in, numbers out) and the source hash: the enhancer's training uses them
+    ("eval.metrics", "eval.lpips", "eval.code_version"),
+    ("datamanagers", "augment.config"),  # augment.config: the --augment.* values the trainer's config holds
     ("registry",),  # MethodSpecification; built-in methods are named by string, not imported
     ("engine",),  # the contracts methods implement: Model, Pipeline, Trainer(Config), optimizers
     ("methods",),
-    ("eval", "enhance", "capture", "blocks"),  # capture: tools that train or load runs for a real capture
-    # (masks auto); blocks: city-block partition of a capture and merge of the block runs
+    # the features that train or load runs: the augmentation (its reference is a run), the enhancer,
+    # and the masks made from a first reference of the capture itself
+    ("augment", "enhancer", "masks.auto_masks", "masks.make_masks", "masks.mask_reference"),
+    ("eval", "blocks"),  # blocks: city-block partition of a capture and merge of the block runs
     ("viewer", "cli"),
 ]
 RANK = {name: i for i, names in enumerate(LAYERS) for name in names}
 
-ALLOWED_UPWARD: set[tuple[str, str]] = set()  # none: every arrow points down
+# the registry names TrainerConfig in its annotations and sits below the engine for now
+ALLOWED_UPWARD: set[tuple[str, str]] = {("nerf2gs_plugin.registry", "nerf2gs_plugin.engine.trainer_config")}
 
 
 def module_name(path: Path) -> str:
@@ -41,22 +47,13 @@ def all_modules() -> dict[str, Path]:
     return {module_name(p): p for p in sorted(ROOT.rglob("*.py"))}
 
 
-def _is_type_checking(test: ast.expr) -> bool:
-    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
-        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
-
-
 def imports_of(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
-    """The package's modules that ``name`` imports anywhere in its source (``from a import b``
-    counts as importing ``a.b`` when that is a module)."""
+    """The package's modules that ``name`` imports anywhere in its source, type-only imports included
+    (``from a import b`` counts as importing ``a.b`` when that is a module)."""
     is_pkg = path.name == "__init__.py"
     found: set[str] = set()
     tree = ast.parse(path.read_text(), str(path))
-    typing_only = {id(n) for t in ast.walk(tree) if isinstance(t, ast.If) and _is_type_checking(t.test)
-                   for stmt in t.body for n in ast.walk(stmt)}
-    for node in ast.walk(tree):
-        if id(node) in typing_only:
-            continue  # ``if TYPE_CHECKING:`` imports are annotations, never run
+    for node in ast.walk(tree):  # ``if TYPE_CHECKING:`` imports count too: an annotation is a dependency
         if isinstance(node, ast.Import):
             targets = [a.name for a in node.names]
         elif isinstance(node, ast.ImportFrom):
@@ -72,8 +69,8 @@ def imports_of(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
 
 
 def layer_of(module: str) -> int:
-    parts = module.split(".")
-    return RANK[parts[1] if len(parts) > 1 else ""]
+    parts = module.split(".")[1:]
+    return next(RANK[".".join(parts[:n])] for n in range(len(parts), -1, -1) if ".".join(parts[:n]) in RANK)
 
 
 def import_graph() -> dict[str, set[str]]:
@@ -141,7 +138,9 @@ def test_no_import_cycles():
 
 def test_the_checker_sees_function_level_imports(tmp_path):
     src = tmp_path / "m.py"
-    src.write_text("def f():\n    from nerf2gs_plugin.eval import metrics\n    import nerf2gs_plugin.cli.train\n")
-    found = imports_of("nerf2gs_plugin.data.m", src, {"nerf2gs_plugin.eval.metrics": src})
-    assert found == {"nerf2gs_plugin.eval.metrics", "nerf2gs_plugin.cli.train"}
+    src.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from nerf2gs_plugin.viewer import server\n"
+                   "def f():\n    from nerf2gs_plugin.eval import metrics\n    import nerf2gs_plugin.cli.train\n")
+    found = imports_of("nerf2gs_plugin.data.m", src, {"nerf2gs_plugin.eval.metrics": src, "nerf2gs_plugin.viewer.server": src})
+    assert found == {"nerf2gs_plugin.eval.metrics", "nerf2gs_plugin.cli.train", "nerf2gs_plugin.viewer.server"}
+    assert layer_of("nerf2gs_plugin.masks.make_masks") > layer_of("nerf2gs_plugin.methods.x") > layer_of("nerf2gs_plugin.masks.auto")
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]

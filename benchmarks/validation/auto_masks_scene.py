@@ -23,16 +23,16 @@ from pathlib import Path
 import torch
 
 torch.set_num_threads(1)
-from nerf2gs_plugin.capture.auto_masks import ground_plane, render_views  # noqa: E402
-from nerf2gs_plugin.capture.mask_reference import ensure_reference  # noqa: E402
+from nerf2gs_plugin.masks.auto_masks import ground_plane, render_views  # noqa: E402
+from nerf2gs_plugin.masks.mask_reference import ensure_reference  # noqa: E402
 from nerf2gs_plugin.data import parse_dataset  # noqa: E402
 from nerf2gs_plugin.data.images import load_mask  # noqa: E402
-from nerf2gs_plugin.data.masks.auto import AutoOptions, masks_from_renders  # noqa: E402
-from nerf2gs_plugin.data.masks.maskless import maskless_view  # noqa: E402
+from nerf2gs_plugin.masks.auto import AutoOptions, masks_from_renders  # noqa: E402
+from nerf2gs_plugin.masks.maskless import maskless_view  # noqa: E402
 from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_street  # noqa: E402
 from nerf2gs_plugin.eval import bench_real as br  # noqa: E402
 from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
-from nerf2gs_plugin.eval.mask_eval import resample_mask  # noqa: E402
+from nerf2gs_plugin.masks.evaluate import resample_mask  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
 seed, fov, cam_h, cars = int(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])

@@ -5,7 +5,7 @@ Usage: python benchmarks/validation/enhancer.py [RESULTS_JSON] [OUT_DIR]
 exist on disk. Writes OUT_DIR/enhancer_val.{json,md}, default benchmarks/results.)
 
 The enhancer exports the state that scores best on held-out *training* views (the identity included:
-`nerf2gs_plugin/enhance/train.py`), so no test view chose it. This script asks whether that choice
+`nerf2gs_plugin/enhancer/train.py`), so no test view chose it. This script asks whether that choice
 holds on views no table reports: for every target, `+ NeRF views` against `+ NeRF views + enhancer`
 (same reference, same steps) on val_street and val_bev, with LPIPS when its weights are available.
 """

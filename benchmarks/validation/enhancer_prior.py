@@ -20,8 +20,8 @@ import torch
 
 torch.set_num_threads(1)
 from nerf2gs_plugin.cli.enhance import evaluate_enhancer  # noqa: E402
-from nerf2gs_plugin.enhance.bench import bench_enhancer_config  # noqa: E402
-from nerf2gs_plugin.enhance.train import report_path, train_enhancer  # noqa: E402
+from nerf2gs_plugin.enhancer.bench import bench_enhancer_config  # noqa: E402
+from nerf2gs_plugin.enhancer.train import report_path, train_enhancer  # noqa: E402
 from nerf2gs_plugin.eval.bench_io import write_bench_files  # noqa: E402
 
 SPLITS = ("val_street", "val_bev")

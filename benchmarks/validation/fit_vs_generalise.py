@@ -23,7 +23,7 @@ from pathlib import Path
 import torch
 
 torch.set_num_threads(1)
-from nerf2gs_plugin.datamanagers.augmented import AugmentConfig, bev_cameras  # noqa: E402
+from nerf2gs_plugin.augment.datamanager import AugmentConfig, bev_cameras  # noqa: E402
 from nerf2gs_plugin.engine.reference import load_run  # noqa: E402
 from nerf2gs_plugin.engine.run_model import load_run_model  # noqa: E402
 from nerf2gs_plugin.eval.bench_io import write_bench_files  # noqa: E402

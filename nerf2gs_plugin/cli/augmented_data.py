@@ -7,12 +7,12 @@ from pathlib import Path
 
 import tyro
 
-from nerf2gs_plugin.datamanagers.augmented import AugmentConfig
+from nerf2gs_plugin.augment.config import AugmentConfig
 
 
 def _augmented_datamanager(data: Path, reference: Path, augment: AugmentConfig, device: str):
     from nerf2gs_plugin.datamanagers.full_image import FullImageDataManagerConfig
-    from nerf2gs_plugin.engine.reference import augmented_datamanager
+    from nerf2gs_plugin.augment.reference import augmented_datamanager
     from nerf2gs_plugin.engine.trainer import pick_device
 
     dev = pick_device(device)
@@ -32,7 +32,7 @@ class ExportAugmented:
     device: str = "auto"
 
     def main(self) -> None:
-        from nerf2gs_plugin.datamanagers.export_augmented import export_augmented_dataset
+        from nerf2gs_plugin.augment.export import export_augmented_dataset
 
         dm = _augmented_datamanager(self.data, self.reference, self.augment, self.device)
         out = export_augmented_dataset(dm, self.out, overwrite=self.overwrite)
@@ -52,7 +52,7 @@ class PreviewAugmented:
     device: str = "auto"
 
     def main(self) -> None:
-        from nerf2gs_plugin.eval.augment_preview import preview_augmented
+        from nerf2gs_plugin.augment.preview import preview_augmented
 
         dm = _augmented_datamanager(self.data, self.reference, self.augment, self.device)
         print(f"wrote {preview_augmented(dm, self.out, self.rows)}")

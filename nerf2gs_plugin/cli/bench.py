@@ -233,7 +233,7 @@ def bench_enhancer(data: Path, runs_root: Path, scale: str, prior: Optional[Path
     the reference's own renders the enhancer learns only synthetic degradations, which made real
     bird's-eye renders worse (measured once, -0.14 dB; not a committed result)."""
     from nerf2gs_plugin.data import folder_fingerprint
-    from nerf2gs_plugin.enhance.bench import bench_prior, ensure_bench_enhancer
+    from nerf2gs_plugin.enhancer.bench import bench_prior, ensure_bench_enhancer
 
     if prior is not None:
         prior = bench_prior(prior, runs_root)

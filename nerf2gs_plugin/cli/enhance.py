@@ -17,8 +17,8 @@ from typing import Optional
 import tyro
 
 from nerf2gs_plugin.cli.common import run_cli
-from nerf2gs_plugin.enhance.pretrain import EnhancerPretrainConfig
-from nerf2gs_plugin.enhance.train import EnhancerTrainConfig
+from nerf2gs_plugin.enhancer.pretrain import EnhancerPretrainConfig
+from nerf2gs_plugin.enhancer.train import EnhancerTrainConfig
 
 
 def _spec(model: str) -> str:
@@ -31,7 +31,7 @@ class Train(EnhancerTrainConfig):
     """Train the built-in enhancer on DATA's training images; writes OUT (.onnx) and a report."""
 
     def main(self) -> None:
-        from nerf2gs_plugin.enhance.train import report_path, train_enhancer
+        from nerf2gs_plugin.enhancer.train import report_path, train_enhancer
 
         report = train_enhancer(self)
         for line in report.summary_lines():
@@ -44,8 +44,8 @@ class Pretrain(EnhancerPretrainConfig):
     """Pre-train the built-in enhancer on generated streets (truth from above known); writes OUT (.onnx), its .pt and a report."""
 
     def main(self) -> None:
-        from nerf2gs_plugin.enhance.pretrain import pretrain_enhancer
-        from nerf2gs_plugin.enhance.train import report_path
+        from nerf2gs_plugin.enhancer.pretrain import pretrain_enhancer
+        from nerf2gs_plugin.enhancer.train import report_path
 
         report = pretrain_enhancer(self)
         for line in report.summary_lines():
@@ -68,7 +68,7 @@ class Apply:
 
     def main(self) -> None:
         from nerf2gs_plugin.data.images import load_image, write_image_atomic
-        from nerf2gs_plugin.enhancers import OnnxModelEnhancer, make_enhancer
+        from nerf2gs_plugin.enhancer import OnnxModelEnhancer, make_enhancer
         from nerf2gs_plugin.errors import DataError
 
         spec = _spec(self.model)
@@ -119,9 +119,9 @@ def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: 
     import torch
 
     from nerf2gs_plugin.data import list_splits
-    from nerf2gs_plugin.enhancers import make_enhancer
-    from nerf2gs_plugin.enhance.degrade import KINDS
-    from nerf2gs_plugin.enhance.train import heldout_psnr, load_split_images
+    from nerf2gs_plugin.enhancer import make_enhancer
+    from nerf2gs_plugin.enhancer.degrade import KINDS
+    from nerf2gs_plugin.enhancer.train import heldout_psnr, load_split_images
     from nerf2gs_plugin.utils.image_metrics import psnr
 
     enh = make_enhancer(spec)
@@ -146,11 +146,11 @@ def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: 
     train = dm.train_images
     train_c = train.cameras.camera_to_worlds[:, :3, 3]
     source_depths: dict[int, torch.Tensor] = {}
-    from nerf2gs_plugin.enhancers.warp import condition_source
+    from nerf2gs_plugin.enhancer.warp import condition_source
 
     def warped(camera, rendered: dict, k: int) -> torch.Tensor:
         """Training view ``k`` warped into ``camera`` through the reference's depth, as the augmentation does."""
-        from nerf2gs_plugin.enhancers.warp import clear_mask, warped_reference
+        from nerf2gs_plugin.enhancer.warp import clear_mask, warped_reference
 
         if k not in source_depths:
             source_depths[k] = run.model.render_camera(train.cameras[k])["depth"].detach().cpu()

@@ -34,6 +34,11 @@ from nerf2gs_plugin.engine.trainer_config import TrainerConfig  # also imported 
 from nerf2gs_plugin.errors import CheckpointError, ConfigError, TrainingDiverged
 from nerf2gs_plugin.utils import collectives
 from nerf2gs_plugin.utils.io import atomic_write_text
+from nerf2gs_plugin.utils.plugins import load_ref
+
+AUGMENTATION = "nerf2gs_plugin.augment.reference:augmented_datamanager"
+"""The factory behind ``--augment-from``, named rather than imported (as the registry names the
+methods): the augmentation sits above the engine, since it loads its reference run through it."""
 
 
 def pick_device(name: str = "auto") -> torch.device:
@@ -91,8 +96,7 @@ class Trainer:
         AugmentedDataManager (the Pipeline applies it after building the model)."""
         if self.config.augment_from is None:
             return None
-        from nerf2gs_plugin.engine.reference import augmented_datamanager
-
+        augmented_datamanager = load_ref(AUGMENTATION)
         ref, augment, device = self.config.augment_from, self.config.augment, self.device
 
         def wrap(inner):  # rank 0 renders the reference views into the cache, the other ranks then read it

@@ -253,15 +253,15 @@ def reference_dir(root: Path, est: Path, steps: int, options: str = "") -> Path:
     must not reuse a reference trained on the old one."""
     import hashlib
 
-    from nerf2gs_plugin.capture.mask_reference import REFERENCE_OVERRIDES
-    from nerf2gs_plugin.data.masks.maskless import strip_frame_keys
+    from nerf2gs_plugin.masks.mask_reference import REFERENCE_OVERRIDES
+    from nerf2gs_plugin.masks.maskless import strip_frame_keys
     from nerf2gs_plugin.eval.code_version import model_code_hash
 
     meta = strip_frame_keys(json.loads((Path(est) / "transforms.json").read_text()))
     for k in ("eval_splits", "process"):  # the eval cameras and the stage times are no part of the capture
         meta.pop(k, None)
     # and by the model code that trains it: a changed default must not reuse a reference made before it
-    recipe = json.dumps(REFERENCE_OVERRIDES, sort_keys=True)  # what it changes of StreetNeRF (capture/ keys no model)
+    recipe = json.dumps(REFERENCE_OVERRIDES, sort_keys=True)  # what it changes of StreetNeRF (masks/ keys no model)
     key = hashlib.sha1((json.dumps(meta, sort_keys=True) + options + model_code_hash() + recipe).encode()).hexdigest()[:10]
     return Path(root) / f"masks-reference-{steps}-{key}"
 
@@ -320,9 +320,9 @@ def run_real_bench(runs_root: Path, out_dir: Path, opts: RealBenchOptions = Real
     """The whole bench; writes ``real.{json,md,png}`` into ``out_dir`` and returns the JSON document.
     ``train=False`` stops after the capture figures, ``street`` replaces the generated street (the
     test's plumbing run on a smaller one)."""
-    from nerf2gs_plugin.capture.make_masks import MasksConfig, make_masks
+    from nerf2gs_plugin.masks.make_masks import MasksConfig, make_masks
     from nerf2gs_plugin.data.process.export import DOWNSCALES
-    from nerf2gs_plugin.eval.mask_eval import paired_mask_iou
+    from nerf2gs_plugin.masks.evaluate import paired_mask_iou
 
     if opts.video_scale != 1 and opts.video_scale not in DOWNSCALES:
         raise ConfigError(f"--video-scale must be 1 or one of process's downscales {DOWNSCALES}, got {opts.video_scale}")

@@ -98,7 +98,7 @@ def process_photos(opts: RealPhotosOptions, out: Path):
 def run_real_photos(opts: RealPhotosOptions, runs_root: Path, out_dir: Path, rerun: bool = False,
                     log: Callable[[str], None] = print, name: Optional[str] = None) -> dict:
     """The whole bench; writes ``real_photos.{json,md,png}`` into ``out_dir``; returns the JSON document."""
-    from nerf2gs_plugin.capture.make_masks import MasksConfig, make_masks
+    from nerf2gs_plugin.masks.make_masks import MasksConfig, make_masks
     from nerf2gs_plugin.eval.bench_io import BenchRunner, failure_reason
     from nerf2gs_plugin.eval.bench_runs import RunSpec
     from nerf2gs_plugin.eval.reference_check import reference_report
@@ -188,7 +188,7 @@ def run_real_photos(opts: RealPhotosOptions, runs_root: Path, out_dir: Path, rer
 # ----------------------------------------------------------------------------- renders from above
 def _above_cameras(run, opts: RealPhotosOptions, views: int, split: str = "test"):
     """Held-out photos' cameras (and photos) and the bird's-eye cameras above them, in ``run``'s frame."""
-    from nerf2gs_plugin.datamanagers.augmented import bev_cameras
+    from nerf2gs_plugin.augment.datamanager import bev_cameras
 
     dm = run.pipeline.datamanager
     td = dm.train_data

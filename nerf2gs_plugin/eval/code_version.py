@@ -3,8 +3,7 @@
 The rule (stated once, used by :mod:`nerf2gs_plugin.eval.bench_runs` and
 :mod:`nerf2gs_plugin.eval.bench_io`): a trained model depends on every ``.py``/``.cpp``/``.h``/``.cu``
 file of the package except those under ``eval/``, ``cli/`` and ``viewer/``, which read models but
-never change one, and the dataset makers ``capture/``, ``data/process/``, ``data/masks/`` and
-``blocks/`` (city-block partition and merge), which write the files a run reads or merge finished
+never change one, and the dataset makers ``masks/``, ``data/process/`` and ``blocks/`` (city-block partition and merge), which write the files a run reads or merge finished
 runs (those files key the run through the dataset fingerprint instead). No model code imports the
 excluded folders, but for ``MODEL_METRIC_CODE``, which is hashed (``tests/eval/test_bench_keys.py``
 checks it on the import graph). That is coarser than the files a method imports (an edit to another
@@ -23,11 +22,11 @@ import nerf2gs_plugin
 SOURCE_ROOT = Path(nerf2gs_plugin.__file__).resolve().parent
 """The package source that is hashed (tests point it at a modified copy)."""
 SOURCE_SUFFIXES = (".py", ".cpp", ".h", ".cu")
-NOT_MODEL_CODE = ("eval", "cli", "viewer", "capture", "data/process", "data/masks", "blocks")
+NOT_MODEL_CODE = ("eval", "cli", "viewer", "masks", "data/process", "blocks")
 """Folders (relative to the package) whose files never key a trained model."""
 METRIC_CODE = ("eval/metrics.py", "eval/lpips.py", "eval/evaluate.py")
 MODEL_METRIC_CODE = ("eval/metrics.py", "eval/lpips.py")
-"""The metric code that model code imports (``enhance/train.py``): it keys models too."""
+"""The metric code that model code imports (``enhancer/train.py``): it keys models too."""
 
 
 def model_source_files(root: Path | None = None) -> list[Path]:

@@ -113,8 +113,8 @@ def find_extra_views(config, train_data, train_cameras: Cameras, thumb_side: int
     reader) whose dataset and geometry match the run's config, with the rendered views as
     thumbnails; when the cache is gone, recomputed from the config exactly as the augmentation does.
     """
-    from nerf2gs_plugin.datamanagers.augment_cache import load_png
-    from nerf2gs_plugin.datamanagers.augmented import bev_cameras, find_cached_extra_views
+    from nerf2gs_plugin.augment.cache import load_png
+    from nerf2gs_plugin.augment.datamanager import bev_cameras, find_cached_extra_views
     from nerf2gs_plugin.engine.checkpoints import dataset_fingerprint, resolve_checkpoint
     from nerf2gs_plugin.errors import UserError
 

@@ -6,7 +6,7 @@ from nerf2gs_plugin.cli import bench as bench_cli
 
 
 def test_bench_enhancer_trains_on_the_bench_reference(tiny_scene, tmp_path, monkeypatch):
-    import nerf2gs_plugin.enhance.bench as enh
+    import nerf2gs_plugin.enhancer.bench as enh
     import nerf2gs_plugin.eval.bench_runs as runs
 
     calls = {}

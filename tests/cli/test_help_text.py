@@ -50,7 +50,7 @@ def test_docs_augment_table_lists_every_flag():
     import dataclasses
     from pathlib import Path
 
-    from nerf2gs_plugin.datamanagers.augmented import AugmentConfig
+    from nerf2gs_plugin.augment.datamanager import AugmentConfig
 
     guide = (Path(__file__).resolve().parents[2] / "docs" / "augmentation.md").read_text()
     rows = set(re.findall(r"^\| `--augment\.([\w-]+)`", guide, flags=re.M))

@@ -1,4 +1,4 @@
-"""A small synthetic street shared by the data tests (generated once per session, ~48x32 px)."""
+"""A small synthetic street shared by the data tests (tests/street_fixtures.py) and COLMAP copies of it."""
 
 from __future__ import annotations
 
@@ -13,36 +13,7 @@ import torch
 
 from nerf2gs_plugin.cameras import opengl_c2w_to_opencv_w2c
 from nerf2gs_plugin.data.ply import read_ply_points
-from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_street
-
-SMALL = dict(width=48, height=32, num_train=6, num_street=2, num_bev=3, num_val_street=2, num_val_bev=2, num_cars=4,
-             spp=2, num_points=300, progress=False)
-
-
-def small_config(out: Path, seed: int = 0, **kw) -> SynthStreetConfig:
-    return SynthStreetConfig(out=out, seed=seed, **{**SMALL, **kw})
-
-
-@pytest.fixture(scope="session")
-def make_config():
-    """``make_config(out, seed=0, **overrides)`` -> a small :class:`SynthStreetConfig`."""
-    return small_config
-
-
-@pytest.fixture(scope="session")
-def small_street(tmp_path_factory) -> Path:
-    """The small street dataset (read-only: copy it with ``street_copy`` before changing it)."""
-    out = tmp_path_factory.mktemp("street") / "street"
-    generate_street(small_config(out))
-    return out
-
-
-@pytest.fixture
-def street_copy(small_street, tmp_path) -> Path:
-    """A private copy of the small street that a test may modify."""
-    dst = tmp_path / "street"
-    shutil.copytree(small_street, dst, ignore=shutil.ignore_patterns(".ns2gs_cache"))
-    return dst
+from street_fixtures import make_config, small_street, street_copy  # noqa: F401  (shared with tests/masks)
 
 
 def _write_colmap(street: Path, root: Path, text: bool = False, model_dir: str = "sparse/0", dist=None) -> Path:

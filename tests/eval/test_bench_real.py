@@ -238,7 +238,7 @@ def test_video_scale_must_be_a_downscale_that_process_writes(tmp_path):
 
 
 def test_resample_mask_between_pinholes():
-    from nerf2gs_plugin.eval.mask_eval import resample_mask
+    from nerf2gs_plugin.masks.evaluate import resample_mask
 
     m = torch.zeros(20, 30, dtype=torch.bool)
     m[5:10, 12:18] = True
@@ -292,7 +292,7 @@ def test_masks_reference_keyed_by_the_model_code(tmp_path, monkeypatch):
     monkeypatch.setattr(cv, "model_code_hash", lambda root=None: "another model")
     b = br.reference_dir(tmp_path, tmp_path, 1000)
     assert b != a
-    import nerf2gs_plugin.capture.mask_reference as mr  # and by what the reference changes of StreetNeRF
+    import nerf2gs_plugin.masks.mask_reference as mr  # and by what the reference changes of StreetNeRF
 
     monkeypatch.setattr(mr, "REFERENCE_OVERRIDES", {"pipeline": {"model": {"appearance_reg_weight": 0.5}}})
     assert br.reference_dir(tmp_path, tmp_path, 1000) not in (a, b)

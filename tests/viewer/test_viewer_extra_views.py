@@ -6,7 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 import torch
 
-from nerf2gs_plugin.datamanagers.augmented import AugmentConfig, bev_cameras, render_augmented_views
+from nerf2gs_plugin.augment.datamanager import AugmentConfig, bev_cameras, render_augmented_views
 from nerf2gs_plugin.engine.checkpoints import dataset_fingerprint
 from nerf2gs_plugin.registry import get_method
 from nerf2gs_plugin.viewer.scene import find_extra_views

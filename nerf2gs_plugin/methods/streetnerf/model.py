@@ -48,7 +48,7 @@ The sparse-point rays are corrected too, by the correction of the camera they we
 point ray is the ray of the pixel where the point projects in that image, and its target distance
 is a per-view depth, so it moves with the image like the colour rays (and the ground loss sees the
 corrected rays it renders). Eval and novel cameras are never corrected. The augmentation renders
-its composites from :meth:`StreetNeRFModel.refined_train_cameras` (see ``datamanagers/augmented.py``).
+its composites from :meth:`StreetNeRFModel.refined_train_cameras` (see ``augment/datamanager.py``).
 """
 
 from __future__ import annotations

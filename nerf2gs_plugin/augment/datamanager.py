@@ -1,0 +1,447 @@
+"""The augmentation of the paper (Sec. 2.3-2.4): a reference model's renders become training data.
+
+:class:`AugmentedDataManager` wraps any method's DataManager, so every target method (built-in or
+plugin) gains it and never knows the views are not real:
+  (a) input-view composites: the real image with only its (dilated) transient-mask pixels
+      replaced by the reference render at that pose;
+  (b) bird's-eye additional views: every ``every_n``-th input pose raised by ``delta_h`` metres
+      along the scene's up vector and pitched down by ``theta_pitch`` degrees below the ground
+      plane's horizon (paper Fig. 3; ``pitch_mode="relative"`` adds it to the input's own tilt),
+      rendered by the reference and optionally passed through an enhancer. A view outside the
+      scene box or a mostly empty render (low accumulation) is dropped with one warning.
+A reference that refined its training poses (a camera optimizer) renders the composites, and
+everything else that re-renders an input view (the confidence's depths, a warped enhancer's source),
+from its refined poses (:attr:`Reference.train_cameras`): that is where it learned each photo was
+taken, so its render lines up with the photo it is pasted into. The bird's-eye cameras stay derived
+from the dataset's poses: they are novel views with no photo, rendered and trained at the one same
+pose, and the target trains its input views at the dataset's poses too.
+Renders are cached under the reference run, keyed by everything that changes them (the cache
+format: :mod:`nerf2gs_plugin.augment.cache`). This module knows no reference method,
+no enhancer implementation and no engine: the engine loads the reference and builds the enhancer.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any, Callable, Iterator, Optional, Protocol
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from nerf2gs_plugin.cameras import Cameras, birds_eye_poses, birds_eye_poses_absolute
+from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
+from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
+from nerf2gs_plugin.augment.config import AugmentConfig
+from nerf2gs_plugin.augment.cache import (
+    CACHE_DIR_NAME,
+    CacheManifest,
+    cache_key,
+    cache_manifests,
+    confidence_path,
+    load_confidence,
+    load_png,
+    read_manifest,
+    save_png,
+)
+from nerf2gs_plugin.datamanagers.base import DataManager
+from nerf2gs_plugin.datamanagers.image_set import ImageSet
+from nerf2gs_plugin.errors import ConfigError
+from nerf2gs_plugin.warn import warn
+
+RenderFn = Callable[[Cameras], dict[str, Tensor]]
+
+
+class ViewEnhancer(Protocol):
+    """What the augmentation needs of an enhancer (``nerf2gs_plugin.enhancer.Enhancer`` is one)."""
+
+    def enhance(self, rgb: Tensor, reference: Optional[Tensor] = None) -> Tensor: ...
+
+    def cache_key(self) -> str: ...
+
+
+@dataclass
+class Reference:
+    """A trained reference as the augmentation sees it: a renderer, a key that changes whenever
+    its renders would (method and checkpoint hash), and the folder its cache lives under."""
+
+    render: RenderFn
+    key: str
+    cache_root: Path
+    depth_along: str = "z"
+    """What the renders' ``depth`` measures ("z" or "ray": :attr:`nerf2gs_plugin.engine.model.Model.depth_along`)."""
+    train_cameras: Optional[Callable[[Cameras], Optional[Cameras]]] = None
+    """The training cameras -> the reference's refined ones (``Model.refined_train_cameras``), or None
+    / a None result: the reference renders input views at the dataset's poses."""
+
+
+def bev_cameras(train: Cameras, up: Tensor, delta_h_world: float, theta_pitch: float, every_n: int = 1,
+                pitch_mode: str = "relative", delta_h_spread_world: float = 0.0, theta_pitch_spread: float = 0.0) -> Cameras:
+    """The additional-view cameras: input intrinsics, raised and pitched poses (with spreads: each view's
+    height and pitch drawn uniformly around delta-h / theta-pitch, the same draws on every call)."""
+    sub = train[torch.arange(0, len(train), max(every_n, 1))]
+    if pitch_mode not in ("absolute", "relative"):
+        raise ConfigError(f"--augment.pitch-mode must be absolute or relative, got {pitch_mode!r}")
+    if delta_h_spread_world < 0 or not 0 <= theta_pitch_spread < 90:
+        raise ConfigError(f"spreads must be >= 0 (pitch < 90 deg), got {delta_h_spread_world}, {theta_pitch_spread}",
+                          "--augment.delta-h-spread / --augment.theta-pitch-spread")
+    poses = birds_eye_poses_absolute if pitch_mode == "absolute" else birds_eye_poses
+    dh: float | Tensor = delta_h_world
+    pitch: float | Tensor = theta_pitch
+    if delta_h_spread_world > 0 or theta_pitch_spread > 0:
+        u = torch.rand(2, len(sub), generator=torch.Generator().manual_seed(0), dtype=torch.float64) * 2 - 1
+        dh = (delta_h_world + delta_h_spread_world * u[0]).clamp_min(0.0)
+        pitch = (theta_pitch + theta_pitch_spread * u[1]).clamp(0.0, 89.0)
+    return sub.with_poses(poses(sub.camera_to_worlds, up, dh, pitch))
+
+
+def inside_box(centres: Tensor, box: Optional[Tensor]) -> Tensor:
+    """Bool ``[N]``: camera centres inside the scene box ``[2, 3]`` (all True without a box)."""
+    if box is None:
+        return torch.ones(len(centres), dtype=torch.bool)
+    box = box.to(centres)
+    return ((centres >= box[0]) & (centres <= box[1])).all(-1)
+
+
+def composite(real: Tensor, render: Tensor, mask: Tensor, dilate_px: int = 0, feather_px: int = 0) -> Tensor:
+    """Real image with the masked pixels taken from ``render``. ``real``/``render`` ``[H,W,3]``,
+    ``mask`` ``[H,W,1]`` bool. Pixels outside the (dilated, feathered) mask are exactly ``real``."""
+    m = mask.float().permute(2, 0, 1)[None]
+    if dilate_px > 0:
+        m = F.max_pool2d(m, 2 * dilate_px + 1, stride=1, padding=dilate_px)
+    if feather_px > 0:
+        soft = F.avg_pool2d(F.max_pool2d(m, 2 * feather_px + 1, 1, feather_px), 2 * feather_px + 1, 1, feather_px, count_include_pad=False)
+        m = torch.maximum(m, soft)
+    m = m[0].permute(1, 2, 0)
+    return torch.where(m > 0, real * (1 - m) + render * m, real)
+
+
+@dataclass
+class AugmentedViews:
+    """What the augmentation produced; also what the preview and the export write out."""
+
+    composites: Optional[ImageSet]  # same cameras as the training set
+    extra: Optional[ImageSet]  # bird's-eye views (enhanced when an enhancer is set)
+    extra_raw: Optional[list[Tensor]]  # bird's-eye renders before enhancement
+    cache_dir: Path
+    reused: bool
+    manifest: Optional[CacheManifest] = None
+
+    @property
+    def render_seconds(self) -> float:
+        """The reference's render time for this entry (as measured when it was rendered)."""
+        return self.manifest.render_seconds if self.manifest is not None else 0.0
+
+
+class _Visibility:
+    """The training views as the visibility confidence needs them: cameras, the reference's depth at
+    each (camera-space z) and the pixels that observe no surface (sky or transient)."""
+
+    def __init__(self, train: ImageSet, depths_z: list[Tensor], config: AugmentConfig, depth_along: str) -> None:
+        self.cameras = train.cameras.to("cpu")
+        self.depths_z = depths_z
+        self.blind: list[Optional[Tensor]] = []
+        for i in range(len(train)):
+            b = [train.mask(k, i) for k in ("sky", "transient") if train.mask(k, i) is not None]
+            self.blind.append(torch.stack(b).any(0)[..., 0].cpu() if b else None)
+        self.images = [train.image(i).cpu() for i in range(len(train))] if config.confidence == "consistency" else None
+        self.config = config
+        self.depth_along = depth_along
+
+    def confidence(self, out: dict[str, Tensor], camera: Cameras) -> Tensor:
+        """``[H, W, 1]`` confidence of one render ``out`` of the reference at ``camera``."""
+        from nerf2gs_plugin.augment.confidence import visibility_confidence
+
+        return visibility_confidence(out["depth"].cpu(), camera.to("cpu"), self.depth_along, self.cameras, self.depths_z,
+                                     self.blind, out["accumulation"].cpu() if "accumulation" in out else None,
+                                     self.config.confidence_full_views, self.config.confidence_depth_tol,
+                                     out["rgb"].cpu(), self.images, self.config.confidence_color_tol)
+
+
+def _save_confidence(path: Path, conf: Tensor) -> None:
+    np.save(path, conf[..., 0].cpu().numpy().astype(np.float16))
+
+
+def _warped_source(out: dict[str, Tensor], camera: Cameras, train: ImageSet, render_fn: RenderFn,
+                   renders: dict[int, dict[str, Tensor]], depths: dict[int, Tensor], depth_along: str) -> Tensor:
+    """``[H, W, 4]``: the training view nearest ``camera`` (facing the same way) warped into it through
+    the render's depth ``out["depth"]``, and its validity: the reference input of a ``warped``-conditioned enhancer."""
+    from nerf2gs_plugin.enhancer.warp import clear_mask, condition_source, warped_reference
+
+    if "depth" not in out:
+        raise ConfigError("an enhancer conditioned on warped views needs a reference that renders depth; this one does not")
+    k = condition_source(camera.camera_to_worlds[0], train.cameras.camera_to_worlds)
+    if k not in depths:  # rendered once per source view (the composites' renders are reused)
+        depths[k] = (renders[k] if k in renders else render_fn(train.cameras[k]))["depth"].cpu()
+    return warped_reference(camera.to("cpu"), out["depth"].cpu(), train.cameras[k].to("cpu"), depths[k], train.image(k).cpu(),
+                            clear_mask(train.mask("transient", k), *train.hw(k)), depth_along)
+
+
+def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn: RenderFn, config: AugmentConfig,
+                  enhancer: Optional[ViewEnhancer], comp_idx: list[int], scene_box: Optional[Tensor],
+                  depth_along: str = "z") -> dict[str, Any]:
+    """Render every image of a cache entry into ``work`` (not yet the entry: it is renamed after).
+    Bird's-eye views outside the scene box or with mostly empty renders are left out; returns the
+    manifest fields that say which were kept and how long it took. With a confidence, every
+    training view is rendered (its depth is the occlusion test) and each render gets a
+    ``_conf.npy`` beside its PNG."""
+    import time
+
+    from nerf2gs_plugin.augment.confidence import depth_to_z
+    from nerf2gs_plugin.progress import make_progress
+
+    for sub in ("composites", "extra", "extra_raw"):
+        (work / sub).mkdir(parents=True, exist_ok=True)
+    with_conf = config.confidence != "none"
+    train_ids = list(range(len(train))) if with_conf else comp_idx
+    comp_set = set(comp_idx)
+    n_jobs = len(train_ids) + (len(bev) if bev is not None else 0)
+    kept: list[int] = []
+    outside = empty = 0
+    t0 = time.perf_counter()
+    with make_progress() as progress:
+        task = progress.add_task("render reference views", total=n_jobs, stats="")
+        renders: dict[int, dict[str, Tensor]] = {}  # the composited views' renders
+        depths_z: list[Tensor] = []  # every input view's, with a confidence (float16: one per view is kept)
+        for i in train_ids:
+            out = {k: v.cpu() for k, v in render_fn(train.cameras[i]).items() if k in ("rgb", "depth", "accumulation")}
+            if with_conf:
+                if "depth" not in out:
+                    from nerf2gs_plugin.errors import ConfigError
+
+                    raise ConfigError("--augment.confidence visibility needs a reference that renders depth; this one does not")
+                depths_z.append(depth_to_z(out["depth"], train.cameras[i].to("cpu"), depth_along).half())
+            if i in comp_set:
+                renders[i] = out
+            progress.update(task, advance=1, stats=f"input view {i}")
+        vis = _Visibility(train, depths_z, config, depth_along) if with_conf else None
+        for i in comp_idx:
+            mask = train.mask("transient", i).cpu()
+            comp = composite(train.image(i).cpu(), renders[i]["rgb"], mask, config.dilate_px, config.feather_px)
+            save_png(work / "composites" / f"{i:05d}.png", comp)
+            if vis is not None:  # real pixels weigh 1, painted ones as much as the reference knows them
+                painted = composite(torch.zeros_like(comp), torch.ones_like(comp), mask, config.dilate_px, config.feather_px)[..., :1]
+                conf = 1.0 - painted + painted * vis.confidence(renders[i], train.cameras[i])
+                _save_confidence(confidence_path(work / "composites" / f"{i:05d}.png"), conf)
+        inside = inside_box(bev.centers, scene_box) if bev is not None else None
+        source_depths: dict[int, Tensor] = {}  # a warped-conditioned enhancer's source views: the reference's depth there
+        for j in range(len(bev) if bev is not None else 0):
+            if not bool(inside[j]):  # outside the scene box: the reference knows nothing there
+                outside += 1
+                progress.update(task, advance=1, stats=f"bird's-eye {j} outside the box")
+                continue
+            out = render_fn(bev[j])
+            if "accumulation" in out and float((out["accumulation"] > 0.5).float().mean()) < config.min_coverage:
+                empty += 1
+                progress.update(task, advance=1, stats=f"bird's-eye {j} mostly empty")
+                continue
+            k = len(kept)
+            kept.append(j)
+            rgb = out["rgb"].cpu()
+            save_png(work / "extra_raw" / f"{k:05d}.png", rgb)
+            if "depth" in out:
+                np.save(work / "extra_raw" / f"{k:05d}_depth.npy", out["depth"].cpu().numpy().astype(np.float16))
+            if vis is not None:
+                _save_confidence(confidence_path(work / "extra" / f"{k:05d}.png"), vis.confidence(out, bev[j]))
+            if enhancer is not None:
+                if getattr(enhancer, "reference_kind", "image") == "warped":
+                    src = _warped_source(out, bev[j], train, render_fn, renders, source_depths, depth_along)
+                else:
+                    src = train.image(j * max(config.every_n, 1)).cpu()
+                rgb = enhancer.enhance(rgb, reference=src)
+            save_png(work / "extra" / f"{k:05d}.png", rgb)
+            progress.update(task, advance=1, stats=f"bird's-eye {j}")
+    return {"extra_indices": kept, "dropped_outside_box": outside, "dropped_empty": empty,
+            "render_seconds": round(time.perf_counter() - t0, 2)}
+
+
+def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, render_fn: RenderFn, ref_key: str,
+                           dataset: str, cache_root: Path, config: AugmentConfig,
+                           enhancer: Optional[ViewEnhancer] = None, scene_box: Optional[Tensor] = None,
+                           depth_along: str = "z", render_cameras: Optional[Cameras] = None,
+                           delta_h_spread_world: float = 0.0) -> AugmentedViews:
+    """Render (or reuse from the cache) the composites and the additional views. ``render_cameras``:
+    the training cameras at the poses the reference renders the input views from (its refined
+    poses; the ``ref_key``'s checkpoint hash keys them); None: ``train``'s own. The bird's-eye
+    cameras and the returned image sets keep ``train``'s poses. ``delta_h_spread_world``:
+    ``config.delta_h_spread`` in world units, as ``delta_h_world`` is ``config.delta_h``."""
+    bev = bev_cameras(train.cameras, up, delta_h_world, config.theta_pitch, config.every_n, config.pitch_mode, delta_h_spread_world,
+                      config.theta_pitch_spread) if config.extra_views else None
+    has_transient = "transient" in train.masks and config.composites
+    enhancer_key = enhancer.cache_key() if enhancer is not None else "none"
+    key = cache_key(ref_key, dataset, asdict(config), bev, train.cameras, enhancer_key)
+    cache_dir = Path(cache_root) / CACHE_DIR_NAME / key
+    reused = config.use_cache and (cache_dir / "manifest.json").is_file()
+    if not reused:
+        work = cache_dir.with_name(f".tmp-{key}-{os.getpid()}")
+        shutil.rmtree(work, ignore_errors=True)
+        comp_idx = [i for i in range(len(train)) if has_transient and bool(train.mask("transient", i).any())]
+        seen_from = train if render_cameras is None else replace(train, cameras=render_cameras)
+        done = _render_entry(work, seen_from, bev, render_fn, config, enhancer, comp_idx, scene_box, depth_along)
+        kept = done["extra_indices"]
+        CacheManifest(reference=ref_key, dataset=dataset, config=asdict(config), enhancer=enhancer_key,
+                      composited_images=comp_idx, num_extra=len(kept),
+                      extra_camera_to_worlds=bev[torch.tensor(kept, dtype=torch.long)].camera_to_worlds.cpu().tolist() if kept else [],
+                      **done).write(work)
+        if cache_dir.exists():
+            shutil.rmtree(cache_dir)
+        os.replace(work, cache_dir)
+    manifest = read_manifest(cache_dir)
+    dropped = manifest.dropped_outside_box + manifest.dropped_empty
+    if dropped:
+        warn(f"{dropped} of {dropped + manifest.num_extra} bird's-eye views dropped",
+             f"never trained on: {manifest.dropped_outside_box} outside the scene box (lower --augment.delta-h), "
+             f"{manifest.dropped_empty} mostly empty renders (coverage < {config.min_coverage})")
+    if bev is not None:
+        bev = bev[torch.tensor(manifest.extra_indices, dtype=torch.long)]
+    with_conf = config.confidence != "none"
+    composites = None
+    if manifest.composited_images:
+        images = [train.image(i).cpu() for i in range(len(train))]
+        for i in manifest.composited_images:
+            images[i] = load_png(manifest.composite_png(i))
+        composites = train.to("cpu").with_images(images)
+        if with_conf:
+            ones = [torch.ones(*train.hw(i), 1) for i in range(len(train))]
+            composites = composites.with_confidence(
+                [load_confidence(manifest.composite_png(i)) if i in manifest.composited_images else ones[i] for i in range(len(train))])
+    extra = extra_raw = None
+    if manifest.num_extra:
+        assert bev is not None
+        imgs = [load_png(manifest.extra_png(j)) for j in range(manifest.num_extra)]
+        extra_raw = [load_png(manifest.extra_png(j, raw=True)) for j in range(manifest.num_extra)]
+        extra = ImageSet.from_images(bev.to("cpu"), imgs, weights=torch.full((len(imgs),), float(config.extra_weight)),
+                                     names=[f"bev_{j:05d}" for j in range(len(imgs))])
+        if with_conf:
+            extra = extra.with_confidence([load_confidence(manifest.extra_png(j)) for j in range(manifest.num_extra)])
+    return AugmentedViews(composites, extra, extra_raw, cache_dir, reused, manifest)
+
+
+class AugmentedDataManager(DataManager):
+    """Any method's DataManager with the reference's composites and bird's-eye views as training data.
+
+    It renders (or reads from the cache) once, at construction, then hands the views to ``inner``
+    through the DataManager's own hooks (:meth:`DataManager.set_train_images` /
+    :meth:`DataManager.set_extra_images`), so ``inner`` keeps sampling exactly as it always does and
+    the model only ever sees ``next_train`` batches. Everything else delegates to ``inner``; the
+    checkpoint state is ``inner``'s, so a run resumes with or without this wrapper.
+    """
+
+    def __init__(self, inner: DataManager, reference: Reference, augment: AugmentConfig,
+                 enhancer: Optional[ViewEnhancer] = None, total_steps: Optional[int] = None) -> None:
+        # no DataManager.__init__: the dataset is inner's, parsed once
+        if not 0.0 < augment.real_only_from <= 1.0:
+            raise ConfigError(f"must be in (0, 1], got {augment.real_only_from}", "--augment.real-only-from")
+        self.real_only_step: Optional[int] = (
+            int(round(augment.real_only_from * total_steps)) if total_steps is not None and augment.real_only_from < 1.0 else None)
+        self.inner = inner
+        self.reference = reference
+        self.augment = augment
+        self.every_n = max(augment.every_n, 1)
+        self.original_train_images: ImageSet = inner.train_images
+        if augment.composites and "transient" not in inner.train_images.masks:
+            warn("the dataset has no transient masks", "input-view composites are off (only the bird's-eye views are added)")
+        td = inner.train_data
+        refined = reference.train_cameras(inner.train_images.cameras) if reference.train_cameras is not None else None
+        self.views: AugmentedViews = render_augmented_views(
+            inner.train_images, td.up, td.metres_to_world(augment.delta_h), reference.render, reference.key,
+            dataset_fingerprint(td.image_filenames), reference.cache_root, augment, enhancer, td.scene_box, reference.depth_along,
+            refined, td.metres_to_world(augment.delta_h_spread),
+        )
+        print(f"reference renders: {self.views.render_seconds:.1f} s" + (" (reused from the cache)" if self.views.reused else ""))
+        if self.views.composites is not None:
+            inner.set_train_images(self.views.composites)
+        if self.views.extra is not None:
+            n_real, n_extra = len(inner.train_images), len(self.views.extra)
+            prob = augment.extra_prob if augment.extra_prob is not None else n_extra / (n_real + n_extra)
+            inner.set_extra_images(self.views.extra, prob)
+
+    @property
+    def manifest(self) -> CacheManifest:
+        assert self.views.manifest is not None
+        return self.views.manifest
+
+    # ------------------------------------------------------------------ the DataManager contract, by delegation
+    @property
+    def config(self):  # type: ignore[override]
+        return self.inner.config
+
+    @property
+    def data(self) -> Path:  # type: ignore[override]
+        return self.inner.data
+
+    @property
+    def device(self) -> torch.device:  # type: ignore[override]
+        return self.inner.device
+
+    @property
+    def generator(self) -> torch.Generator:  # type: ignore[override]
+        return self.inner.generator
+
+    @property
+    def train_data(self) -> DataparserOutputs:  # type: ignore[override]
+        return self.inner.train_data
+
+    @property
+    def train_images(self) -> ImageSet:  # type: ignore[override]
+        return self.inner.train_images
+
+    @property
+    def extra_images(self) -> Optional[ImageSet]:  # type: ignore[override]
+        return self.inner.extra_images
+
+    @property
+    def extra_prob(self) -> float:  # type: ignore[override]
+        return self.inner.extra_prob
+
+    @property
+    def all_train_cameras(self) -> Cameras:
+        return self.inner.all_train_cameras
+
+    def train_batch(self, i: int) -> dict[str, Any]:
+        return self.inner.train_batch(i)
+
+    def set_train_images(self, images: ImageSet) -> None:
+        self.inner.set_train_images(images)
+
+    def set_extra_images(self, images: Optional[ImageSet], prob: float) -> None:
+        self.inner.set_extra_images(images, prob)
+
+    def next_train(self, step: int) -> tuple[Any, dict[str, Any]]:
+        if self.real_only_step is not None and step >= self.real_only_step:
+            self.inner.extra_prob = 0.0  # the final phase: input views only (the draw still happens: streams stay aligned)
+        return self.inner.next_train(step)
+
+    def next_eval(self, step: int) -> tuple[Cameras, dict[str, Any]]:
+        return self.inner.next_eval(step)
+
+    def eval_split_names(self) -> list[str]:
+        return self.inner.eval_split_names()
+
+    def eval_split(self, name: str) -> tuple[DataparserOutputs, ImageSet]:
+        return self.inner.eval_split(name)
+
+    def eval_images(self, name: str) -> Iterator[tuple[Cameras, dict[str, Any]]]:
+        return self.inner.eval_images(name)
+
+    def state_dict(self) -> dict:
+        return self.inner.state_dict()
+
+    def load_state_dict(self, state: dict) -> None:
+        self.inner.load_state_dict(state)
+
+
+def find_cached_extra_views(cache_root: Path, dataset: str, augment: AugmentConfig, num_views: int) -> Optional[CacheManifest]:
+    """The newest cache entry under a reference run whose bird's-eye views are those of ``augment``
+    for ``num_views`` input poses (some may have been dropped: ``extra_indices``), or None."""
+    for manifest in cache_manifests(cache_root):
+        same = manifest.same_geometry(dataset, augment.delta_h, augment.theta_pitch, max(int(augment.every_n), 1), augment.pitch_mode,
+                                      augment.delta_h_spread, augment.theta_pitch_spread)
+        if same and manifest.num_extra == len(manifest.extra_indices) and all(0 <= i < num_views for i in manifest.extra_indices):
+            return manifest
+    return None
+

@@ -1,0 +1,114 @@
+"""``--segmenter auto``, the part that loads a run: the mask-less reference renders every frame,
+the ground plane is fitted, and ``masks/auto.py`` turns the renders into masks.
+
+The ground plane is ``data/ground.py``'s RANSAC fit (the one ``ns2gs-data process`` uses for the
+metric scale) on the sparse points in the reference's normalised world, else on the rendered
+surface points of the training views.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from pathlib import Path
+from typing import Callable, Iterable
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from nerf2gs_plugin.masks import from_renders as fr
+from nerf2gs_plugin.masks.auto import AutoOptions, FrameMasks, Renders, masks_from_renders
+from nerf2gs_plugin.errors import CheckpointError, ConfigError
+
+MAX_PLANE_POINTS = 50_000  # RANSAC on a random subset of the rendered surface points
+
+
+def ground_plane(train_data, rendered: Iterable[tuple[Tensor, Tensor]]) -> tuple[Tensor, float]:
+    """``(up, height)`` of the ground plane ``{x : x . up = height}`` in the normalised world:
+    the RANSAC plane of the sparse points below the cameras, else of the rendered surface points
+    (``(points [H, W, 3], acc [H, W])`` per training view, accumulation > 0.5), made upright with the
+    cameras' horizontal axes and path, else levelled with the path (``data/road_plane.py``)."""
+    from nerf2gs_plugin.data.ground import MAX_TILT_DEG, fit_ground_plane
+    from nerf2gs_plugin.data.road_plane import level_plane
+
+    centres = train_data.cameras.centers.double().numpy()
+    cam_up = train_data.up.double().numpy()
+    plane = None
+    if train_data.points3D_xyz is not None and len(train_data.points3D_xyz):
+        # None also for planes steeper than data.ground.MAX_TILT_DEG (roof lines): try the rendered surfaces
+        plane = fit_ground_plane(train_data.points3D_xyz.double().numpy(), centres, cam_up)
+    used_sparse = plane is not None
+    if plane is None:
+        pts = [p.reshape(-1, 3)[a.reshape(-1) > 0.5] for p, a in rendered]
+        pts = torch.cat(pts) if pts else torch.zeros(0, 3)
+        if len(pts) > MAX_PLANE_POINTS:
+            pts = pts[torch.randperm(len(pts), generator=torch.Generator().manual_seed(0))[:MAX_PLANE_POINTS]]
+        plane = fit_ground_plane(pts.double().numpy(), centres, cam_up)
+    if plane is None:
+        raise ConfigError(f"no ground plane found below the cameras within {MAX_TILT_DEG:.0f} deg of their up "
+                          "(neither the sparse points nor the rendered surfaces give one)")
+    fitted_on = train_data.points3D_xyz.double().numpy() if used_sparse else pts.double().numpy()
+    cam_right = train_data.cameras.camera_to_worlds[:, :3, 0].double().numpy()
+    normal, offset = level_plane(plane.normal, plane.offset, fitted_on, centres, cam_right=cam_right)
+    return torch.from_numpy(normal).float(), -float(offset)
+
+
+def check_reference_dataset(checkpoint: Path, image_filenames: list[Path]) -> None:
+    from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
+    from nerf2gs_plugin.engine.checkpoints import load_checkpoint
+
+    ckpt = load_checkpoint(checkpoint, map_location="cpu")
+    ours = dataset_fingerprint(image_filenames)
+    if ckpt.get("dataset") not in (None, ours):
+        raise CheckpointError(f"reference was trained on a different dataset (fingerprint {ckpt.get('dataset')} vs {ours})", checkpoint)
+
+
+def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[str], None] = print, progress: bool = True) -> Renders:
+    """Render every frame of ``splits`` with the reference. ``view``: the dataset (its mask-less
+    view) the reference was trained on."""
+    from nerf2gs_plugin.data import parse_dataset
+    from nerf2gs_plugin.data.images import load_image
+    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.progress import make_progress
+
+    with warnings.catch_warnings():  # a reference without masks: its "no sky masks" warnings are intended
+        warnings.filterwarnings("ignore", message="StreetNeRF: the dataset has no .* masks")
+        run = load_run(reference, device="cpu", data=view)
+    model = run.model
+    if not hasattr(model, "render_camera"):
+        raise CheckpointError(f"method '{run.config.method_name}' cannot render cameras", run.checkpoint)
+    train = run.pipeline.datamanager.train_data
+    check_reference_dataset(run.checkpoint, train.image_filenames)
+    downscale = float(getattr(run.config.pipeline.datamanager, "downscale", 1.0))
+    data = {s: (train if s == "train" else parse_dataset(view, s, downscale=downscale)) for s in splits}
+    t0 = time.perf_counter()
+    views: dict[str, list[dict[str, Tensor]]] = {s: [] for s in splits}
+    total = sum(len(d) for d in data.values())
+    with make_progress(progress) as prog, torch.no_grad():
+        task = prog.add_task("masks: render", total=total, stats="")
+        for s, d in data.items():
+            for i in range(len(d)):
+                cam = d.cameras[i : i + 1]
+                out = model.render_camera(cam)
+                rays = cam.generate_rays(0)
+                h, w = int(cam.height[0]), int(cam.width[0])
+                img = load_image(d.image_filenames[i])
+                if tuple(img.shape[:2]) != (h, w):
+                    img = F.interpolate(img.permute(2, 0, 1)[None], size=(h, w), mode="area")[0].permute(1, 2, 0)
+                views[s].append({"rgb": out["rgb"].cpu(), "depth": out["depth"][..., 0].cpu(), "acc": out["accumulation"][..., 0].cpu(),
+                                 "dirs": rays.directions.reshape(h, w, 3).cpu(), "origin": rays.origins[0].cpu(), "image": img})
+                prog.advance(task)
+    seconds = time.perf_counter() - t0
+    log(f"masks: rendered {total} views in {seconds:.1f} s")
+    pts = ((fr.surface_points(r["origin"], r["dirs"], r["depth"]), r["acc"]) for r in views.get("train", []))
+    up, height = ground_plane(train, pts)
+    box = train.scene_box.float()
+    extent = float((box[1] - box[0]).max()) / 2
+    return Renders(views, up, height, train.metres_to_world(1.0), seconds, extent)
+
+
+def auto_masks(view: Path, reference: Path, splits: list[str], opts: AutoOptions,
+               log: Callable[[str], None] = print, progress: bool = True) -> dict[str, list[FrameMasks]]:
+    """:func:`render_views` then :func:`~nerf2gs_plugin.masks.auto.masks_from_renders`."""
+    return masks_from_renders(render_views(view, reference, splits, log, progress), opts, log)

@@ -1,0 +1,156 @@
+"""``ns2gs-data masks DATA --segmenter auto|onnx:PATH``: write ``masks/{sky,ground,transient}/<image>.png``
+for every frame of a dataset, the layout the parsers already read, so StreetNeRF's sky, ground and
+transient terms and the augmentation's composites work on real captures unchanged.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable, Optional
+
+import torch
+import torch.nn.functional as F
+import tyro
+
+from nerf2gs_plugin.data.dataparser_outputs import MASK_KINDS
+from nerf2gs_plugin.masks.auto import AutoOptions
+from nerf2gs_plugin.masks.maskless import maskless_view, strip_mask_keys
+from nerf2gs_plugin.errors import ConfigError, DataError
+from nerf2gs_plugin.utils.io import atomic_write_text
+
+
+@dataclass
+class MasksConfig:
+    """Estimate sky / ground / transient masks for a dataset (a real capture has none)."""
+
+    data: tyro.conf.Positional[Path]
+    """Dataset folder (transforms.json or a COLMAP model)."""
+    segmenter: str = "auto"
+    """"auto": from the capture itself through a first reference NeRF trained without masks (no
+    weights needed); "onnx:PATH": an ONNX semantic-segmentation model (see --class-map)."""
+    class_map: Optional[str] = None
+    """onnx: "cityscapes", "ade20k" or a JSON file {sky|ground|transient: [class ids or names]};
+    default: from the model's metadata or its class count (19 / 150)."""
+    reference: Optional[Path] = None
+    """auto: the reference run (directory or .ckpt); trained here when absent
+    (default outputs/<dataset>/masks-reference)."""
+    reference_steps: int = 1000
+    """auto: training steps of a new reference."""
+    downscale: float = 1.0
+    """auto: image downscale of a new reference (renders are upsampled to the image size)."""
+    auto: AutoOptions = field(default_factory=AutoOptions)
+    splits: tuple[str, ...] = ()
+    """Only these splits (default: every split; "train" is what StreetNeRF's mask terms use)."""
+    overwrite: bool = False
+    """Replace masks that already exist."""
+    progress: bool = True
+
+
+def _parser_groups(data: Path):
+    """Every split's raw frames (original image paths, sizes, distortion), as the parser lists them."""
+    from nerf2gs_plugin.data import dataparser_config
+
+    return dataparser_config(data).raw_frames()
+
+
+def _existing_masks(data: Path, groups) -> list[str]:
+    found = [k for k in MASK_KINDS if (data / "masks" / k).is_dir() and any((data / "masks" / k).iterdir())]
+    meta = data / "transforms.json"
+    if meta.is_file() and any(f"{k}_mask_path" in meta.read_text() for k in MASK_KINDS):
+        found.append("transforms.json mask paths")
+    return found
+
+
+def _write(data: Path, image: Path, masks: dict[str, torch.Tensor], size: tuple[int, int]) -> None:
+    """Masks at any resolution -> PNGs at the image's ``(w, h)`` (nearest)."""
+    from nerf2gs_plugin.data.images import write_mask_atomic
+
+    w, h = size
+    for kind, m in masks.items():
+        if tuple(m.shape) != (h, w):
+            m = F.interpolate(m.float()[None, None], size=(h, w), mode="nearest")[0, 0] > 0.5
+        write_mask_atomic(data / "masks" / kind / f"{image.stem}.png", m)
+
+
+def make_masks(cfg: MasksConfig, log: Callable[[str], None] = print) -> dict:
+    """Write the masks; returns a summary (also written to ``DATA/masks/masks.json``)."""
+    data = Path(cfg.data)
+    if not data.is_dir():
+        raise DataError("dataset folder does not exist", data)
+    t0 = time.perf_counter()
+    groups = _parser_groups(data)
+    if cfg.splits:
+        unknown = [s for s in cfg.splits if s not in groups]
+        if unknown:
+            raise ConfigError(f"--splits: unknown split '{unknown[0]}' (this dataset has: {', '.join(groups)})")
+        groups = {s: groups[s] for s in groups if s in cfg.splits}
+    existing = _existing_masks(data, groups)
+    if existing and not cfg.overwrite:
+        raise ConfigError(f"the dataset already has masks ({', '.join(existing)}); pass --overwrite to replace them", data / "masks")
+    frames, seen = [], set()
+    for split, fs in groups.items():
+        for f in fs:
+            if f.image.resolve() not in seen:
+                seen.add(f.image.resolve())
+                frames.append((split, f))
+    stems = [f.image.stem for _, f in frames]
+    if len(set(stems)) != len(stems):
+        dup = next(s for s in stems if stems.count(s) > 1)
+        raise DataError(f"two images share the file name stem '{dup}'; masks/<kind>/<stem>.png would collide", data)
+    if cfg.overwrite:
+        strip_mask_keys(data)
+    summary: dict = {"segmenter": cfg.segmenter, "images": len(frames)}
+    coverage = {k: [0, 0] for k in MASK_KINDS}
+
+    def count(ms: dict[str, torch.Tensor]) -> None:
+        for k, m in ms.items():
+            coverage[k][0] += int(m.sum())
+            coverage[k][1] += m.numel()
+
+    if cfg.segmenter.startswith("onnx:"):
+        from nerf2gs_plugin.data.images import load_image
+        from nerf2gs_plugin.masks.onnx_segmenter import OnnxSegmenter
+        from nerf2gs_plugin.progress import make_progress
+
+        seg = OnnxSegmenter(cfg.segmenter[len("onnx:"):], cfg.class_map)
+        with make_progress(cfg.progress) as prog:
+            task = prog.add_task("masks: onnx", total=len(frames), stats="")
+            for _, f in frames:
+                img = load_image(f.image)
+                ms = seg.masks(img)
+                count(ms)
+                _write(data, f.image, ms, (img.shape[1], img.shape[0]))
+                prog.advance(task)
+        summary["class_ids"] = seg._ids
+    elif cfg.segmenter == "auto":
+        from nerf2gs_plugin.masks.auto_masks import auto_masks
+        from nerf2gs_plugin.masks.mask_reference import ensure_reference
+
+        distorted = [f.image.name for _, f in frames if f.intr.distorted]
+        if distorted:
+            raise DataError(f"--segmenter auto needs undistorted (pinhole) images; {distorted[0]} has distortion "
+                            "(ns2gs-data process undistorts; or use --segmenter onnx:PATH)", data)
+        t_ref = time.perf_counter()
+        ref = ensure_reference(data, cfg.reference, cfg.reference_steps, cfg.downscale, cfg.progress, log)
+        summary["reference"] = str(ref)
+        summary["reference_seconds"] = round(time.perf_counter() - t_ref, 1)
+        t_m = time.perf_counter()
+        result = auto_masks(maskless_view(data), ref, list(groups), cfg.auto, log, cfg.progress)
+        for split, fs in groups.items():
+            for f, m in zip(fs, result[split]):
+                ms = {"sky": m.sky, "ground": m.ground, "transient": m.transient}
+                count(ms)
+                _write(data, f.image, ms, (f.intr.width, f.intr.height))
+        summary["auto"] = asdict(cfg.auto)
+        summary["mask_seconds"] = round(time.perf_counter() - t_m, 1)
+    else:
+        raise ConfigError(f"--segmenter must be 'auto' or 'onnx:PATH', got {cfg.segmenter!r}")
+    summary["coverage"] = {k: round(a / b, 4) if b else 0.0 for k, (a, b) in coverage.items()}
+    summary["seconds"] = round(time.perf_counter() - t0, 1)
+    atomic_write_text(data / "masks" / "masks.json", json.dumps(summary, indent=1, default=str))
+    log(f"wrote masks for {len(frames)} images to {data / 'masks'} in {summary['seconds']:.1f} s; "
+        + ", ".join(f"{k} {100 * v:.1f}%" for k, v in summary["coverage"].items()) + " of the pixels")
+    return summary
