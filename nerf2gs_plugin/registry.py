@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.utils.plugins import load_entry_points, load_ref
 
-if TYPE_CHECKING:  # the registry imports no layer at import time: methods' configs import it
+if TYPE_CHECKING:  # an annotation only: importing the registry loads neither the engine nor a method
     from nerf2gs_plugin.engine.trainer_config import TrainerConfig
 
 ENTRY_POINT_GROUP = "nerf2gs.methods"

@@ -23,8 +23,10 @@ LAYERS: list[tuple[str, ...]] = [
     # the image metrics (images in, numbers out) and the source hash: the enhancer's training uses them
     ("eval.metrics", "eval.lpips", "eval.code_version"),
     ("datamanagers", "augment.config"),  # augment.config: the --augment.* values the trainer's config holds
-    ("registry",),  # MethodSpecification; built-in methods are named by string, not imported
     ("engine",),  # the contracts methods implement: Model, Pipeline, Trainer(Config), optimizers
+    # MethodSpecification; built-in methods are named by string, not imported. runs: a trained run
+    # loaded back, its method found in the registry
+    ("registry", "runs"),
     ("methods",),
     # the features that train or load runs: the augmentation (its reference is a run), the enhancer,
     # and the masks made from a first reference of the capture itself
@@ -34,8 +36,7 @@ LAYERS: list[tuple[str, ...]] = [
 ]
 RANK = {name: i for i, names in enumerate(LAYERS) for name in names}
 
-# the registry names TrainerConfig in its annotations and sits below the engine for now
-ALLOWED_UPWARD: set[tuple[str, str]] = {("nerf2gs_plugin.registry", "nerf2gs_plugin.engine.trainer_config")}
+ALLOWED_UPWARD: set[tuple[str, str]] = set()  # none: every arrow points down
 
 
 def module_name(path: Path) -> str:

@@ -52,8 +52,8 @@ def test_builtin_methods_have_cpu_and_paper_scale(name):
 
 
 def test_registry_imports_no_layer_at_import_time():
-    """registry -> engine/trainer -> engine/reference -> registry was a cycle: the registry now
-    needs TrainerConfig only for type checking, and the trainer no longer imports reference."""
+    """The registry needs TrainerConfig only for type checking: importing it loads neither the engine
+    nor a method, and the trainer imports no run loader (which imports the registry)."""
     import subprocess
     import sys
 
@@ -64,7 +64,7 @@ def test_registry_imports_no_layer_at_import_time():
                          capture_output=True, text=True, timeout=120, check=True).stdout
     assert "engine" not in out and "methods" not in out, out
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True).stdout
-    assert "nerf2gs_plugin.engine.reference" not in out, out
+    assert "nerf2gs_plugin.runs.load" not in out, out
 
 
 def test_plugin_calling_sys_exit_at_import_is_isolated(tmp_path, monkeypatch):

@@ -23,7 +23,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from nerf2gs_plugin.engine.config import load_config, read_config_doc  # noqa: E402
-from nerf2gs_plugin.engine.reference import load_run  # noqa: E402
+from nerf2gs_plugin.runs.load import load_run  # noqa: E402
 from nerf2gs_plugin.engine.trainer import Trainer  # noqa: E402
 from nerf2gs_plugin.eval.bench_size import _nested  # noqa: E402
 from nerf2gs_plugin.eval.evaluate import evaluate_run  # noqa: E402

@@ -17,7 +17,7 @@ from pathlib import Path
 import torch
 
 torch.set_num_threads(1)
-from nerf2gs_plugin.engine.reference import load_run  # noqa: E402
+from nerf2gs_plugin.runs.load import load_run  # noqa: E402
 from nerf2gs_plugin.eval.bench_io import fmt  # noqa: E402
 from nerf2gs_plugin.eval.evaluate import evaluate_run  # noqa: E402
 from nerf2gs_plugin.eval.metrics import LPIPS  # noqa: E402

@@ -18,7 +18,7 @@ import torch
 
 torch.set_num_threads(1)
 from nerf2gs_plugin.engine.config import load_config, read_config_doc  # noqa: E402
-from nerf2gs_plugin.engine.reference import load_run  # noqa: E402
+from nerf2gs_plugin.runs.load import load_run  # noqa: E402
 from nerf2gs_plugin.engine.trainer import Trainer  # noqa: E402
 from nerf2gs_plugin.eval.evaluate import evaluate_run  # noqa: E402
 from nerf2gs_plugin.eval.machine import machine_info, machine_line  # noqa: E402

@@ -22,7 +22,7 @@ from pathlib import Path
 import torch
 
 torch.set_num_threads(1)
-from nerf2gs_plugin.engine.reference import load_run  # noqa: E402
+from nerf2gs_plugin.runs.load import load_run  # noqa: E402
 from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 

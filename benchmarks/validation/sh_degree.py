@@ -12,7 +12,7 @@ from nerf2gs_plugin.engine.config import apply_plain
 from nerf2gs_plugin.engine.trainer import Trainer
 from nerf2gs_plugin.eval.bench_paper import step_overrides, _merge
 from nerf2gs_plugin.registry import get_method
-from nerf2gs_plugin.engine.reference import load_run
+from nerf2gs_plugin.runs.load import load_run
 from nerf2gs_plugin.eval.evaluate import evaluate_run
 
 deg, steps, data, out_dir = int(sys.argv[1]), int(sys.argv[2]), Path(sys.argv[3]), Path(sys.argv[4])

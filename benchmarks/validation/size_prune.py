@@ -15,7 +15,7 @@ from nerf2gs_plugin.engine.trainer import Trainer
 from nerf2gs_plugin.eval.bench_paper import _overrides
 from nerf2gs_plugin.eval.bench_size import model_overrides
 from nerf2gs_plugin.registry import get_method
-from nerf2gs_plugin.engine.reference import load_run
+from nerf2gs_plugin.runs.load import load_run
 from nerf2gs_plugin.eval.evaluate import evaluate_run
 
 method, label, data, out_dir = sys.argv[1], sys.argv[2], Path(sys.argv[3]), Path(sys.argv[4])

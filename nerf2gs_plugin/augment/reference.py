@@ -16,7 +16,7 @@ from nerf2gs_plugin.data import parse_dataset
 from nerf2gs_plugin.datamanagers.base import DataManager
 from nerf2gs_plugin.engine.checkpoints import dataset_fingerprint, load_checkpoint, resolve_checkpoint
 from nerf2gs_plugin.engine.config import read_config_doc
-from nerf2gs_plugin.engine.reference import load_run
+from nerf2gs_plugin.runs.load import load_run
 from nerf2gs_plugin.enhancer import make_enhancer
 from nerf2gs_plugin.errors import CheckpointError, ConfigError
 

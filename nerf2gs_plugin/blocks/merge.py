@@ -30,7 +30,7 @@ from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
 from nerf2gs_plugin.data.normalize import DataparserTransform
 from nerf2gs_plugin.engine.checkpoints import checkpoint_path, list_checkpoints, load_checkpoint, resolve_checkpoint, save_checkpoint
 from nerf2gs_plugin.engine.config import load_config, read_config_doc, save_config
-from nerf2gs_plugin.engine.reference import find_dataset
+from nerf2gs_plugin.runs.load import find_dataset
 from nerf2gs_plugin.engine.run_cameras import save_train_cameras
 from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.registry import get_method
@@ -144,7 +144,7 @@ def merge(cfg: MergeConfig) -> Path:
     atomic_write_text(out / MERGE_FILE, json.dumps({"format": "nerf2gs-merge/1", "partition": str(runs[0].partition),
                                                    "method": runs[0].method, "step": step, "blocks": report,
                                                    "primitives": sum(x["kept"] for x in report)}, indent=1))
-    from nerf2gs_plugin.engine.run_model import load_run_model
+    from nerf2gs_plugin.runs.model import load_run_model
 
     load_run_model(out)  # the model must take the merged state (a clear error here, not in the viewer)
     return out

@@ -136,7 +136,7 @@ def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: 
             r = heldout_psnr(enh.enhance, imgs, KINDS, 1.0, 0, None if getattr(enh, "reference_kind", "image") == "warped" else refs)
             result["splits"][s] = {"images": r["images"], "psnr_before": r["psnr_degraded"], "psnr_after": r["psnr_enhanced"]}
         return result
-    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.runs.load import load_run
     from nerf2gs_plugin.eval.metrics import LPIPS
     from nerf2gs_plugin.progress import make_progress
 

@@ -57,7 +57,7 @@ def print_table(result: dict) -> None:
 
 
 def main() -> None:
-    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.runs.load import load_run
     from nerf2gs_plugin.engine.trainer import pick_device
     from nerf2gs_plugin.eval.evaluate import evaluate_run
 

@@ -50,7 +50,7 @@ class ExportArgs:
 
 def export(args: ExportArgs) -> Path:
     from nerf2gs_plugin.data.normalize import load_dataparser_transform
-    from nerf2gs_plugin.engine.run_model import load_run_model
+    from nerf2gs_plugin.runs.model import load_run_model
     from nerf2gs_plugin.methods.gaussian_frame import to_data_frame
     from nerf2gs_plugin.methods.gaussian_utils import write_gaussian_ply
     from nerf2gs_plugin.methods.sky_shell import concat_gaussians, sky_shell_gaussians

@@ -94,7 +94,7 @@ def reference_pairs(refs: Sequence[Path], data: Path, indices: Sequence[int], ge
                     condition_of: Optional[Mapping[int, int]] = None) -> list[Pair]:
     """``pose`` pairs (and ``perturbed`` ones when asked) at the training images ``indices``, from each
     reference; with ``condition_of`` (training index -> another training index), conditioned pairs."""
-    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.runs.load import load_run
 
     if condition_of is not None:
         own = [i for i in indices if condition_of[i] == i]

@@ -142,7 +142,7 @@ def _reference(data: Path, run: Path, steps: int, progress: bool, log: Callable[
 
 def street_pairs(data: Path, run: Path, index: int, progress: bool = True) -> list[Pair]:
     """Every held-out camera of a generated street: (the reference's render there, the ray-cast truth)."""
-    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.runs.load import load_run
 
     loaded = load_run(run, data=data)
     dm = loaded.pipeline.datamanager

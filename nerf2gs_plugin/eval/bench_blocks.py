@@ -38,7 +38,7 @@ def _scene(name: str, overrides: dict, root: Path, steps: int) -> list[dict[str,
     from nerf2gs_plugin.blocks.merge import MergeConfig, merge
     from nerf2gs_plugin.blocks.partition import PartitionConfig, partition
     from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_street
-    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.runs.load import load_run
     from nerf2gs_plugin.eval.evaluate import evaluate_run
 
     shutil.rmtree(root, ignore_errors=True)

@@ -156,7 +156,7 @@ def _check_dataset(root: Path) -> Optional[str]:
 
 def _check_run(run_dir: Path, data: Path) -> Optional[str]:
     """Load the run as eval/export do and render one view: it must be finite."""
-    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.runs.load import load_run
 
     run = load_run(run_dir, data=data)
     cams = run.pipeline.datamanager.train_images.cameras

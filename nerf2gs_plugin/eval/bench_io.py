@@ -153,7 +153,7 @@ class BenchRunner:
         return self._lpips or None
 
     def run(self, spec: RunSpec, data: Path, reference: Optional[tuple[Path, str]] = None, step_hook=None) -> Outcome:
-        from nerf2gs_plugin.engine.reference import load_run
+        from nerf2gs_plugin.runs.load import load_run
         from nerf2gs_plugin.eval.evaluate import evaluate_run
 
         key = self.key(spec, data, reference)

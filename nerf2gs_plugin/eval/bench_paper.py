@@ -278,7 +278,7 @@ def psnr_bar_chart(results: dict[str, dict], path: Path, title: str) -> None:
 
 def renders_figure(results: dict[str, dict], labels: list[str], split: str, path: Path, image_index: int = 0) -> None:
     """Paper Fig. 4 analogue: GT and each run's render of one eval view."""
-    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.runs.load import load_run
 
     images, names = [], []
     for label in labels:

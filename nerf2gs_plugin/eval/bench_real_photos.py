@@ -206,7 +206,7 @@ def renders_from_above(run_dirs: list[Path], labels: list[str], path: Path, opts
     ``delta_h`` m above it (no photo exists there)."""
     import torch
 
-    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.runs.load import load_run
     from nerf2gs_plugin.utils.plotting import pyplot, save_figure
 
     plt = pyplot()

@@ -188,7 +188,7 @@ def case_dataset(case: StressCase, data: Path, runs_root: Path, synthetic: bool)
 def run_case(case: StressCase, data: Path, runner: BenchRunner, synthetic: bool, step_hook=None) -> dict:
     """Train/evaluate one case (reusing earlier work) and classify it. An augmented case first
     trains (or reuses) its reference on the same, stressed, dataset."""
-    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.runs.load import load_run
 
     spec = RunSpec(case.label, case.method, case.overrides)
     tags = {"stress": case.stress or None, "level": case.level, "level_label": case.level_label or None}

@@ -9,7 +9,7 @@ from typing import Optional
 
 import torch
 
-from nerf2gs_plugin.engine.reference import LoadedRun
+from nerf2gs_plugin.runs.load import LoadedRun
 from nerf2gs_plugin.errors import DataError
 from nerf2gs_plugin.eval.figures import save_eval_grid
 from nerf2gs_plugin.eval.metrics import IMAGE_METRICS, LPIPS

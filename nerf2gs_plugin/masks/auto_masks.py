@@ -69,7 +69,7 @@ def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[
     view) the reference was trained on."""
     from nerf2gs_plugin.data import parse_dataset
     from nerf2gs_plugin.data.images import load_image
-    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.runs.load import load_run
     from nerf2gs_plugin.progress import make_progress
 
     with warnings.catch_warnings():  # a reference without masks: its "no sky masks" warnings are intended

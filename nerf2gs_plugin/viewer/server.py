@@ -102,7 +102,7 @@ class Viewer:
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_run(cls, run: Any, config: Optional[ViewerConfig] = None) -> "Viewer":
-        """A viewer over a :class:`~nerf2gs_plugin.engine.reference.LoadedRun`."""
+        """A viewer over a :class:`~nerf2gs_plugin.runs.load.LoadedRun`."""
         cfg = config or ViewerConfig()
         dm = run.pipeline.datamanager
         extra = find_extra_views(run.config, dm.train_data, dm.train_images.cameras, cfg.thumbnail_side)
@@ -367,7 +367,7 @@ class Viewer:
 
 def open_viewer(path: Path, config: Optional[ViewerConfig] = None, device: str = "auto", data: Optional[Path] = None) -> Viewer:
     """Load a run directory or ``.ckpt`` of any registered method and serve it."""
-    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.runs.load import load_run
     from nerf2gs_plugin.engine.trainer import pick_device
 
     cfg = config or ViewerConfig()

@@ -23,7 +23,7 @@ from nerf2gs_plugin.data.normalize import DataparserTransform
 from nerf2gs_plugin.data.ply import read_ply_points
 from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_street
 from nerf2gs_plugin.engine.checkpoints import load_checkpoint, resolve_checkpoint
-from nerf2gs_plugin.engine.reference import load_run
+from nerf2gs_plugin.runs.load import load_run
 from nerf2gs_plugin.engine.trainer import Trainer
 from nerf2gs_plugin.eval.evaluate import evaluate_run
 from nerf2gs_plugin.registry import get_method

@@ -15,7 +15,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "methods" / "splatf
 from splat_tiny_scene import needs_rasterizer, write_dataset  # noqa: E402
 
 from nerf2gs_plugin.cli.export import ExportArgs, export  # noqa: E402
-from nerf2gs_plugin.engine.reference import load_run  # noqa: E402
+from nerf2gs_plugin.runs.load import load_run  # noqa: E402
 from nerf2gs_plugin.engine.trainer import Trainer  # noqa: E402
 from nerf2gs_plugin.methods.gaussian_utils import read_gaussian_ply
 from nerf2gs_plugin.methods.splatfacto.config import gaussian_optimizers, splatfacto_method  # noqa: E402

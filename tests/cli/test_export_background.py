@@ -19,7 +19,7 @@ from nerf2gs_plugin.cameras import Cameras  # noqa: E402
 from nerf2gs_plugin.cli.export import ExportArgs, export  # noqa: E402
 from nerf2gs_plugin.data.normalize import load_dataparser_transform  # noqa: E402
 from nerf2gs_plugin.engine.checkpoints import list_checkpoints  # noqa: E402
-from nerf2gs_plugin.engine.run_model import load_run_model  # noqa: E402
+from nerf2gs_plugin.runs.model import load_run_model  # noqa: E402
 from nerf2gs_plugin.engine.trainer import Trainer  # noqa: E402
 from nerf2gs_plugin.methods.gaussian_frame import camera_to_data_frame  # noqa: E402
 from nerf2gs_plugin.methods.gaussian_utils import read_gaussian_ply  # noqa: E402

@@ -45,7 +45,7 @@ def test_what_reads_a_run_config_does_not_import_the_training_loop():
     import subprocess
     import sys
 
-    code = ("import sys, nerf2gs_plugin.engine.reference, nerf2gs_plugin.registry, nerf2gs_plugin.engine.trainer_config; "
+    code = ("import sys, nerf2gs_plugin.runs.load, nerf2gs_plugin.registry, nerf2gs_plugin.engine.trainer_config; "
             "print('nerf2gs_plugin.engine.trainer' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "False"

@@ -38,7 +38,7 @@ def _cli(*args, timeout=180):
 
 
 def _assert_kept_checkpoints_render_finite(run_dir: Path):
-    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.runs.load import load_run
 
     for ckpt in list_checkpoints(run_dir):
         run = load_run(ckpt)  # refuses non-finite parameters

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from nerf2gs_plugin.engine.checkpoints import list_checkpoints, load_checkpoint
-from nerf2gs_plugin.engine.reference import load_run
+from nerf2gs_plugin.runs.load import load_run
 from nerf2gs_plugin.engine.trainer import Trainer
 from nerf2gs_plugin.errors import CheckpointError, TrainingDiverged
 from nerf2gs_plugin.registry import get_method

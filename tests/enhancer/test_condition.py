@@ -109,7 +109,7 @@ def tiny_run(tiny_scene, tmp_path_factory):
 
 
 def test_conditioned_pairs_are_warped_from_another_view(tiny_scene, tiny_run):
-    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.runs.load import load_run
     from nerf2gs_plugin.enhancer.pairs import reference_pairs
 
     gen = lambda: torch.Generator().manual_seed(0)  # noqa: E731
@@ -210,7 +210,7 @@ class _Recorder:
 def test_augmentation_feeds_each_birds_eye_view_its_reference(tiny_scene, tiny_run, tmp_path):
     from nerf2gs_plugin.augment.datamanager import AugmentConfig, render_augmented_views
     from nerf2gs_plugin.datamanagers.full_image import FullImageDataManagerConfig
-    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.runs.load import load_run
 
     run = load_run(tiny_run, data=tiny_scene)
     dm = FullImageDataManagerConfig().setup(data=tiny_scene, device="cpu")

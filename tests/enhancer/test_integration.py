@@ -94,7 +94,7 @@ def test_reference_pairs_from_a_partially_trained_run(tiny_scene, tmp_path):
     # both against the ground truth: recomputed here with numpy
     import numpy as np
 
-    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.runs.load import load_run
     from nerf2gs_plugin.enhancer import make_enhancer
 
     enh = make_enhancer(f"onnx:{tmp_path / 'e.onnx'}")

@@ -53,7 +53,7 @@ def test_pretrain_writes_prior_report_and_reuses_streets(prior, monkeypatch):
 
 def test_street_pairs_are_the_reference_render_and_the_truth(prior):
     from nerf2gs_plugin.enhancer.pretrain import street_pairs
-    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.runs.load import load_run
     from nerf2gs_plugin.utils.image_metrics import psnr
 
     cfg, _ = prior

@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from nerf2gs_plugin.engine.reference import find_dataset
+from nerf2gs_plugin.runs.load import find_dataset
 from nerf2gs_plugin.eval.demo import link_runs, next_steps, readable_name
 
 

@@ -13,7 +13,7 @@ import pytest
 import torch
 
 from nerf2gs_plugin.utils.config import apply_plain
-from nerf2gs_plugin.engine.reference import load_run
+from nerf2gs_plugin.runs.load import load_run
 from nerf2gs_plugin.engine.trainer import Trainer
 from nerf2gs_plugin.eval import lpips as lpips_mod
 from nerf2gs_plugin.eval.evaluate import evaluate_run

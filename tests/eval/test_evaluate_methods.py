@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from nerf2gs_plugin.utils.config import apply_plain
-from nerf2gs_plugin.engine.reference import load_run
+from nerf2gs_plugin.runs.load import load_run
 from nerf2gs_plugin.engine.trainer import Trainer
 from nerf2gs_plugin.eval.evaluate import evaluate_run
 from nerf2gs_plugin.registry import get_method

@@ -66,7 +66,7 @@ def test_train_cli_logs_and_writes_the_check_on_a_tiny_scene(tiny_scene, tmp_pat
     scene's held-out street views; ``ns2gs-train --augment-from REF --baseline BASE`` logs the
     difference of the two measured PSNRs before training and writes it into the new run folder."""
     from nerf2gs_plugin.cli.train import pop_baseline, train
-    from nerf2gs_plugin.engine.reference import load_run
+    from nerf2gs_plugin.runs.load import load_run
     from nerf2gs_plugin.eval.evaluate import evaluate_run
     from nerf2gs_plugin.registry import get_method
 

@@ -10,7 +10,7 @@ import torch
 from splat_tiny_scene import needs_rasterizer, write_dataset
 
 from nerf2gs_plugin.engine.checkpoints import list_checkpoints
-from nerf2gs_plugin.engine.reference import load_run
+from nerf2gs_plugin.runs.load import load_run
 from nerf2gs_plugin.engine.trainer import Trainer
 from nerf2gs_plugin.methods.splatfacto.config import gaussian_optimizers, splatfacto_method
 from nerf2gs_plugin.rendering.backend import gsplat_available

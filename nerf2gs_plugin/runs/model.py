@@ -38,7 +38,7 @@ def load_run_model(path: Path, device: torch.device | str = "cpu", data: Optiona
     run_dir, ckpt_file = resolve_checkpoint(path)
     cameras = load_train_cameras(run_dir)
     if cameras is None:  # an older run: build it from its dataset
-        from nerf2gs_plugin.engine.reference import load_run
+        from nerf2gs_plugin.runs.load import load_run
 
         run = load_run(path, device=device, data=data)
         cams = run.pipeline.datamanager.train_data.cameras
