@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import signal
 import sys
 from pathlib import Path
 from typing import Optional
 
 import tyro
 
-from nerf2gs_plugin.cli.common import run_cli
+from nerf2gs_plugin.cli.common import exit_on_sigterm, run_cli
 from nerf2gs_plugin.engine.trainer import Trainer, TrainerConfig
 from nerf2gs_plugin.registry import discover_methods, report_failures
 
@@ -44,8 +43,8 @@ def train(config: TrainerConfig, baseline: Optional[Path] = None) -> None:
     """Train one run (in this process, or as one rank of a data-parallel run: rank 0 reports)."""
     from nerf2gs_plugin.utils.collectives import rank
 
-    # a scheduler's preemption signal saves like Ctrl-C (SIGINT raises KeyboardInterrupt)
-    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    # a scheduler's preemption signal saves like Ctrl-C (then exits 143)
+    exit_on_sigterm()
     report = None
     if config.augment_from is not None and rank() == 0:  # point 5 of issue 18: say so before training on a weaker reference
         from nerf2gs_plugin.eval.reference_check import reference_report

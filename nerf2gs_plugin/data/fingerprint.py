@@ -22,6 +22,15 @@ def dataset_fingerprint(image_filenames: list[Path]) -> str:
     return h.hexdigest()[:16]
 
 
+def file_sha1(path: Path) -> str:
+    """SHA-1 of a whole file's content (a file replaced under the same name, size and time differs)."""
+    h = hashlib.sha1()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
 SMALL_FILE = 1 << 18  # files up to 256 KiB are hashed whole; bigger ones by size, mtime and both ends
 _EDGE = 1 << 16
 

@@ -141,31 +141,112 @@ def list_images(folder: Path) -> list[Path]:
     return sorted(files, key=lambda p: _natural_key(p.name))
 
 
+SOURCES_SUFFIX = ".sources.json"
+"""Beside the frames folder: each copied photo's source content hash, --max-size and frame size."""
+
+
 def collect_images(folder: Path, out_dir: Path, max_size: int, progress=None) -> FrameReport:
-    """Copy (or, above ``max_size``, shrink) every readable image of ``folder`` into ``out_dir``."""
+    """Copy (or, above ``max_size``, shrink) every readable image of ``folder`` into ``out_dir``.
+
+    A frame is reused only when its photo's content (hash) and ``max_size`` are those it was made from:
+    a photo replaced under the same name is copied again. Unreadable photos are named in a warning;
+    photos of more than one size are an error (:func:`check_one_size`)."""
+    import json
+
+    from nerf2gs_plugin.data.fingerprint import file_sha1
+    from nerf2gs_plugin.utils.io import atomic_write_text
+
     files = list_images(folder)
     out_dir.mkdir(parents=True, exist_ok=True)
+    record_path = out_dir.with_name(out_dir.name + SOURCES_SUFFIX)
+    try:
+        record = json.loads(record_path.read_text())
+    except (OSError, ValueError):
+        record = {}
     names: list[str] = []
-    unreadable = 0
+    unreadable: list[str] = []
+    sizes: dict[str, tuple[int, int]] = {}
+    done: dict[str, list] = {}
     task = progress.add_task("frames: collect images", total=len(files), stats="") if progress else None
     for p in files:
         dst = out_dir / p.name
-        if not dst.is_file():
-            head = cv2.imread(str(p), cv2.IMREAD_COLOR)
+        try:
+            digest = file_sha1(p)
+        except OSError:  # no read permission: as unreadable as a broken file
+            digest = None
+        old = record.get(p.name)
+        if digest is not None and dst.is_file() and isinstance(old, list) and len(old) == 4 and old[:2] == [digest, max_size]:
+            sizes[p.name] = (int(old[2]), int(old[3]))
+        else:
+            head = cv2.imread(str(p), cv2.IMREAD_COLOR) if digest is not None else None
             if head is None:
-                unreadable += 1
+                unreadable.append(p.name)
                 if task is not None:
-                    progress.update(task, advance=1)
+                    progress.update(task, advance=1, stats=f"{len(unreadable)} unreadable")
                 continue
             if max_size > 0 and max(head.shape[:2]) > max_size:
-                _write_atomic(dst, _fit(head, max_size), 95)
+                head = _fit(head, max_size)
+                _write_atomic(dst, head, 95)
             else:
                 tmp = dst.with_name(f".{dst.name}.tmp")
                 shutil.copyfile(p, tmp)
                 os.replace(tmp, dst)
+            sizes[p.name] = (int(head.shape[1]), int(head.shape[0]))
+        done[p.name] = [digest, max_size, *sizes[p.name]]
         names.append(p.name)
         if task is not None:
-            progress.update(task, advance=1, stats=f"{unreadable} unreadable" if unreadable else "")
+            progress.update(task, advance=1, stats=f"{len(unreadable)} unreadable" if unreadable else "")
+    atomic_write_text(record_path, json.dumps(done, indent=0))
+    if unreadable:
+        from nerf2gs_plugin.warn import warn
+
+        shown = ", ".join(unreadable[:10]) + (f" and {len(unreadable) - 10} more" if len(unreadable) > 10 else "")
+        warn(f"{len(unreadable)} unreadable photos skipped: {shown}", f"not JPEG/PNG images OpenCV decodes (in {folder})")
     if len(names) < MIN_FRAMES:
         raise DataError(f"too few images: {len(names)} readable JPEG/PNG files (need at least {MIN_FRAMES})", folder)
+    check_one_size(sizes, folder)
     return FrameReport(names, len(files), 0)
+
+
+def check_one_size(sizes: dict[str, tuple[int, int]], folder: Path) -> None:
+    """Photos of more than one frame size: a :class:`DataError` naming the sizes. The SfM gives the whole
+    capture one camera (one focal prior, steadier mapping), and COLMAP's single-camera reader refuses an
+    image of another size, so those photos never registered and the error blamed the matching."""
+    by_size: dict[tuple[int, int], list[str]] = {}
+    for name, wh in sizes.items():
+        by_size.setdefault(wh, []).append(name)
+    if len(by_size) < 2:
+        return
+    groups = sorted(by_size.items(), key=lambda kv: -len(kv[1]))
+    parts = [f"{len(n)} of {w}x{h} ({', '.join(n) if len(n) <= 2 else n[0] + ', ...'})" for (w, h), n in groups]
+    raise DataError(f"photos of {len(groups)} sizes: {', '.join(parts)}; the SfM shares one camera between all photos, so "
+                    "process each size as its own capture, or bring them to one size (a rotated photo: rotate it back)", folder)
+
+
+def video_size_hint(video: Path, fps: Optional[float], num_frames: Optional[int], max_size: int) -> tuple[int, float]:
+    """(frames, bytes per frame) a video will give, about (JPEG at ~1 byte per pixel); (0, 0) when
+    OpenCV cannot open it (the frame stage then says so)."""
+    cap = cv2.VideoCapture(str(video))
+    try:
+        if not cap.isOpened():
+            return 0, 0.0
+        w, h = cap.get(cv2.CAP_PROP_FRAME_WIDTH), cap.get(cv2.CAP_PROP_FRAME_HEIGHT)
+        vfps, total = cap.get(cv2.CAP_PROP_FPS) or 30.0, max(cap.get(cv2.CAP_PROP_FRAME_COUNT), 0)
+    finally:
+        cap.release()
+    n = num_frames if num_frames else total / vfps * (fps or 2.0)
+    s = min(1.0, max_size / max(w, h, 1)) if max_size > 0 else 1.0
+    return int(min(n, total)), float(w * h * s * s)
+
+
+def images_size_hint(files: list[Path], max_size: int) -> tuple[int, float]:
+    """(frames, bytes per frame) a photo folder will give, about (a shrunk photo: ~1 byte per pixel as JPEG, 3 as PNG)."""
+    if not files:
+        return 0, 0.0
+    sizes = []
+    for p in files:
+        size = p.stat().st_size
+        if max_size > 0:
+            size = min(size, int(max_size * max_size * 0.75 * (3 if p.suffix.lower() == ".png" else 1)))
+        sizes.append(size)
+    return len(files), float(sum(sizes)) / len(files)

@@ -73,79 +73,104 @@ class ProcessReport:
         ]
 
 
-def _silence_colmap() -> None:
+def _silence_colmap(logs: Path) -> None:
     import pycolmap
 
+    from nerf2gs_plugin.data.process.output import colmap_logs_into
+
     pycolmap.logging.minloglevel = 2  # errors only: COLMAP's INFO stream would bury the progress bars
+    colmap_logs_into(logs)  # not the system temp folder
 
 
-def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=None) -> ProcessReport:
-    """``frames_fn(frame_dir, progress) -> FrameReport`` makes the frames; the rest is shared."""
+def check_options(opts: ProcessOptions) -> None:
+    """Flags checked before anything is read or written."""
+    from nerf2gs_plugin.errors import ConfigError
+
+    if opts.fov_deg is not None and not 1.0 < opts.fov_deg < 179.0:
+        raise ConfigError(f"--fov-deg must be in (1, 179), got {opts.fov_deg}", "--fov-deg")
+
+
+def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=None, size_hint: tuple[int, float] = (0, 0.0)) -> ProcessReport:
+    """``frames_fn(frame_dir, progress) -> FrameReport`` makes the frames; the rest is shared. ``size_hint``:
+    (frames, bytes per frame) expected, for the free-space check (:mod:`.output`)."""
     from nerf2gs_plugin.data.process import export, sfm
+    from nerf2gs_plugin.data.process.output import LOGS, claimed_output, estimate_bytes, expected_pairs
     from nerf2gs_plugin.progress import make_progress
 
-    _silence_colmap()
+    check_options(opts)
     root = Path(opts.out)
-    work = root / "colmap"
-    frame_dir = work / "frames"
-    work.mkdir(parents=True, exist_ok=True)
-    times: dict[str, float] = {}
-    with make_progress(enabled=opts.progress) as progress:
-        t = time.perf_counter()
-        fr = frames_fn(frame_dir, progress)
-        times["frames"] = time.perf_counter() - t
-        names = fr.names
-        for p in frame_dir.iterdir():  # frames of an earlier run with other options
-            if p.is_file() and p.name not in set(names):
-                p.unlink()
-        focal = focal_px_fn(frame_dir, names) if focal_px_fn else None
-        if opts.fov_deg is not None:
-            from nerf2gs_plugin.data.images import image_size
+    frames_n, frame_bytes = size_hint
+    pairs = expected_pairs(frames_n, sfm.choose_matching(opts.sfm, frames_n, is_video), opts.sfm)
+    with claimed_output(root, estimate_bytes(frames_n, frame_bytes, opts.sfm.max_features, pairs)) as claim:
+        work = claim.work
+        frame_dir = work / "frames"
+        times: dict[str, float] = {}
+        with make_progress(enabled=opts.progress) as progress:
+            t = time.perf_counter()
+            fr = frames_fn(frame_dir, progress)
+            times["frames"] = time.perf_counter() - t
+            claim.keep()  # frames made and checked: worth resuming from here on
+            _silence_colmap(work / LOGS)
+            names = fr.names
+            for p in frame_dir.iterdir():  # frames of an earlier run with other options
+                if p.is_file() and p.name not in set(names):
+                    p.unlink()
+            hashes = frame_hashes(frame_dir, names)
+            content = sfm.content_key(hashes)
+            focal = focal_px_fn(frame_dir, names) if focal_px_fn else None
+            if opts.fov_deg is not None:
+                from nerf2gs_plugin.data.images import image_size
 
-            if not 1.0 < opts.fov_deg < 179.0:
-                raise DataError(f"--fov-deg must be in (1, 179), got {opts.fov_deg}", "--fov-deg")
-            focal = 0.5 * image_size(frame_dir / names[0])[0] / np.tan(np.radians(opts.fov_deg) / 2)
-        t = time.perf_counter()
-        sfm.extract(work / "database.db", frame_dir, names, opts.sfm, focal, progress)
-        times["features"] = time.perf_counter() - t
-        method = sfm.choose_matching(opts.sfm, len(names), is_video)
-        t = time.perf_counter()
-        changed = sfm.match(work / "database.db", method, opts.sfm, work / "matching.json", progress)
-        times["matching"] = time.perf_counter() - t
-        t = time.perf_counter()
-        mapped = sfm.reconstruct(work / "database.db", frame_dir, work / "distorted", len(names), opts.sfm, changed, progress)
-        times["mapping"] = time.perf_counter() - t
-        if mapped.registered < opts.min_registered_fraction * len(names):
-            raise DataError(f"registration failed: only {mapped.registered} of {len(names)} frames registered (fewer than "
-                            f"{opts.min_registered_fraction:.0%}); try --matching exhaustive, more overlap, or less blur", root)
-        t = time.perf_counter()
-        und = export.undistort(mapped.model_dir, frame_dir, work / "undistorted", progress)
-        export.install_images(und / "images", root)
-        dst = root / "sparse" / "0"
-        shutil.rmtree(dst, ignore_errors=True)
-        dst.parent.mkdir(parents=True, exist_ok=True)
-        os.replace(und / "sparse", dst)
-        shutil.rmtree(und, ignore_errors=True)  # the images left there are those already in place
-        times["undistort"] = time.perf_counter() - t
-        t = time.perf_counter()
-        import pycolmap
+                focal = 0.5 * image_size(frame_dir / names[0])[0] / np.tan(np.radians(opts.fov_deg) / 2)
+            t = time.perf_counter()
+            sfm.extract(work / "database.db", frame_dir, names, opts.sfm, focal, progress, hashes=hashes)
+            times["features"] = time.perf_counter() - t
+            method = sfm.choose_matching(opts.sfm, len(names), is_video)
+            t = time.perf_counter()
+            changed = sfm.match(work / "database.db", method, opts.sfm, work / "matching.json", progress, content=content)
+            times["matching"] = time.perf_counter() - t
+            t = time.perf_counter()
+            mapped = sfm.reconstruct(work / "database.db", frame_dir, work / "distorted", len(names), opts.sfm, changed, progress,
+                                     content=content)
+            times["mapping"] = time.perf_counter() - t
+            if mapped.registered < opts.min_registered_fraction * len(names):
+                raise DataError(f"registration failed: only {mapped.registered} of {len(names)} frames registered (fewer than "
+                                f"{opts.min_registered_fraction:.0%}); try --matching exhaustive, more overlap, or less blur", root)
+            t = time.perf_counter()
+            und = export.undistort(mapped.model_dir, frame_dir, work / "undistorted", progress)
+            export.install_images(und / "images", root)
+            dst = root / "sparse" / "0"
+            shutil.rmtree(dst, ignore_errors=True)
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(und / "sparse", dst)
+            shutil.rmtree(und, ignore_errors=True)  # the images left there are those already in place
+            times["undistort"] = time.perf_counter() - t
+            t = time.perf_counter()
+            import pycolmap
 
-        rec = pycolmap.Reconstruction(str(root / "sparse" / "0"))
-        reg_names, c2w, scale, check = checked_reconstruction(root, rec, opts, is_video or method == "sequential", len(names))
-        check_line = check.pop("line")
-        export.write_downscaled(root, reg_names, progress)
-        times["export"] = time.perf_counter() - t
-        extra = {"process": {"source": "video" if is_video else "images", "frames": len(names), "registered": mapped.registered,
-                             "kept": len(reg_names),
-                             "matching": method, "camera_height_m": opts.camera_height, "scale_source": scale.source,
-                             "capture_check": check}}
-        if scale.plane is not None:
-            extra["ground_plane"] = scale.plane.to_json()
-        export.write_transforms(root, rec, scale.metres_per_unit, scale.up, extra)
-        # beside, not in, transforms.json: runs fingerprint the files they read, and times change every run
-        atomic_write_text(work / TIMES_FILE, json.dumps({k: round(v, 2) for k, v in times.items()}, indent=1))
+            rec = pycolmap.Reconstruction(str(root / "sparse" / "0"))
+            reg_names, c2w, scale, check = checked_reconstruction(root, rec, opts, is_video or method == "sequential", len(names))
+            check_line = check.pop("line")
+            export.write_downscaled(root, reg_names, progress)
+            times["export"] = time.perf_counter() - t
+            extra = {"process": {"source": "video" if is_video else "images", "frames": len(names), "registered": mapped.registered,
+                                 "kept": len(reg_names),
+                                 "matching": method, "camera_height_m": opts.camera_height, "scale_source": scale.source,
+                                 "capture_check": check}}
+            if scale.plane is not None:
+                extra["ground_plane"] = scale.plane.to_json()
+            export.write_transforms(root, rec, scale.metres_per_unit, scale.up, extra)
+            # beside, not in, transforms.json: runs fingerprint the files they read, and times change every run
+            atomic_write_text(work / TIMES_FILE, json.dumps({k: round(v, 2) for k, v in times.items()}, indent=1))
     return ProcessReport(root, len(names), mapped.registered, mapped.points, method, scale.metres_per_unit, scale.source, times,
                          fr.dropped_blurry, check_line)
+
+
+def frame_hashes(frame_dir: Path, names: list[str]) -> dict[str, str]:
+    """Content hash of each frame: the SfM stages reuse their work only for the same content."""
+    from nerf2gs_plugin.data.fingerprint import file_sha1
+
+    return {n: file_sha1(frame_dir / n) for n in names}
 
 
 def metric_scale(xyz: np.ndarray, c2w: np.ndarray, opts: ProcessOptions):

@@ -76,8 +76,21 @@ def _write_marker(path: Path, key: dict) -> None:
     os.replace(tmp, path)
 
 
-def extract(db: Path, image_dir: Path, names: list[str], opt: SfmOptions, focal_px: Optional[float], progress=None, chunk: int = 16) -> None:
-    """SIFT features for ``names`` into ``db`` (one shared camera; EXIF focal as its prior)."""
+FEATURES_RECORD = "features.json"
+"""Beside the database: the content hash of each frame its features were extracted from."""
+
+
+def content_key(hashes: dict[str, str]) -> str:
+    """One digest of the frames' names and contents (keys the matching and mapping markers)."""
+    import hashlib
+
+    return hashlib.sha1(json.dumps(hashes, sort_keys=True).encode()).hexdigest()
+
+
+def extract(db: Path, image_dir: Path, names: list[str], opt: SfmOptions, focal_px: Optional[float], progress=None, chunk: int = 16,
+            hashes: Optional[dict[str, str]] = None) -> None:
+    """SIFT features for ``names`` into ``db`` (one shared camera; EXIF focal as its prior). With the
+    frames' content ``hashes``, a database holding features of other content under a name starts over."""
     import pycolmap
 
     ext = pycolmap.FeatureExtractionOptions()
@@ -85,15 +98,25 @@ def extract(db: Path, image_dir: Path, names: list[str], opt: SfmOptions, focal_
     ext.num_threads = opt.num_threads
     ext.sift.max_num_features = opt.max_features
     done: set[str] = set()
+    record_path = db.with_name(FEATURES_RECORD)
     if db.is_file():
+        recorded = {}
+        if hashes is not None:
+            try:
+                recorded = json.loads(record_path.read_text())
+            except (OSError, ValueError):
+                pass
         with pycolmap.Database.open(str(db)) as d:
             images = d.read_all_images()
             done = {im.name for im in images if d.exists_keypoints(im.image_id)}
-            stale = any(im.name not in set(names) for im in images)
-        if stale:  # another frame set (other --num-frames/--fps): start the database over
+            stale = any(im.name not in set(names) or (hashes is not None and recorded.get(im.name) != hashes.get(im.name))
+                        for im in images)
+        if stale:  # another frame set (other --num-frames/--fps, replaced photos): start the database over
             for p in db.parent.glob(db.name + "*"):
                 p.unlink()
             done = set()
+    if hashes is not None:  # before extracting: what the database will hold features of
+        _write_marker(record_path, {n: hashes[n] for n in names})
     todo = [n for n in names if n not in done]
     task = progress.add_task("features (SIFT)", total=len(names), completed=len(names) - len(todo), stats="") if progress else None
     for s in range(0, len(todo), chunk):
@@ -130,15 +153,16 @@ def _camera_params(model: str, f: float, image: Path) -> str:
     return ",".join(f"{v:.6f}" for v in vals)
 
 
-def match(db: Path, method: str, opt: SfmOptions, marker: Path, progress=None) -> bool:
-    """Match (or reuse the matches when ``marker`` records the same method and options)."""
-    import pycolmap
-
+def match(db: Path, method: str, opt: SfmOptions, marker: Path, progress=None, content: str = "") -> bool:
+    """Match (or reuse the matches when ``marker`` records the same method, options and frames:
+    ``content``, :func:`content_key` of the frames, else their names)."""
     import hashlib
+
+    import pycolmap
 
     with pycolmap.Database.open(str(db)) as d:
         names = sorted(im.name for im in d.read_all_images())
-    key = {"images": hashlib.sha1("|".join(names).encode()).hexdigest(), "method": method, "overlap": opt.overlap, "vocab_tree": str(opt.vocab_tree or ""), "max_features": opt.max_features,
+    key = {"images": content or hashlib.sha1("|".join(names).encode()).hexdigest(), "method": method, "overlap": opt.overlap, "vocab_tree": str(opt.vocab_tree or ""), "max_features": opt.max_features,
            "max_image_size": opt.max_image_size, "loop_pairs": opt.loop_pairs if method == "sequential" and opt.vocab_tree is None else 0,
            **({} if opt.quadratic_overlap or method != "sequential" else {"quadratic_overlap": False})}  # absent: earlier markers stay valid
     if _marker(marker, key):
@@ -196,13 +220,16 @@ class MapResult:
     reused: bool
 
 
-def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOptions, matches_changed: bool, progress=None) -> MapResult:
-    """Incremental mapping; the largest model is kept as ``out_dir/0``."""
+def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOptions, matches_changed: bool, progress=None,
+                content: str = "") -> MapResult:
+    """Incremental mapping; the largest model is kept as ``out_dir/0`` (reused when its marker records the
+    same options and frames' ``content`` and the matches did not change)."""
     import pycolmap
 
     marker = out_dir / "done.json"
     final = out_dir / "0"
-    key = {"total": total, "camera_model": opt.camera_model, "refine_intrinsics": opt.refine_intrinsics}
+    key = {"total": total, "camera_model": opt.camera_model, "refine_intrinsics": opt.refine_intrinsics,
+           **({"frames": content} if content else {})}
     if not matches_changed and _marker(marker, key) and (final / "cameras.bin").is_file():
         rec = pycolmap.Reconstruction(str(final))
         return MapResult(final, rec.num_reg_images(), total, rec.num_points3D(), True)
