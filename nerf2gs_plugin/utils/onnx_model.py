@@ -32,11 +32,39 @@ def read_convention(path: Path, session, keys: Iterable[str]) -> dict[str, str]:
     return conv
 
 
+def import_onnxruntime():
+    """``onnxruntime``, imported so that it leaves no files behind: on import its telemetry writes a
+    device id and an event database under the user's cache folder (``XDG_CACHE_HOME``) and a ``.ses``
+    file in the system temp folder; both are pointed at a private folder for the import, which is then
+    removed (measured: nothing is written there or elsewhere after the import)."""
+    import os
+    import shutil
+    import sys
+    import tempfile
+
+    if "onnxruntime" in sys.modules:
+        return sys.modules["onnxruntime"]
+    private = tempfile.mkdtemp(prefix="ns2gs-ort-")
+    saved = {k: os.environ.get(k) for k in ("XDG_CACHE_HOME", "TMPDIR")}
+    os.environ.update(XDG_CACHE_HOME=private, TMPDIR=private)
+    try:
+        import onnxruntime
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+        shutil.rmtree(private, ignore_errors=True)
+    return onnxruntime
+
+
 def open_session(path: Path, providers: Optional[Sequence[str]] = None):
     """An onnxruntime session of ``path`` (CUDA when available, else CPU; threads as torch's, no
     busy-waiting on shared CPUs). A file onnxruntime cannot load is a ConfigError naming it."""
-    import onnxruntime as ort
     import torch
+
+    ort = import_onnxruntime()
 
     if providers is None:
         providers = [p for p in ("CUDAExecutionProvider", "CPUExecutionProvider") if p in ort.get_available_providers()]

@@ -230,3 +230,24 @@ def test_train_sigterm_saves_and_exits_143(monkeypatch, capsys):
     finally:
         signal.signal(signal.SIGTERM, previous)
     assert e.value.code == 143 and "checkpoint saved to step-3.ckpt" in capsys.readouterr().err
+
+
+def test_onnxruntime_leaves_no_files_outside(tmp_path):
+    """Opening an ONNX model (masks, enhancers) writes nothing under the user's cache or temp folder
+    (onnxruntime's telemetry wrote a device id, a database and a .ses file there on import)."""
+    import onnx
+    from onnx import TensorProto, helper
+
+    graph = helper.make_graph([helper.make_node("Identity", ["x"], ["y"])], "g",
+                              [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1, 3, 4, 4])],
+                              [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1, 3, 4, 4])])
+    model = tmp_path / "id.onnx"
+    onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 13)]), str(model))
+    cache, tmp, home = tmp_path / "cache", tmp_path / "tmp", tmp_path / "home"
+    for d in (cache, tmp, home):
+        d.mkdir()
+    env = {**_env(tmp), "XDG_CACHE_HOME": str(cache), "HOME": str(home)}
+    code = f"from nerf2gs_plugin.utils.onnx_model import open_session; open_session({str(model)!r}, ['CPUExecutionProvider'])"
+    r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert [str(p.relative_to(tmp_path)) for d in (cache, tmp, home) for p in d.rglob("*")] == []
