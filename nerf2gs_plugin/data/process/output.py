@@ -14,7 +14,7 @@ import shutil
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator, Optional
+from typing import Iterator
 
 from nerf2gs_plugin.errors import DataError
 
@@ -110,12 +110,11 @@ def claimed_output(root: Path, needed_bytes: int) -> Iterator[Claim]:
     """Check the free space, make ``root/colmap`` and lock it for this run; on a failure before
     :meth:`Claim.keep`, remove the folders this run made."""
     root = Path(root)
-    check_free_space(root, needed_bytes)
+    check_free_space(root, needed_bytes - _size_of(root))  # a re-run rewrites files already there
     claim = Claim(root)
     _make(claim.work, claim.made)
-    fd: Optional[int] = None
+    fd = _lock(claim.work / LOCK_NAME)  # refused: the folders are the other run's now, left alone
     try:
-        fd = _lock(claim.work / LOCK_NAME)
         yield claim
     except BaseException:
         if not claim.kept:
@@ -123,9 +122,20 @@ def claimed_output(root: Path, needed_bytes: int) -> Iterator[Claim]:
                 shutil.rmtree(p, ignore_errors=True)
         raise
     finally:
-        if fd is not None:
-            fcntl.flock(fd, fcntl.LOCK_UN)
-            os.close(fd)
+        fcntl.flock(fd, fcntl.LOCK_UN)
+        os.close(fd)
+
+
+def _size_of(root: Path) -> int:
+    """Bytes in the files under ``root`` (0 when it does not exist)."""
+    total = 0
+    for dirpath, _, files in os.walk(root):
+        for f in files:
+            try:
+                total += os.lstat(os.path.join(dirpath, f)).st_size
+            except OSError:
+                continue
+    return total
 
 
 def colmap_logs_into(folder: Path) -> None:

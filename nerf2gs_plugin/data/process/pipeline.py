@@ -79,6 +79,10 @@ def _silence_colmap(logs: Path) -> None:
     from nerf2gs_plugin.data.process.output import colmap_logs_into
 
     pycolmap.logging.minloglevel = 2  # errors only: COLMAP's INFO stream would bury the progress bars
+    # its errors go to the log file (pycolmap also copies every message to stderr by default): the
+    # run's own error is the one line there
+    pycolmap.logging.alsologtostderr = False
+    pycolmap.logging.stderrthreshold = 3
     colmap_logs_into(logs)  # not the system temp folder
 
 
@@ -131,11 +135,12 @@ def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=Non
             times["matching"] = time.perf_counter() - t
             t = time.perf_counter()
             mapped = sfm.reconstruct(work / "database.db", frame_dir, work / "distorted", len(names), opts.sfm, changed, progress,
-                                     content=content)
+                                     content=content, method=method)
             times["mapping"] = time.perf_counter() - t
             if mapped.registered < opts.min_registered_fraction * len(names):
                 raise DataError(f"registration failed: only {mapped.registered} of {len(names)} frames registered (fewer than "
-                                f"{opts.min_registered_fraction:.0%}); try --matching exhaustive, more overlap, or less blur", root)
+                                f"{opts.min_registered_fraction:.0%}); try {'' if method == 'exhaustive' else '--matching exhaustive, '}"
+                                "more overlap, or less blur", root)
             t = time.perf_counter()
             und = export.undistort(mapped.model_dir, frame_dir, work / "undistorted", progress)
             export.install_images(und / "images", root)

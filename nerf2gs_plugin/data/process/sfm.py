@@ -221,7 +221,7 @@ class MapResult:
 
 
 def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOptions, matches_changed: bool, progress=None,
-                content: str = "") -> MapResult:
+                content: str = "", method: str = "") -> MapResult:
     """Incremental mapping; the largest model is kept as ``out_dir/0`` (reused when its marker records the
     same options and frames' ``content`` and the matches did not change)."""
     import pycolmap
@@ -281,8 +281,9 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
             progress.update(task, completed=0, stats=f"retry {attempt + 1}: {best.num_reg_images() if best else 0} registered")
     if best is None:
         shutil.rmtree(work, ignore_errors=True)
-        raise DataError(f"registration failed: 0 of {total} images registered (no initial pair; try --matching exhaustive, "
-                        "more frames, or less blur)", image_dir)
+        hint = "" if method == "exhaustive" else "--matching exhaustive, "  # not when it was exhaustive already
+        raise DataError(f"registration failed: 0 of {total} images registered (no initial pair; try {hint}more frames, or less blur)",
+                        image_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     final.mkdir(parents=True, exist_ok=True)
     best.write(str(final))
