@@ -32,3 +32,8 @@ class CheckpointError(UserError):
 
 class TrainingDiverged(UserError):
     """NaN/inf in the loss or the parameters; the last good checkpoint is kept."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (a scheduler's preemption, ``kill``): cleaned up like Ctrl-C, but the command exits
+    143 (128 + SIGTERM), not SIGINT's 130 (see :func:`nerf2gs_plugin.cli.common.exit_on_sigterm`)."""

@@ -8,13 +8,9 @@ import sys
 import threading
 from typing import Callable, TypeVar
 
-from nerf2gs_plugin.errors import UserError
+from nerf2gs_plugin.errors import Terminated, UserError
 
 T = TypeVar("T")
-
-
-class Terminated(KeyboardInterrupt):
-    """SIGTERM (a scheduler's preemption, ``kill``): cleaned up like Ctrl-C, but exits 143, not 130."""
 
 
 def _raise_terminated(signum, frame) -> None:  # noqa: ARG001

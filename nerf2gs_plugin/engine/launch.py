@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import signal
 import socket
 import sys
 import tempfile
@@ -26,7 +27,7 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 from urllib.parse import urlparse
 
-from nerf2gs_plugin.errors import ConfigError, UserError
+from nerf2gs_plugin.errors import ConfigError, Terminated, UserError
 
 ENV_VARS = ("RANK", "WORLD_SIZE", "LOCAL_RANK", "MASTER_ADDR", "MASTER_PORT")
 
@@ -122,6 +123,8 @@ def _failure(e: BaseException) -> tuple[int, bool, str]:
         if isinstance(e.code, int) or e.code is None:
             return e.code or 0, False, f"exited with code {e.code}"
         return 1, False, str(e.code)
+    if isinstance(e, Terminated):
+        return 128 + signal.SIGTERM, False, "terminated"
     if isinstance(e, KeyboardInterrupt):
         return 130, False, "interrupted"
     return 2 if isinstance(e, UserError) else 1, _is_peer_failure(e), _one_line(e)
@@ -163,7 +166,7 @@ def run_rank(fn: Callable[..., Any], config: Any, *args: Any, error_dir: Optiona
             Path(error_dir, f"rank{rank}").write_text(f"{time.time()!r}\t{int(peer)}\t{code}\t{line}")
         elif isinstance(e, KeyboardInterrupt):
             if rank == 0:
-                print("interrupted", file=sys.stderr, flush=True)
+                print(line, file=sys.stderr, flush=True)
         elif not peer:
             print(f"error: rank {rank}: {line}", file=sys.stderr, flush=True)
     finally:
@@ -223,8 +226,8 @@ def launch(fn: Callable[..., Any], config: Any, *args: Any) -> None:
             for p in procs:
                 p.join()
             rank, code, line = _first_failure(error_dir, procs, failed, int(env["RANK"]))
-            if code == 130:
-                print("interrupted", file=sys.stderr)
+            if code in (130, 128 + signal.SIGTERM):
+                print("interrupted" if code == 130 else "terminated", file=sys.stderr)
             else:
                 print(f"error: rank {rank}: {line}", file=sys.stderr)
             sys.exit(code)

@@ -235,4 +235,5 @@ def test_os_errors_in_any_front_end_are_one_line(capsys):
 
     with pytest.raises(SystemExit) as e:
         run_cli(main)
-    assert e.value.code == 2 and capsys.readouterr().err == "error: /out/eval.json: No space left on device\n"
+    err = capsys.readouterr().err  # the disk too: its mount point and what is left on it
+    assert e.value.code == 2 and err.startswith("error: /out/eval.json: No space left on device (") and err.count("\n") == 1
