@@ -97,7 +97,7 @@ def check_options(opts: ProcessOptions) -> None:
 def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=None, size_hint: tuple[int, float] = (0, 0.0)) -> ProcessReport:
     """``frames_fn(frame_dir, progress) -> FrameReport`` makes the frames; the rest is shared. ``size_hint``:
     (frames, bytes per frame) expected, for the free-space check (:mod:`.output`)."""
-    from nerf2gs_plugin.data.process import export, sfm
+    from nerf2gs_plugin.data.process import sfm
     from nerf2gs_plugin.data.process.output import LOGS, claimed_output, estimate_bytes, expected_pairs
     from nerf2gs_plugin.progress import make_progress
 
@@ -106,69 +106,86 @@ def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=Non
     frames_n, frame_bytes = size_hint
     pairs = expected_pairs(frames_n, sfm.choose_matching(opts.sfm, frames_n, is_video), opts.sfm)
     with claimed_output(root, estimate_bytes(frames_n, frame_bytes, opts.sfm.max_features, pairs)) as claim:
-        work = claim.work
-        frame_dir = work / "frames"
+        frame_dir = claim.work / "frames"
         times: dict[str, float] = {}
         with make_progress(enabled=opts.progress) as progress:
             t = time.perf_counter()
             fr = frames_fn(frame_dir, progress)
             times["frames"] = time.perf_counter() - t
             claim.keep()  # frames made and checked: worth resuming from here on
-            _silence_colmap(work / LOGS)
-            names = fr.names
+            _silence_colmap(claim.work / LOGS)
             for p in frame_dir.iterdir():  # frames of an earlier run with other options
-                if p.is_file() and p.name not in set(names):
+                if p.is_file() and p.name not in set(fr.names):
                     p.unlink()
-            hashes = frame_hashes(frame_dir, names)
-            content = sfm.content_key(hashes)
-            focal = focal_px_fn(frame_dir, names) if focal_px_fn else None
-            if opts.fov_deg is not None:
-                from nerf2gs_plugin.data.images import image_size
-
-                focal = 0.5 * image_size(frame_dir / names[0])[0] / np.tan(np.radians(opts.fov_deg) / 2)
-            t = time.perf_counter()
-            sfm.extract(work / "database.db", frame_dir, names, opts.sfm, focal, progress, hashes=hashes)
-            times["features"] = time.perf_counter() - t
-            method = sfm.choose_matching(opts.sfm, len(names), is_video)
-            t = time.perf_counter()
-            changed = sfm.match(work / "database.db", method, opts.sfm, work / "matching.json", progress, content=content)
-            times["matching"] = time.perf_counter() - t
-            t = time.perf_counter()
-            mapped = sfm.reconstruct(work / "database.db", frame_dir, work / "distorted", len(names), opts.sfm, changed, progress,
-                                     content=content, method=method)
-            times["mapping"] = time.perf_counter() - t
-            if mapped.registered < opts.min_registered_fraction * len(names):
-                raise DataError(f"registration failed: only {mapped.registered} of {len(names)} frames registered (fewer than "
+            method, mapped = _sfm_stages(claim.work, fr.names, opts, is_video, focal_px_fn, progress, times)
+            if mapped.registered < opts.min_registered_fraction * len(fr.names):
+                raise DataError(f"registration failed: only {mapped.registered} of {len(fr.names)} frames registered (fewer than "
                                 f"{opts.min_registered_fraction:.0%}); try {'' if method == 'exhaustive' else '--matching exhaustive, '}"
                                 "more overlap, or less blur", root)
-            t = time.perf_counter()
-            und = export.undistort(mapped.model_dir, frame_dir, work / "undistorted", progress)
-            export.install_images(und / "images", root)
-            dst = root / "sparse" / "0"
-            shutil.rmtree(dst, ignore_errors=True)
-            dst.parent.mkdir(parents=True, exist_ok=True)
-            os.replace(und / "sparse", dst)
-            shutil.rmtree(und, ignore_errors=True)  # the images left there are those already in place
-            times["undistort"] = time.perf_counter() - t
-            t = time.perf_counter()
-            import pycolmap
-
-            rec = pycolmap.Reconstruction(str(root / "sparse" / "0"))
-            reg_names, c2w, scale, check = checked_reconstruction(root, rec, opts, is_video or method == "sequential", len(names))
-            check_line = check.pop("line")
-            export.write_downscaled(root, reg_names, progress)
-            times["export"] = time.perf_counter() - t
-            extra = {"process": {"source": "video" if is_video else "images", "frames": len(names), "registered": mapped.registered,
-                                 "kept": len(reg_names),
-                                 "matching": method, "camera_height_m": opts.camera_height, "scale_source": scale.source,
-                                 "capture_check": check}}
-            if scale.plane is not None:
-                extra["ground_plane"] = scale.plane.to_json()
-            export.write_transforms(root, rec, scale.metres_per_unit, scale.up, extra)
-            # beside, not in, transforms.json: runs fingerprint the files they read, and times change every run
-            atomic_write_text(work / TIMES_FILE, json.dumps({k: round(v, 2) for k, v in times.items()}, indent=1))
-    return ProcessReport(root, len(names), mapped.registered, mapped.points, method, scale.metres_per_unit, scale.source, times,
+            scale, check_line = _export_stages(root, mapped, method, len(fr.names), opts, is_video, progress, times)
+    return ProcessReport(root, len(fr.names), mapped.registered, mapped.points, method, scale.metres_per_unit, scale.source, times,
                          fr.dropped_blurry, check_line)
+
+
+def _sfm_stages(work: Path, names: list[str], opts: ProcessOptions, is_video: bool, focal_px_fn, progress, times: dict):
+    """Features, matching and mapping of the frames in ``work/frames``, each reused only for the same
+    frame content: (matching method, :class:`~.sfm.MapResult`)."""
+    from nerf2gs_plugin.data.process import sfm
+
+    frame_dir = work / "frames"
+    hashes = frame_hashes(frame_dir, names)
+    content = sfm.content_key(hashes)
+    focal = focal_px_fn(frame_dir, names) if focal_px_fn else None
+    if opts.fov_deg is not None:
+        from nerf2gs_plugin.data.images import image_size
+
+        focal = 0.5 * image_size(frame_dir / names[0])[0] / np.tan(np.radians(opts.fov_deg) / 2)
+    t = time.perf_counter()
+    sfm.extract(work / "database.db", frame_dir, names, opts.sfm, focal, progress, hashes=hashes)
+    times["features"] = time.perf_counter() - t
+    method = sfm.choose_matching(opts.sfm, len(names), is_video)
+    t = time.perf_counter()
+    changed = sfm.match(work / "database.db", method, opts.sfm, work / "matching.json", progress, content=content)
+    times["matching"] = time.perf_counter() - t
+    t = time.perf_counter()
+    mapped = sfm.reconstruct(work / "database.db", frame_dir, work / "distorted", len(names), opts.sfm, changed, progress,
+                             content=content, method=method)
+    times["mapping"] = time.perf_counter() - t
+    return method, mapped
+
+
+def _export_stages(root: Path, mapped, method: str, frames: int, opts: ProcessOptions, is_video: bool, progress, times: dict):
+    """Undistortion and the dataset layout (:mod:`.export`) with the capture check: (metric scale, check line)."""
+    import pycolmap
+
+    from nerf2gs_plugin.data.process import export
+
+    work = root / "colmap"
+    t = time.perf_counter()
+    und = export.undistort(mapped.model_dir, work / "frames", work / "undistorted", progress)
+    export.install_images(und / "images", root)
+    dst = root / "sparse" / "0"
+    shutil.rmtree(dst, ignore_errors=True)
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    os.replace(und / "sparse", dst)
+    shutil.rmtree(und, ignore_errors=True)  # the images left there are those already in place
+    times["undistort"] = time.perf_counter() - t
+    t = time.perf_counter()
+    rec = pycolmap.Reconstruction(str(root / "sparse" / "0"))
+    reg_names, c2w, scale, check = checked_reconstruction(root, rec, opts, is_video or method == "sequential", frames)
+    check_line = check.pop("line")
+    export.write_downscaled(root, reg_names, progress)
+    times["export"] = time.perf_counter() - t
+    extra = {"process": {"source": "video" if is_video else "images", "frames": frames, "registered": mapped.registered,
+                         "kept": len(reg_names),
+                         "matching": method, "camera_height_m": opts.camera_height, "scale_source": scale.source,
+                         "capture_check": check}}
+    if scale.plane is not None:
+        extra["ground_plane"] = scale.plane.to_json()
+    export.write_transforms(root, rec, scale.metres_per_unit, scale.up, extra)
+    # beside, not in, transforms.json: runs fingerprint the files they read, and times change every run
+    atomic_write_text(work / TIMES_FILE, json.dumps({k: round(v, 2) for k, v in times.items()}, indent=1))
+    return scale, check_line
 
 
 def frame_hashes(frame_dir: Path, names: list[str]) -> dict[str, str]:
