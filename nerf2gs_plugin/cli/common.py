@@ -28,22 +28,17 @@ def exit_on_sigterm():
 
 def _disk_line(e: OSError) -> str:
     """ENOSPC / EDQUOT: the file, the reason and the disk (its mount point and what is left on it)."""
-    import os
-    import shutil
     from pathlib import Path
 
+    from nerf2gs_plugin.utils.disk import free_bytes, mount_point
+
     line = f"{e.filename}: {e.strerror}" if e.filename else str(e.strerror or e)
-    folder = Path(e.filename).absolute().parent if e.filename else Path.cwd()
-    while not folder.exists() and folder != folder.parent:
-        folder = folder.parent
-    mount = folder
-    while not os.path.ismount(mount) and mount != mount.parent:
-        mount = mount.parent
+    where = Path(e.filename).parent if e.filename else Path.cwd()
     try:
-        free = shutil.disk_usage(folder).free
+        free = free_bytes(where)
     except OSError:
         return line
-    return f"{line} ({free / 1e6:.0f} MB free on {mount}; free space there or choose another output folder)"
+    return f"{line} ({free / 1e6:.0f} MB free on {mount_point(where)}; free space there or choose another output folder)"
 
 
 def run_cli(main: Callable[[], T]) -> T:

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Iterator
 
 from nerf2gs_plugin.errors import DataError
+from nerf2gs_plugin.utils.disk import free_bytes, mount_point
 
 LOCK_NAME = "process.lock"
 LOGS = "logs"
@@ -34,24 +35,9 @@ def estimate_bytes(frames: int, frame_bytes: float, max_features: int, pairs: in
     return int(frames * frame_bytes * COPIES + 1.5 * db + MARGIN_BYTES)
 
 
-def _existing(path: Path) -> Path:
-    path = path.absolute()
-    while not path.exists() and path != path.parent:
-        path = path.parent
-    return path
-
-
-def mount_point(path: Path) -> Path:
-    """The mount point of the disk that holds ``path`` (or would hold it)."""
-    path = _existing(Path(path))
-    while not os.path.ismount(path) and path != path.parent:
-        path = path.parent
-    return path
-
-
 def check_free_space(root: Path, needed: int) -> None:
     """A :class:`DataError` naming the disk when it has less than ``needed`` bytes free."""
-    free = shutil.disk_usage(_existing(Path(root))).free
+    free = free_bytes(root)
     if free < needed:
         raise DataError(f"not enough free space on {mount_point(root)} ({free / MB:.1f} MB free, about {needed / MB:.1f} MB "
                         "needed): free space there or choose another --out", root)
