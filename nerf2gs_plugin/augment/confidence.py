@@ -1,4 +1,4 @@
-"""How well the reference knows each pixel it rendered for the target (issue 23, ``--augment.confidence``).
+"""How well the reference knows each pixel it rendered for the target (``--augment.confidence``).
 
 A reference's render is trustworthy where its training cameras saw the surface it shows, and a
 guess elsewhere (rooftops and facade tops from above, the road behind a parked car that never

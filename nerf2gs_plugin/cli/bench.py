@@ -231,7 +231,7 @@ def bench_enhancer(data: Path, runs_root: Path, scale: str, prior: Optional[Path
     """Train (once) the built-in enhancer on this dataset and the bench's StreetNeRF run (trained
     first, or reused: the plan then reuses it too); returns the --augment.enhancer spec. Without
     the reference's own renders the enhancer learns only synthetic degradations, which made real
-    bird's-eye renders worse (measured once, -0.14 dB; not a committed result)."""
+    bird's-eye renders worse."""
     from nerf2gs_plugin.data import folder_fingerprint
     from nerf2gs_plugin.enhancer.bench import bench_prior, ensure_bench_enhancer
 

@@ -46,7 +46,7 @@ def train(config: TrainerConfig, baseline: Optional[Path] = None) -> None:
     # a scheduler's preemption signal saves like Ctrl-C (then exits 143)
     exit_on_sigterm()
     report = None
-    if config.augment_from is not None and rank() == 0:  # point 5 of issue 18: say so before training on a weaker reference
+    if config.augment_from is not None and rank() == 0:  # say so before training on a weaker reference
         from nerf2gs_plugin.eval.reference_check import reference_report
 
         line, doc = reference_report(config.augment_from, baseline)

@@ -101,7 +101,7 @@ def check_points3d_bin(path: Path) -> int:
     head = struct.Struct("<Q3d3BdQ")
     buf, size = r.buf, len(r.buf)
     pos = r.pos
-    for i in range(n):  # a loop over records, not pixels: ~1 s per million points
+    for i in range(n):  # a Python loop, but over records, not pixels
         if pos + head.size > size:
             r.pos = pos
             raise r.fail(f"truncated: point {i} of {n}")

@@ -2,12 +2,11 @@
 steady height over a road moves parallel to it.
 
 Why: the RANSAC plane of ``data/ground.py`` rests on the sparse points below the cameras, which a
-forward drive at low resolution gives few of (48 inliers of 660 points on the bench's street), and
-its tilt along the drive is then off by degrees: refitted in the reference's normalised world, the
-camera heights above it ran from 6.2 m to 2.4 m along a 3 m drive, so far road lay metres off the
-plane (levelled: 3.0-3.3 m). ``ns2gs-data process`` keeps its own plane for the metric scale:
-levelled there, the bench's scale error went from +3.4% to +5.4% (48 inliers: the offset moves a
-few centimetres either way), so that is left alone. The path itself pins that tilt down:
+forward drive at low resolution gives few of, and its tilt along the drive is then off by degrees:
+the camera heights above it change by more than half along a short drive, so far road lies metres
+off the plane. ``ns2gs-data process`` keeps its own plane for the metric scale: levelling it there
+made the bench's scale error worse (with few inliers the offset moves a few centimetres either way),
+so that is left alone. The path itself pins that tilt down:
 the plane's normal is made perpendicular to every direction the camera centres spread along (the
 drive; both axes of a path that turns), keeping the points' say about the rest (the roll of a
 straight drive), and the plane's height is refitted on the points (the densest layer below the
@@ -58,11 +57,9 @@ def upright_normal(normal: np.ndarray, cam_right: np.ndarray, centres: np.ndarra
     more than one direction free or the result is more than ``max_deg`` from ``normal``.
 
     Why: people and cars hold cameras without roll and drive parallel to the road, and hundreds of
-    camera axes pin the up down better than the few sparse points below a forward drive: on the real
-    bench's drive the RANSAC plane sits 4.1 deg off the true up and levelling it with the path alone
-    (:func:`level_normal`) 4.05 (the roll about a straight drive still comes from the points), the
-    upright direction 0.6; on castle-P30 (hand-held, 15k points) 0.66 against the plane's 0.93
-    (``benchmarks/results/ground_fit.md``)."""
+    camera axes pin the up down better than the few sparse points below a forward drive; levelling the
+    plane with the path alone (:func:`level_normal`) still takes the roll about a straight drive from
+    the points (``benchmarks/results/ground_fit.md``)."""
     n = np.asarray(normal, dtype=np.float64)
     n = n / np.linalg.norm(n)
     right = np.asarray(cam_right, dtype=np.float64).reshape(-1, 3)

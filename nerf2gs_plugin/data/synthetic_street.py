@@ -145,7 +145,7 @@ def generate_street(cfg: SynthStreetConfig) -> dict[str, Any]:
     """Write the dataset to ``cfg.out``; returns the statistics also saved in ``synth_stats.json``.
 
     Runs single-threaded: the work is many small tensor ops, which intra-op threads slow down on
-    a shared CPU (measured 4x slower with 2 threads under load)."""
+    a shared CPU."""
     _check(cfg)
     threads = torch.get_num_threads()
     torch.set_num_threads(1)

@@ -96,7 +96,7 @@ class EnhancerTrainConfig:
     seed: int = 0
     threads: int = 0
     """Torch threads; 0 = auto: all cores on an idle machine, 1 on a busy one (OpenMP threads that
-    wait for each other on oversubscribed cores made a step ~10x slower in our measurements)."""
+    wait for each other on oversubscribed cores make a step many times slower)."""
     progress: bool = True
 
 

@@ -109,10 +109,10 @@ def _nearest_rotation(M: np.ndarray) -> np.ndarray:
 class LocalAlignment:
     """Maps cameras from the true frame into an estimated one by the training cameras around each.
 
-    Why: one Sim(3) leaves each camera with the SfM's slowly drifting orientation error (1-3 deg on
-    a 30-frame drive of 200x112 frames); an eval camera mapped by it looks 1-3 deg off where the
-    models, fitted to the estimated training cameras, expect it, and that alone costs ~3 dB (the
-    real bench's ``real_rotation_check.md``) whatever the models learnt. Here each camera gets the
+    Why: one Sim(3) leaves each camera with the SfM's slowly drifting orientation error; an eval camera
+    mapped by it looks a few degrees off where the models, fitted to the estimated training cameras,
+    expect it, and that alone costs PSNR (the real bench's ``real_rotation_check.md``) whatever the
+    models learnt. Here each camera gets the
     rotation and offset that carry its true neighbours onto their estimated selves (Gaussian weights
     over the distance to the training centres beyond the nearest, ``sigma`` in true units), the scale
     stays the global one. It reads only training cameras, never an eval image or a model, so every

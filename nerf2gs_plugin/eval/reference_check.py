@@ -1,6 +1,6 @@
 """Is the reference worth inheriting? Its measured held-out PSNR against the target's baseline.
 
-Issue 18, point 5: before a target trains on a reference's views (``--augment-from``), say in the
+Before a target trains on a reference's views (``--augment-from``), say in the
 run's log, with the measured numbers, whether the reference is weaker than the target trained
 without it. The numbers are the ones already measured in each run folder (``eval.json`` from
 ``ns2gs-eval``, or a bench's ``bench_eval*.json``), never recomputed here: this runs before

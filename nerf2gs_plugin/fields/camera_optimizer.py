@@ -1,7 +1,7 @@
 """Learnable per-training-image pose corrections (nerfstudio's camera optimizer, SO3xR3 mode).
 
-On a real capture the training poses come from our own SfM and carry its error (the real bench:
-1.4 deg, 0.3% ATE on the embedded street). With ``mode="SO3xR3"`` every training image gets a
+On a real capture the training poses come from our own SfM and carry its error. With
+``mode="SO3xR3"`` every training image gets a
 6-vector ``[t, r]`` (:mod:`nerf2gs_plugin.utils.lie`), initialised to zero and trained with the
 model by its own optimizer group (``camera_opt``) plus a small L2 penalty that keeps the
 whole set from drifting (a gauge the images cannot fix). Only TRAINING rays are corrected: eval and
@@ -11,14 +11,9 @@ images (augmentation views: bird's-eye renders) are never corrected.
 Any ray or splatting method can hold one: rays go through :meth:`CameraOptimizer.apply_to_rays`,
 whole cameras through :meth:`CameraOptimizer.apply_to_cameras`.
 
-Measured with StreetNeRF at CPU scale (400 steps, one thread on a shared 2-core EPYC; 2026-11-24,
-not a committed table): it does NOT help there, so it stays off. On ``ns2gs-bench real``'s estimated
-capture the refined poses ended further from the truth than the SfM's (after the Sim(3) alignment:
-ATE 0.31% -> 0.82%, rotation 1.40 -> 1.93 deg) and StreetNeRF lost 0.76 / 0.59 / 0.34 dB street /
-bev_1 / bev_2; a 200-step linear warm-up of its rate, a third of the rate, or removing the common
-correction of all cameras did not turn that round. On a second street (synthetic, seed 7) with every
-training pose moved by 1.5 deg and 0.3 m, the rotations improved a little (1.50 -> 1.38 deg) but the
-centres drifted away (0.30 -> 1.08 m) and street PSNR fell 18.88 -> 17.53 dB. A few hundred steps
+Off by default: at CPU scale (a few hundred StreetNeRF steps) it does not help; on an SfM capture the
+refined poses ended further from the truth than the SfM's, and on a street with perturbed poses the
+centres drifted away (docs/methods.md). A few hundred steps
 leave the field too blurry for its translation gradient to point home (the tiny-scene test shows a
 basin of ~2 px; outside it the colour loss is as happy moving away); nerfstudio runs it for 30k steps.
 """

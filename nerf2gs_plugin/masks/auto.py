@@ -32,8 +32,8 @@ class AutoOptions:
     """Sky: only regions that reach the image's top row (a see-through patch in a facade does not)."""
     sky_fill_holes: bool = False
     """Sky: fill the mask's holes (regions touching neither the left, right nor bottom row: clouds the
-    mask-less reference gave density). Off by default: sky IoU 0.705 -> 0.781 on one validation street,
-    0.722 -> 0.697 on the other (benchmarks/results/auto_masks_seed{7,3}_video4.md)."""
+    mask-less reference gave density). Off by default: it helped one validation street and hurt the
+    other (benchmarks/results/auto_masks_seed{7,3}_video4.md)."""
     horizon_margin_deg: float = 2.0
     """Sky may reach this far below the ground plane's horizon."""
     ground_tol_m: float = 0.5
@@ -44,10 +44,9 @@ class AutoOptions:
     (0: per pixel)."""
     ground_empty: bool = True
     """Ground also where a downward ray meets nothing in the reference (accumulation below 0.5 after
-    the median): a short reference leaves the textureless road near the camera see-through. Measured
-    through the real-capture path on three synthetic streets (same renders, this rule off -> on):
-    ground IoU 0.751 -> 0.762 (seed 0), 0.596 -> 0.723 (seed 7), 0.605 -> 0.684 (seed 3), recall up
-    0.02-0.17, precision not down (benchmarks/results/auto_masks_seed*.md)."""
+    the median): a short reference leaves the textureless road near the camera see-through. On three
+    synthetic streets it raised ground IoU and recall without lowering precision
+    (benchmarks/results/auto_masks_seed*.md)."""
     ground_normals: bool = False
     """Also require the rendered normal (from depth differences) within 30 deg of up."""
     transient_k: float = 3.0

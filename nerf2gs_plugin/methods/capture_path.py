@@ -2,9 +2,8 @@
 
 Why: whoever carried the camera (a car, a person) stood on its path, so nothing the scene holds lies
 within about a metre of it; yet a splatting model puts semi-transparent primitives there when the
-training views' far backgrounds need them (castle-P30: a dozen Gaussians 0.3-1.7 m from the path
-blacked out a held-out photo taken 3.7 m from the nearest training camera, 8.9 dB;
-``benchmarks/results/near_camera_floaters.md``). Every view later rendered from the road stands on
+training views' far backgrounds need them (on castle-P30 a dozen such Gaussians blacked out a held-out
+photo: ``benchmarks/results/near_camera_floaters.md``). Every view later rendered from the road stands on
 that path, so these are the floaters users see first.
 
 The path is the training cameras' centres joined in capture order; a join longer than

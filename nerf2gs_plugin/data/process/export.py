@@ -79,7 +79,7 @@ def install_images(src: Path, root: Path) -> None:
 
     A re-run of ``process`` on the same model writes the same bytes: those files are left as they are
     (with their ``images_{2,4,8}`` copies), so a run reading the capture meanwhile never finds a file
-    missing (the folder used to be removed and written again). A changed image loses its copies, which
+    missing. A changed image loses its copies, which
     :func:`write_downscaled` makes again; an image no longer in ``src`` is removed with its copies.
     """
     import filecmp

@@ -1,8 +1,8 @@
 """Is the reconstruction one scale along the capture? A check of the camera's height above its own road.
 
 Why: incremental SfM can register every frame and still join two stretches of a capture at different
-scales (the synthetic street's drive down and back: 120 of 120 registered, each pass within 0.04% ATE,
-the second pass 25x the scale of the first). A registered count does not show it, and the metric
+scales (the synthetic street's drive down and back: every frame registered, each pass accurate, the
+second pass many times the scale of the first). A registered count does not show it, and the metric
 scale, set from the median camera height, is then wrong for one of the stretches. A car or a walker
 carries the camera at about one height, so the camera's height above the road it sees, in SfM units,
 should be about constant along the capture; a stretch where it jumps by several times is a join at
@@ -13,10 +13,9 @@ Each camera's local height is read from its own observations: the sparse points 
 their distance), of which the road is the lowest surface, so a high percentile of their drops below
 the camera is its height above the road. Scale-free: only ratios of heights are compared.
 
-A join can also keep the scale and misplace the second stretch along the path (the forward drive's
-120 frames once came out as two halves 13% apart in scale and 5 frame spacings apart along the
-street, ATE 14% where each half had 0.03%): the camera's step from one frame to the next (in name
-order) then jumps. :func:`path_jump` finds the largest step against the
+A join can also keep the scale and misplace the second stretch along the path (a forward drive came
+out as two accurate halves a few frame spacings apart along the street): the camera's step from one
+frame to the next (in name order) then jumps. :func:`path_jump` finds the largest step against the
 steps around it.
 """
 
@@ -30,20 +29,18 @@ import numpy as np
 MAX_HEIGHT_JUMP = 4.0
 """The largest ratio between the median local camera heights of two stretches of one capture that is
 still one scale. A mount's height above its road moves by well under 2x (slopes, kerbs, a walker's
-stride); on four good captures the largest ratio measured was 1.10, at a wrong join 25x (and 1.14 at
-a join that kept the scale: the path check's case; benchmarks/results/scale_check.md)."""
+stride); good captures stay far below it and wrong joins far above (a join that keeps the scale is the
+path check's case; benchmarks/results/scale_check.md)."""
 DROP_PERCENTILE = 90.0
 """The percentile of a camera's drops to the points below it taken as its height: the road is the
 lowest surface it sees, most points lie above it (facades, cars)."""
 MAX_STEP_JUMP = 4.0
 """The largest step between consecutive frames of an ordered capture (a video, or photos matched
 sequentially), over the median of the steps around it, that is still one path: a video's frames come
-at one rate, and a blurry frame dropped doubles one step (measured: 1.40x at most on two good ordered
-captures, 6.2x and 18.8x at wrong joins)."""
+at one rate, and a blurry frame dropped doubles one step; a wrong join jumps far more."""
 MAX_STEP_JUMP_PHOTOS = 10.0
 """The same for a photo set matched exhaustively (its name order may not be a path): a walker's photos
-jump (castle-P30: 5.7x between its first two), a wrong join more (the down-and-back drive matched
-exhaustively: 55x at the join of its passes, 20x where a frame of the first pass was misplaced)."""
+jump, a wrong join (two passes joined, a frame misplaced) jumps more."""
 STEP_WINDOW = 5
 """Steps on each side a step is compared with."""
 MIN_POINTS_BELOW = 10

@@ -29,8 +29,8 @@ class SfmOptions:
     overlap: int = 10
     """Sequential matching's window. With --quadratic-overlap (the default, as COLMAP's and nerfstudio's)
     pycolmap 4 pairs each frame with the frames 1, 2, 4, ..., 2^(overlap-1) after it, so any overlap
-    above log2 of the frame count gives the same pairs (measured on 30 frames: overlap 5, 10 and 20 all
-    match the frames 1, 2, 4, 8 and 16 apart); --no-quadratic-overlap: the frames 1..overlap after it,
+    above log2 of the frame count gives the same pairs (on 30 frames, overlap 5, 10 and 20 all match the
+    frames 1, 2, 4, 8 and 16 apart); --no-quadratic-overlap: the frames 1..overlap after it,
     then those hops too."""
     quadratic_overlap: bool = True
     vocab_tree: Optional[Path] = None
@@ -39,7 +39,7 @@ class SfmOptions:
     """Sequential matching without --vocab-tree: each frame is also matched with its N most similar
     frames outside the window (a bag of words learned on the capture's own SIFT features: closes loops
     with no vocabulary file; 0: off, the default: a drive that never comes back gains nothing, and on
-    castle-P30 3 pairs cost 17% more SfM time for ATE 0.109 vs 0.117%)."""
+    castle-P30 they cost SfM time for hardly better poses)."""
     max_image_size: int = 1600
     """SIFT runs on images shrunk to this longest side (speed; the full image is still undistorted)."""
     max_features: int = 4096
@@ -260,8 +260,8 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
             options.mapper.abs_pose_refine_focal_length = options.mapper.abs_pose_refine_extra_params = False
         if attempt > 0:
             # accept what a forward-moving camera gives: smaller angles, fewer inliers. COLMAP's default
-            # initial pair needs a 16 deg triangulation angle, which 120 frames 0.5 m apart of a forward
-            # drive never reach (2 of 120 registered); with these, 120 of 120 (ATE 0.04%)
+            # initial pair needs a 16 deg triangulation angle, which the closely spaced frames of a forward
+            # drive never reach (almost nothing registers); with these, every frame does
             options.mapper.init_min_tri_angle = 8.0
             options.mapper.init_max_forward_motion = 0.99
             options.mapper.abs_pose_min_num_inliers = 15

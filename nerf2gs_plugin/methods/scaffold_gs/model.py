@@ -78,13 +78,13 @@ class ScaffoldGSModelConfig(SplatModelConfig):
     training resolution) x the growing steps (update-until - update-from) over this, the larger of this and the
     growth budget below, at most max-anchors. An anchor spawns n-offsets (10) neural Gaussians: 540,000 is
     Splatfacto's 54,000 pixel-steps per Gaussian for each of them. On the synthetic streets it binds only with
-    NeRF views at the default scale (their 60 views from above double the pixels: ~6.7k anchors, where the
-    growth budget stops at ~4.5k, 0.51 dB below the uncapped best: benchmarks/results/prune_margin/)."""
+    NeRF views at the default scale (their views from above double the pixels, and the growth budget alone
+    stopped below the uncapped best: benchmarks/results/prune_margin/)."""
     anchor_growth: float = 1.25
     """0 = off (both off: the fixed max-anchors). Else the anchors' soft budget is this many times the initial
     anchors (the voxelised sparse points: what the capture's structure gave), the larger of this and the pixel
-    budget above when both are on, at most max-anchors. Scaffold-GS's neural Gaussians carry the detail: growth bought
-    0.03-0.35 dB for 2.3-2.5x the anchors on two synthetic streets (benchmarks/results/views_budget/)."""
+    budget above when both are on, at most max-anchors. Scaffold-GS's neural Gaussians carry the detail: more
+    growth bought little for over twice the anchors on two synthetic streets (benchmarks/results/views_budget/)."""
 
 
 class ScaffoldGSModel(Model):

@@ -69,17 +69,15 @@ class SplatfactoModelConfig(SplatModelConfig):
     window / 54,000 and 2 Gaussians per sparse point, at most 60k; once densification stops the Gaussians
     carrying the lightest 10% of the training views' blending weight are pruned (benchmarks/results/size_prune.md);
     every prune keeps 1 m around the capture path free (benchmarks/results/path_clearance.md). The pixel
-    term meets issue 20's size target on two synthetic streets (benchmarks/results/views_budget/), the
+    term meets the model-size target on two synthetic streets (benchmarks/results/views_budget/), the
     point term keeps a real courtyard's Gaussians (castle-P30's validation photos: benchmarks/results/scene_budget/)."""
     depth_loss_weight: float = 0.1
     """Sparse-point depth (0: off): weight of mean_p A_p * min(|D_p - z_p| / z_p, 1) over the sparse
     points a training view sees (methods/point_visibility.py), D the rendered expected depth and A the
     accumulation at the point's pixel (a weight only, no gradient), z the point's depth: gsplat's depth_loss in the bounded form of
     StreetNeRF's point depth. A Gaussian that floats in front of a surface the SfM saw pulls D short of z.
-    0.1 chosen on validation views, two seeds each (benchmarks/results/depth_loss.md): the streets' val views
-    21.43 -> 21.58 and 20.98 -> 21.37 dB, castle-P30's validation photos 24.02 -> 25.36 (the veil of
-    near-camera Gaussians over one photo gone); 0.2 gave castle 25.05 (one seed). Not measured at the paper
-    scale (the same value there)."""
+    0.1 chosen on the validation views of two streets and castle-P30 (benchmarks/results/depth_loss.md; it
+    lifts the veil of near-camera Gaussians over one photo); the paper scale keeps the same value."""
     mcmc: MCMCStrategyConfig = field(default_factory=lambda: MCMCStrategyConfig(
         cap_max=30000, refine_start_iter=300, refine_stop_iter=2500))
     """The MCMC strategy at CPU scale (with --pipeline.model.strategy-type mcmc): 30k-Gaussian hard budget."""

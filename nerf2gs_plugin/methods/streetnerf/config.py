@@ -3,11 +3,8 @@
 Default (CPU scale: the synthetic street at ~200x112 px on 2 CPU cores, well under 20 minutes):
 see ``DEFAULT_STEPS``, 1024 rays per batch, a 12-level 2^15 hash grid, proposal rounds 48 -> 24 ->
 24 fine samples. The learning rates decay over ``max_num_iterations`` whatever it is set to.
-Measured on the synthetic street (ns2gs-data synth-street defaults, 200x112, 60 views; shared 2-core
-Xeon, load 3-5, `ns2gs-bench paper-table --scale default`): 3000 steps in 753 s; street / bev_1 / bev_2
-PSNR 26.47 / 23.69 / 21.93 (Splatfacto's default run in the same bench: 24.36 / 19.68 / 19.02). Without
-the sparse-point depth loss (quick bench, 1500 steps) bev_1 was 18.28 dB: the upper facades stay
-half-built. Ground regularisation on vs off: see `ns2gs-bench ablation`.
+Without the sparse-point depth loss the upper facades stay half-built. Times and PSNR: docs/results
+(`ns2gs-bench paper-table`); ground regularisation on vs off: `ns2gs-bench ablation`.
 
 Paper scale (``streetnerf_paper_method``, :func:`paper_scale`): Zip-NeRF/nerfacto-like capacity for
 a GPU: 16 levels x 2^19 entries up to 4096, proposal samples 256 -> 96 -> 48, 4096 rays, 25k steps.
@@ -31,7 +28,7 @@ PAPER_STEPS = 25000
 def streetnerf_optimizers(max_steps: int) -> dict[str, OptimizerConfig]:
     """nerfacto's Adam settings (lr 1e-2, eps 1e-15) with exponential decay to a tenth at the end: nerfacto
     decays over 200k steps, so its lr barely moves in a few thousand; decaying to 1e-4 in 3000 steps
-    starves the hash tables (measured: no learning on the tiny scene). ``camera_opt`` is used only with
+    starves the hash tables (no learning on the tiny scene). ``camera_opt`` is used only with
     ``--pipeline.model.camera-optimizer.mode SO3xR3``: nerfstudio's pose-refinement rate (6e-4), decayed
     to a tenth over the run like the others."""
     return {

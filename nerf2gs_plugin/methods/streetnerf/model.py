@@ -126,10 +126,8 @@ class StreetNeRFModelConfig(ModelConfig):
     sh_degree: int = 0
     """Degree of the view-direction encoding of colour. 0 (view-independent colour) by default: the
     bird's-eye directions were never seen in training, and a view-dependent head extrapolates them to
-    grey/dark facades (synthetic street, quick bench: bev_1/bev_2 17.27/16.69 dB at degree 3,
-    18.28/17.95 dB at degree 0, an older StreetNeRF, measured on the test views). Re-checked on the
-    validation views, which no table reports (benchmarks/results/sh_degree_val.md, 400 steps):
-    val_bev 21.15 dB at degree 0 vs 19.46 at degree 3, val_street 24.34 vs 24.08.
+    grey/dark facades (degree 0 wins from above and on the street on the validation views:
+    benchmarks/results/sh_degree_val.md).
     Raise it (nerfacto: 4) for glossy real scenes seen from the training directions only."""
     anti_alias: bool = True
     """Zip-NeRF level downweighting by the sample footprint."""
@@ -170,8 +168,8 @@ class StreetNeRFModelConfig(ModelConfig):
     appearance_reg_weight: float = 1.0
     """Weight pulling the per-image colour transforms to the identity (on their mean squared deviation).
     1e-3 left them almost free: on castle-P30 they fitted more than the photos' exposure and cost the
-    held-out photos 0.84 dB; 1.0 is +0.03 / +0.17 dB on the two synthetic streets' validation views and
-    no worse under +-1 stop of exposure stress (benchmarks/results/appearance_reg.md)."""
+    held-out photos; 1.0 is a little better on the two synthetic streets' validation views and no worse
+    under exposure stress (benchmarks/results/appearance_reg.md)."""
     point_depth_weight: float = 0.05
     """Weight of the sparse-point depth loss."""
     point_rays_per_batch: int = 256
@@ -397,7 +395,7 @@ class StreetNeRFModel(Model):
         start = self.config.ground_start_step
         if not self.ground_from_points and start // 2 <= self.step < start:
             # estimated from photometric geometry only, then frozen: updating it while the loss pulls
-            # the weights towards it feeds back and drifts (measured: 1.3 m too low on the street)
+            # the weights towards it feeds back and drifts (the plane ends up far below the road)
             self._update_ground_height(o, d, w, t_mid, acc)
         if self.step < start or not bool(self.ground_known):
             return None

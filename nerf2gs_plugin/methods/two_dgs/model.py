@@ -38,8 +38,7 @@ class TwoDGSModelConfig(SplatfactoModelConfig):
     densify_signal: Literal["lowpass", "screen"] = "screen"
     """What the densification gradient measures (see rasterize_surfels): screen is the
     projected centre's gradient as in 3DGS/2DGS/gsplat; lowpass (our first proxy) grows with the
-    surfel's size and kept 2.8x more surfels at the quick scale (43.6k vs 15.4k) for 0.7 dB less
-    from above and 0.4 dB more on the street."""
+    surfel's size and keeps far more surfels, worse from above and only a little better on the street."""
     normal_lambda: float = 0.05
     """Weight of the normal consistency loss (rendered normals vs depth normals)."""
     normal_start: int = scheduled(700)
@@ -52,11 +51,11 @@ class TwoDGSModelConfig(SplatfactoModelConfig):
     """Frame of the rasterizer's rendered normals (converted to world for the viewer)."""
     strategy: DefaultStrategyConfig = field(default_factory=lambda: cpu_scale_strategy(pixel_steps_per_gaussian=36000.0,
                                                                                        prune_margin_db=2.0))
-    """Splatfacto's CPU-scale strategy with the views' pixels x densification steps / 36,000 (~12k surfels at the
-    quick scale on the synthetic street): Splatfacto's ~8k there left 2DGS 0.6 dB below its best
-    (benchmarks/results/model_size*.md). The weight prune drops at most Splatfacto's 10% and less where the
-    surfels fit their views closely (prune-margin-db 2, chosen on the validation views of two streets at the
-    default scale, where the fixed 10% ended 0.43-0.82 dB below the unpruned best: benchmarks/results/prune_margin/)."""
+    """Splatfacto's CPU-scale strategy with the views' pixels x densification steps / 36,000, a larger budget
+    than Splatfacto's, which left 2DGS below its best (benchmarks/results/model_size*.md). The weight prune
+    drops at most Splatfacto's 10% and less where the surfels fit their views closely (prune-margin-db 2,
+    chosen on the validation views of two streets at the default scale, where the fixed 10% ended below the
+    unpruned best: benchmarks/results/prune_margin/)."""
     depth_loss_weight: float = 0.0
     """Splatfacto's sparse-point depth loss: off for 2DGS (its depth output is the median by default;
     not measured)."""
