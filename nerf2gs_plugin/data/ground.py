@@ -55,8 +55,8 @@ def fit_ground_plane(points: np.ndarray, cam_centres: np.ndarray, cam_up: Option
     its distance to the plane is below ``rel_thresh`` x the reference height, the median over the
     candidate points of the median camera's height above them along ``cam_up``. It is not each
     hypothesis's own camera height: that grows for planes tilted or far below the cameras and gave
-    them a wider band, so they won by counting walls (castle-P30: a plane 37 deg off with 7.6x the
-    true camera height, where this band finds the courtyard floor 1 deg from the true up).
+    them a wider band, so they won by counting walls (on castle-P30 a steeply tilted plane far below
+    the cameras, where this band finds the courtyard floor).
     """
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     cams = np.asarray(cam_centres, dtype=np.float64).reshape(-1, 3)

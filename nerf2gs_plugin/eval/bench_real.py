@@ -12,7 +12,7 @@ Eval cameras live in the true frame. An estimated dataset's frame is the SfM's, 
 true one by the Sim(3) that aligns its training cameras onto the true ones (``pose_eval``: the
 capture figures ATE, rotation and scale error are taken after it). Each true eval camera is mapped
 into the estimated frame by the training cameras around it (``pose_eval.LocalAlignment``: one
-Sim(3) would leave it 1-3 deg off where the models expect it, which alone costs ~3 dB) and written
+Sim(3) would leave it degrees off where the models expect it, which alone costs PSNR) and written
 into the estimated ``transforms.json`` as an eval split; the parser then normalises it with the
 estimated dataset's own normalisation, exactly as the training cameras. The ground-truth dataset
 goes through the same mapping with its own (identity) alignment, so both columns are produced by
@@ -42,7 +42,7 @@ GT_CAPTURE_POINTS = "ground_truth_capture_points"
 """The column with the true poses, scale and masks and the estimated capture's sparse points (carried
 into the true frame): what ``gain_ratio`` compares against. ``ground_truth`` has the generator's points
 (``gain_ratio_generator_points``): 4,000 samples of every surface, the road included, which no SfM finds
-- on the bench's drive they alone lifted StreetNeRF from above by ~0.7 dB."""
+- on the bench's drive they alone lift StreetNeRF from above."""
 
 
 @dataclass
@@ -55,7 +55,7 @@ class RealBenchOptions:
     """The video's frames are the street rendered at this multiple of its 200x112 (1, 2, 4 or 8: a dashcam
     hands over large frames); the SfM runs on them and the estimated column trains on ``process``'s
     ``images_<video_scale>`` copies, the ground-truth column's size. SIFT places a keypoint to about a
-    pixel: from 200x112 frames the eval cameras' local rotation noise was 0.25 deg, from 800x448 0.05."""
+    pixel, so larger frames give the eval cameras less local rotation noise."""
     reference_steps: int = 1000
     """Steps of the masks' first reference (StreetNeRF without masks)."""
     streetnerf_steps: int = 400

@@ -1,7 +1,7 @@
 """``ns2gs-bench real-photos --images DIR``: a real outdoor photo set through the whole path.
 
 ``process images`` (pycolmap SfM, ground-plane metric scale from the camera height) -> ``masks``
-(``--segmenter auto``) -> StreetNeRF -> Splatfacto -> (the reference check of issue 18 point 5:
+(``--segmenter auto``) -> StreetNeRF -> Splatfacto -> (the reference check:
 the StreetNeRF's measured held-out PSNR against Splatfacto's, logged before the next run) ->
 Splatfacto + NeRF views. Every ``holdout_every``-th photo (by name) is held out of every training
 run, the masks' first reference included; the table is PSNR / SSIM / LPIPS on those held-out
@@ -149,7 +149,7 @@ def run_real_photos(opts: RealPhotosOptions, runs_root: Path, out_dir: Path, rer
         if spec.augment_from and ref is None:
             results[label] = {"label": label, "target": spec.method, "failed": True, "error": f"reference run '{spec.augment_from}' failed"}
             continue
-        if spec.augment_from and "splatfacto" in done_runs:  # issue 18 point 5: said before training on it
+        if spec.augment_from and "splatfacto" in done_runs:  # the reference check, said before training on it
             line, check = reference_report(ref[0], done_runs["splatfacto"][0])
             log(f"[bench] {line}")
         log(f"[bench] {label}")
@@ -268,7 +268,7 @@ def _test_psnr(r: Optional[dict], key: str = "psnr"):
 
 
 def target_lines(results: dict[str, dict]) -> list[str]:
-    """Issue 18 point 5's two targets on the held-out photos, measured."""
+    """The reference check's two targets on the held-out photos, measured."""
     nerf, base, aug = (_test_psnr(results.get(k)) for k in LABELS)
     out = []
     if nerf is not None and base is not None:

@@ -1,7 +1,7 @@
 """model-size: quality against primitives for each splatting method, sweeping its densification
 budget and threshold one field at a time from the method's default, and whether the default ends
 within 0.5 dB of the best swept configuration at no more than 1.5x the primitives of the smallest
-one within that band (issue 20's target).
+one within that band (the model-size target).
 
 Splatfacto and 2DGS sweep ``strategy.max_gaussians`` (the fixed soft budget),
 ``strategy.pixel_steps_per_gaussian`` (a budget read from the views: training pixels x densification
@@ -30,7 +30,7 @@ from nerf2gs_plugin.errors import ConfigError
 
 TOLERANCE_DB = 0.5
 SIZE_TARGET = 1.5
-"""Issue 20: the default at no more than this many times the primitives of the smallest run in the band."""
+"""The model-size target: the default at no more than this many times the primitives of the smallest run in the band."""
 # method -> [(model config field (dotted into a nested config), values at quick scale, values at
 # default scale)]; one field varies at a time, the others stay default; the default itself is one
 # run of its own ("<method> default"), and a swept value equal to it is not run twice.

@@ -122,8 +122,8 @@ class DefaultStrategyConfig:
     gaussians_per_sparse_point: float = 0.0
     """0 = off. Else the soft budget is at least this many Gaussians per sparse (SfM) point of the capture
     (the larger of this and the pixel budget above, at most max-gaussians): what the views show, not only
-    how many pixels they have: a real courtyard's photos give ~4x the points of a synthetic street's views
-    of the same pixel count, and need more Gaussians per pixel."""
+    how many pixels they have: a real courtyard's photos give several times the points of a synthetic
+    street's views of the same pixel count, and need more Gaussians per pixel."""
     prune_weight_fraction: float = 0.0
     """0 = off (nerfstudio). Else, at the first refinement at or after stop-split-at, render every
     training view once and prune the Gaussians that together carry this fraction of the total
