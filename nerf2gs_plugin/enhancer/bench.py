@@ -3,7 +3,7 @@
 With ``reference`` (the bench's StreetNeRF run) it trains on that run's real renders (training
 poses and perturbed poses, see :mod:`nerf2gs_plugin.enhancer.pairs`), the setting that improves real
 bird's-eye renders; without, on synthetic degradations of the training images only, which made real
-bird's-eye renders slightly worse in our measurements (the held-out selection then keeps it close
+bird's-eye renders slightly worse (the held-out selection then keeps it close
 to the identity at best). The reference's checkpoint hash is part of the cache key.
 """
 
