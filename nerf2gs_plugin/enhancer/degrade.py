@@ -8,6 +8,8 @@ from __future__ import annotations
 import math
 from typing import Sequence
 
+import cv2
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import Tensor
@@ -25,20 +27,18 @@ def _ri(gen: torch.Generator, lo: int, hi: int) -> int:
 
 
 def gaussian_blur(x: Tensor, sigma: float) -> Tensor:
-    """Separable Gaussian blur of ``[B, C, H, W]`` with reflect padding."""
+    """Gaussian blur of ``[B, C, H, W]`` (radius 3 sigma, mirrored border without repeating the edge).
+    OpenCV's, as exact as a torch convolution and many times faster on the CPU (docs/libraries.md)."""
     if sigma <= 0:
         return x
     r = max(1, int(math.ceil(3 * sigma)))
     r = min(r, x.shape[-1] - 1, x.shape[-2] - 1)
     if r < 1:
         return x
-    t = torch.arange(-r, r + 1, dtype=x.dtype, device=x.device)
-    k = torch.exp(-0.5 * (t / sigma) ** 2)
-    k = k / k.sum()
-    c = x.shape[1]
-    x = F.pad(x, (r, r, r, r), mode="reflect")
-    x = F.conv2d(x, k.view(1, 1, 1, -1).expand(c, 1, 1, -1), groups=c)
-    return F.conv2d(x, k.view(1, 1, -1, 1).expand(c, 1, -1, 1), groups=c)
+    hwc = x.detach().cpu().permute(0, 2, 3, 1).numpy()
+    out = np.stack([cv2.GaussianBlur(im, (2 * r + 1, 2 * r + 1), sigma, sigmaY=sigma, borderType=cv2.BORDER_REFLECT_101)
+                    .reshape(im.shape) for im in hwc])
+    return torch.from_numpy(out).permute(0, 3, 1, 2).to(x)
 
 
 def _resample(y: Tensor, f: float) -> Tensor:
