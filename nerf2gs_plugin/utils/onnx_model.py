@@ -36,7 +36,7 @@ def import_onnxruntime():
     """``onnxruntime``, imported so that it leaves no files behind: on import its telemetry writes a
     device id and an event database under the user's cache folder (``XDG_CACHE_HOME``) and a ``.ses``
     file in the system temp folder; both are pointed at a private folder for the import, which is then
-    removed (measured: nothing is written there or elsewhere after the import)."""
+    removed (nothing is written there or elsewhere after the import)."""
     import os
     import shutil
     import sys
