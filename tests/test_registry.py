@@ -68,7 +68,7 @@ def test_registry_imports_no_layer_at_import_time():
 
 
 def test_plugin_calling_sys_exit_at_import_is_isolated(tmp_path, monkeypatch):
-    """issue 17 #5: a plugin that calls sys.exit() at import used to end every ns2gs-train with exit 1."""
+    """A plugin that calls sys.exit() at import must not end every ns2gs-train with exit 1."""
     dist = tmp_path / "exiting_plugin-0.1.dist-info"
     dist.mkdir()
     (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: exiting-plugin\nVersion: 0.1\n")

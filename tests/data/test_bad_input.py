@@ -152,7 +152,7 @@ def test_not_a_dataset_and_bad_flags(tmp_path, monkeypatch, capsys):
 
 
 def test_duplicate_file_path_frames_warn_once(street_copy, capsys):
-    """issue 17 #6: two frames with the same file_path trained with no warning."""
+    """Two frames with the same file_path warn once instead of training silently."""
     _edit(street_copy, lambda m: m["frames"].append(dict(m["frames"][1])))
     parse_dataset(street_copy, "train")
     parse_dataset(street_copy, "train")

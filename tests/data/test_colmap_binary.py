@@ -1,4 +1,4 @@
-"""issue 17 #3: corrupt COLMAP binaries are bounds-checked before pycolmap allocates anything."""
+"""Corrupt COLMAP binaries are bounds-checked before pycolmap allocates anything."""
 
 from __future__ import annotations
 

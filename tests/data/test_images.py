@@ -67,7 +67,7 @@ def test_ascii_ply_and_bad_ply(tmp_path):
 
 
 def test_written_png_follows_umask(tmp_path):
-    """issue 17 #6: PNGs were written 0600 (the temp file's mode)."""
+    """PNGs follow the umask, not the temp file's 0600."""
     import os
     import stat
 

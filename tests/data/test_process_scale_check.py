@@ -31,7 +31,7 @@ def test_local_height_is_the_road_below_each_camera():
 
 
 def test_two_stretches_at_different_scales_are_found_at_their_join():
-    """The drive down and back of issue 18's stand-in: each pass right, the second at 25x the first's scale."""
+    """A drive down and back: each pass right, the second at 25x the first's scale."""
     a = _street(30, 0.03, 0.01)
     b = _street(30, 0.75, 0.25, x0=1.0, seed=1)
     h = local_camera_heights(np.concatenate([a[0], b[0]]), a[1] + b[1], np.array([0.0, 0.0, 1.0]))

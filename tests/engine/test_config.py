@@ -73,7 +73,7 @@ def test_optimizer_schedule():
 
 @pytest.mark.parametrize("umask, mode", [(0o022, 0o644), (0o077, 0o600), (0o002, 0o664)])
 def test_atomic_write_follows_umask(tmp_path, umask, mode):
-    """issue 17 #6: files were written 0600 (tempfile.mkstemp's mode) whatever the umask."""
+    """Files follow the umask, not tempfile.mkstemp's 0600."""
     import os
     import stat
 

@@ -1,4 +1,4 @@
-"""issue 17 #7: the fault-injection suite (shared with ``ns2gs-bench faults``).
+"""The fault-injection suite (shared with ``ns2gs-bench faults``).
 
 >= 100 random byte flips and truncations (fixed seed) over every file of a tiny nerfstudio
 dataset, its COLMAP twin and a trained run: each ends in finite output or one of the package's

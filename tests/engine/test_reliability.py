@@ -1,4 +1,4 @@
-"""issue 17: divergence, run-directory clashes, step arithmetic, disk full, signals (each test failed before the fix)."""
+"""Divergence, run-directory clashes, step arithmetic, disk full, signals."""
 
 from __future__ import annotations
 

@@ -265,7 +265,7 @@ def test_size_plan_and_smallest_within():
     assert "splatfacto pixel_steps_per_gaussian=0" in labels and "2dgs gaussians_per_sparse_point=0" in labels  # either term off
     assert "splatfacto pixel_steps_per_gaussian=54000" not in labels  # the default's own value
     assert "scaffold-gs anchor_growth=0" in labels  # Scaffold-GS's views term alone
-    assert "scaffold-gs pixel_steps_per_anchor=0" in labels  # its growth term alone (the default before 2026-11-26's)
+    assert "scaffold-gs pixel_steps_per_anchor=0" in labels  # its growth term alone
     for spec in plan:
         apply_plain(get_method(spec.method).config, spec.overrides)  # valid fields and types
     own = next(s for s in plan if s.label == "splatfacto default")  # the registered default, the paper table's run

@@ -1,4 +1,4 @@
-"""Issue 18 point 5: before a target trains on a reference, the log says (with the measured numbers)
+"""Before a target trains on a reference, the log says (with the measured numbers)
 whether the reference is weaker than the target's baseline; the same line goes into the run folder."""
 
 import dataclasses
