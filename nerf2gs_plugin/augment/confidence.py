@@ -8,7 +8,8 @@ moved). ``visibility`` confidence measures exactly that, with the reference's ow
   2. ``X`` is projected into every training camera; that camera *observed* ``X`` when ``X`` falls
      inside its image, in front of it, on a pixel that is neither sky nor transient in its masks,
      and the reference's depth rendered at that training view (interpolated in inverse depth)
-     agrees with ``X``'s depth there within ``rel_tol`` (otherwise something nearer hid ``X``: a facade in front of a rooftop);
+     agrees with ``X``'s depth there within ``rel_tol`` (otherwise something nearer hid ``X``: a
+     facade in front of a rooftop);
   3. confidence = ``min(observations / full_views, 1)`` x the render's accumulation.
 
 So a surface no training view saw gets ~0 and one seen by ``full_views`` views or more gets ~1.

@@ -5,11 +5,13 @@ one within that band (the model-size target).
 
 Splatfacto and 2DGS sweep ``strategy.max_gaussians`` (the fixed soft budget),
 ``strategy.pixel_steps_per_gaussian`` (a budget read from the views: training pixels x densification
-steps over it), ``strategy.gaussians_per_sparse_point`` (the budget's floor read from the SfM points), ``strategy.densify_grad_thresh``, ``strategy.prune_weight_fraction`` (the blending-
-weight prune after densification) and ``strategy.prune_margin_db`` (how far below the model's error the prune's
-change to the training renders must stay); Scaffold-GS sweeps ``max_anchors``, ``anchor_growth`` (growth relative to
-the initial anchors; 0 leaves the views term alone), ``pixel_steps_per_anchor`` (0 leaves the growth term alone;
-20,000 puts the views term above any growth: the fixed ``max_anchors`` of before) and ``grow_threshold``. The band and the picks are chosen on the validation
+steps over it), ``strategy.gaussians_per_sparse_point`` (the budget's floor read from the SfM points),
+``strategy.densify_grad_thresh``, ``strategy.prune_weight_fraction`` (the blending-weight prune after
+densification) and ``strategy.prune_margin_db`` (how far below the model's error the prune's change to
+the training renders must stay); Scaffold-GS sweeps ``max_anchors``, ``anchor_growth`` (growth relative
+to the initial anchors; 0 leaves the views term alone), ``pixel_steps_per_anchor`` (0 leaves the growth
+term alone; 20,000 puts the views term above any growth, like a fixed ``max_anchors``) and
+``grow_threshold``. The band and the picks are chosen on the validation
 views (val_street, val_bev) where the dataset has them, the test views (street, bev_1, bev_2)
 otherwise; both are reported. With ``augment`` every run trains on StreetNeRF's views (the StreetNeRF
 run is shared with the paper table when the scale matches).

@@ -74,8 +74,9 @@ class SplatfactoModelConfig(SplatModelConfig):
     depth_loss_weight: float = 0.1
     """Sparse-point depth (0: off): weight of mean_p A_p * min(|D_p - z_p| / z_p, 1) over the sparse
     points a training view sees (methods/point_visibility.py), D the rendered expected depth and A the
-    accumulation at the point's pixel (a weight only, no gradient), z the point's depth: gsplat's depth_loss in the bounded form of
-    StreetNeRF's point depth. A Gaussian that floats in front of a surface the SfM saw pulls D short of z.
+    accumulation at the point's pixel (a weight only, no gradient), z the point's depth: gsplat's depth_loss in
+    the bounded form of StreetNeRF's point depth. A Gaussian that floats in front of a surface the SfM saw pulls
+    D short of z.
     0.1 chosen on the validation views of two streets and castle-P30 (benchmarks/results/depth_loss.md; it
     lifts the veil of near-camera Gaussians over one photo); the paper scale keeps the same value."""
     mcmc: MCMCStrategyConfig = field(default_factory=lambda: MCMCStrategyConfig(
