@@ -25,9 +25,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from nerf2gs_plugin.engine.config import load_config, read_config_doc  # noqa: E402
 from nerf2gs_plugin.runs.load import load_run  # noqa: E402
 from nerf2gs_plugin.engine.trainer import Trainer  # noqa: E402
-from nerf2gs_plugin.eval.bench_size import _nested  # noqa: E402
+from nerf2gs_bench.size import _nested  # noqa: E402
 from nerf2gs_plugin.eval.evaluate import evaluate_run  # noqa: E402
-from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
+from nerf2gs_bench.machine import machine_line  # noqa: E402
 from nerf2gs_plugin.registry import get_method  # noqa: E402
 from nerf2gs_plugin.utils.config import apply_plain  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402

@@ -26,7 +26,7 @@ from sfm_speed import read_strecha  # noqa: E402
 
 from nerf2gs_plugin.data.ground import MAX_TILT_DEG, estimate_metric_scale, fit_ground_plane  # noqa: E402
 from nerf2gs_plugin.data.ply import read_ply_points  # noqa: E402
-from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
+from nerf2gs_bench.machine import machine_line  # noqa: E402
 from nerf2gs_plugin.eval.pose_eval import pose_errors  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 

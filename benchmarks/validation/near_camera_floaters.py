@@ -24,7 +24,7 @@ torch.set_num_threads(1)
 from nerf2gs_plugin.augment.datamanager import bev_cameras  # noqa: E402
 from nerf2gs_plugin.runs.load import load_run  # noqa: E402
 from nerf2gs_plugin.methods.capture_path import capture_path  # noqa: E402
-from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
+from nerf2gs_bench.machine import machine_line  # noqa: E402
 from nerf2gs_plugin.utils.image_metrics import psnr_from_mse  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 

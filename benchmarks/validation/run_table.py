@@ -24,8 +24,8 @@ import json
 import sys
 from pathlib import Path
 
-from nerf2gs_plugin.eval.bench_io import EVAL_SPLITS, VAL_SPLITS, eval_cache_name
-from nerf2gs_plugin.eval.machine import machine_line
+from nerf2gs_bench.runner import EVAL_SPLITS, VAL_SPLITS, eval_cache_name
+from nerf2gs_bench.machine import machine_line
 from nerf2gs_plugin.registry import get_method
 from nerf2gs_plugin.utils.io import atomic_write_text
 

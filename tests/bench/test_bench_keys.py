@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from nerf2gs_plugin.eval import bench_runs, code_version
-from nerf2gs_plugin.eval.bench_runs import RunSpec
+from nerf2gs_bench import code_version, runs as bench_runs
+from nerf2gs_bench.runs import RunSpec
 
 
 @pytest.fixture
@@ -53,7 +53,6 @@ def test_no_model_code_imports_the_folders_left_out_of_the_hash():
         return next((f for f in code_version.NOT_MODEL_CODE if rel == f or rel.startswith(f + "/")), None)
 
     hashed = {"nerf2gs_plugin." + n[:-3].replace("/", ".") for n in code_version.MODEL_METRIC_CODE}
-    hashed.add("nerf2gs_plugin.eval.code_version")  # names the hash, changes no model
     arrows = sorted((a, b) for a, bs in import_graph().items() for b in bs
                     if folder(a) is None and folder(b) is not None and b not in hashed)
     assert not arrows, f"model code imports code left out of the model hash: {arrows}"
@@ -65,7 +64,7 @@ def test_run_key_changes_with_one_line_of_a_loss_and_with_the_device(source_copy
     assert bench_runs.run_key("data", spec, None, "cpu") == k0
     assert bench_runs.run_key("data", spec, None, "cuda:NVIDIA H100") != k0
     e0 = code_version.eval_code_hash()
-    _edit(source_copy / "eval" / "bench_paper.py", "\n", "\n# a table tweak: models do not change\n")
+    _edit(source_copy / "eval" / "table_print.py", "\n", "\n# a table tweak: models do not change\n")
     assert bench_runs.run_key("data", spec, None, "cpu") == k0
     _edit(source_copy / "engine" / "losses.py", "\n", "\n# one changed line\n")
     k1 = bench_runs.run_key("data", spec, None, "cpu")
@@ -78,7 +77,7 @@ def test_run_key_changes_with_one_line_of_a_loss_and_with_the_device(source_copy
 def test_bench_retrains_after_a_loss_change_reevaluates_after_a_metric_change_and_reruns(tiny_scene, tmp_path, source_copy,
                                                                                         monkeypatch):
     from nerf2gs_plugin.eval import lpips as lpips_mod
-    from nerf2gs_plugin.eval.bench_io import BenchRunner
+    from nerf2gs_bench.runner import BenchRunner
 
     monkeypatch.setattr(lpips_mod.importlib.util, "find_spec", lambda name: None)  # fast: LPIPS n/a
     monkeypatch.delenv(lpips_mod.ENV_VAR, raising=False)
@@ -114,7 +113,7 @@ def test_bench_retrains_after_a_loss_change_reevaluates_after_a_metric_change_an
 
 
 def test_failure_markers_expire_with_the_code(tiny_scene, tmp_path, source_copy):
-    from nerf2gs_plugin.eval.bench_io import BenchRunner
+    from nerf2gs_bench.runner import BenchRunner
 
     lines: list[str] = []
     runner = BenchRunner(tmp_path / "runs", log=lines.append, device="cpu")
@@ -157,7 +156,7 @@ def test_dataset_fingerprint_covers_every_file_a_run_reads(tiny_scene, tmp_path)
 
 
 def test_bench_regenerates_a_street_of_an_older_generator(tmp_path, monkeypatch):
-    from nerf2gs_plugin.cli import bench
+    from nerf2gs_bench import cli as bench
     from nerf2gs_plugin.data import synthetic_street
 
     made = []
@@ -179,7 +178,7 @@ def test_a_bench_waits_for_another_training_of_the_same_run(tmp_path):
     import time
 
     from nerf2gs_plugin.engine.run_dir import RunDirLock
-    from nerf2gs_plugin.eval.bench_runs import wait_for_other_training
+    from nerf2gs_bench.runs import wait_for_other_training
 
     wait_for_other_training(tmp_path / "never-trained")  # no lock file: returns at once
     lock = RunDirLock(tmp_path / "run")
@@ -201,7 +200,7 @@ def test_two_benches_evaluate_a_shared_run_once(tmp_path):
     import time
     from types import SimpleNamespace
 
-    from nerf2gs_plugin.eval.bench_io import BenchRunner
+    from nerf2gs_bench.runner import BenchRunner
 
     run_dir = tmp_path / "run"
     run_dir.mkdir()

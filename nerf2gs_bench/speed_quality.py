@@ -14,8 +14,8 @@ from pathlib import Path
 from typing import Optional, Sequence
 
 from nerf2gs_plugin.errors import DataError
-from nerf2gs_plugin.eval.bench_io import fmt, mean_psnr, write_bench_files
-from nerf2gs_plugin.eval.machine import machine_line
+from nerf2gs_bench.runner import fmt, mean_psnr, write_bench_files
+from nerf2gs_bench.machine import machine_line
 from nerf2gs_plugin.utils.plotting import pyplot, save_figure
 
 SOURCES = ("paper_table", "ablation")

@@ -12,8 +12,8 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from nerf2gs_plugin.errors import UserError
-from nerf2gs_plugin.eval.bench_runs import RunSpec, evaluation_lock, run_key, train_or_reuse
-from nerf2gs_plugin.eval.machine import machine_info, machine_line
+from nerf2gs_bench.runs import RunSpec, evaluation_lock, run_key, train_or_reuse
+from nerf2gs_bench.machine import machine_info, machine_line
 from nerf2gs_plugin.eval.metrics import LPIPS
 from nerf2gs_plugin.utils.config import apply_plain
 from nerf2gs_plugin.utils.io import atomic_write_text
@@ -125,8 +125,8 @@ class BenchRunner:
         self._fingerprints: dict[str, str] = {}
 
     def key(self, spec: RunSpec, data: Path, reference: Optional[tuple[Path, str]] = None) -> str:
-        """The run key this runner trains ``spec`` under (see :func:`~nerf2gs_plugin.eval.bench_runs.run_key`)."""
-        from nerf2gs_plugin.eval.code_version import device_label
+        """The run key this runner trains ``spec`` under (see :func:`~nerf2gs_bench.runs.run_key`)."""
+        from nerf2gs_bench.code_version import device_label
 
         return run_key(self.fingerprint(data), spec, reference[1] if reference else None, device_label(self.device))
 
@@ -134,7 +134,7 @@ class BenchRunner:
         """What a cached evaluation must match: the run, the metric code, the splits, the device."""
         import hashlib
 
-        from nerf2gs_plugin.eval.code_version import device_label, eval_code_hash
+        from nerf2gs_bench.code_version import device_label, eval_code_hash
 
         doc = json.dumps([run_key_, eval_code_hash(), list(self.splits), device_label(self.device)])
         return hashlib.sha1(doc.encode()).hexdigest()[:12]
@@ -184,7 +184,7 @@ class BenchRunner:
 
     def _evaluate(self, run_dir: Path, key: str, load_run, evaluate_run) -> dict:
         """The cached evaluation when its :meth:`eval_key` matches, else a fresh one (labelled)."""
-        from nerf2gs_plugin.eval.code_version import device_label
+        from nerf2gs_bench.code_version import device_label
 
         eval_path = run_dir / eval_cache_name(self.splits)  # validation and test evaluations cached side by side
         want = self.eval_key(key)

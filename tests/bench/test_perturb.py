@@ -9,7 +9,7 @@ import torch
 
 from nerf2gs_plugin.data import list_splits, parse_dataset
 from nerf2gs_plugin.errors import DataError
-from nerf2gs_plugin.eval.perturb import Perturbation, perturb_pose, perturbed_copy, pose_difference, random_rotation
+from nerf2gs_bench.perturb import Perturbation, perturb_pose, perturbed_copy, pose_difference, random_rotation
 
 
 def test_random_rotation_has_the_requested_angle():

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import pytest
 
-from nerf2gs_plugin.eval.bench_faults import run_suite
+from nerf2gs_bench.faults import run_suite
 
 pytestmark = pytest.mark.faults
 

@@ -4,7 +4,7 @@ tiny training followed by a resume.
 
 Every case must end in finite output or in one of the package's errors (:class:`UserError`: the
 one line ``error: <file>: <what>``), never an unexpected exception (a traceback), a hang or more
-than 2 GB of memory. Shared by ``tests/engine/test_faults.py`` (in ``make test``) and
+than 2 GB of memory. Shared by ``tests/bench/test_faults.py`` (in ``make test``) and
 ``ns2gs-bench faults`` (``benchmarks/results/faults.json``).
 """
 
@@ -301,7 +301,7 @@ def _tiny_scene_module():
     """tests/tiny_scene.py of this checkout (the analytic scene the engine tests train on)."""
     import importlib.util
 
-    path = Path(__file__).resolve().parents[2] / "tests" / "tiny_scene.py"
+    path = Path(__file__).resolve().parents[1] / "tests" / "tiny_scene.py"
     spec = importlib.util.spec_from_file_location("nerf2gs_tiny_scene", path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
@@ -320,7 +320,7 @@ def summarize(results: list[FaultResult]) -> dict[str, Any]:
 
 
 def worker_main(argv: list[str]) -> None:
-    """``python -m nerf2gs_plugin.eval.bench_faults WORK N SEED METHOD OUT.json``: file faults in a
+    """``python -m nerf2gs_bench.faults WORK N SEED METHOD OUT.json``: file faults in a
     process whose address space is capped (so 'more than 2 GB' fails instead of swapping)."""
     work, n, seed, method, out = Path(argv[0]), int(argv[1]), int(argv[2]), argv[3], Path(argv[4])
     fault_roots(work, method)  # imports and fixtures before the cap
@@ -336,8 +336,8 @@ def run_suite(work: Path, n_files: int = 120, n_kills: int = 5, seed: int = 0, m
     work.mkdir(parents=True, exist_ok=True)
     out = work / "file_faults.json"
     t0 = time.perf_counter()
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(Path(__file__).resolve().parents[2]), os.environ.get("PYTHONPATH")])))
-    p = subprocess.run([sys.executable, "-m", "nerf2gs_plugin.eval.bench_faults", str(work), str(n_files), str(seed), method, str(out)],
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(Path(__file__).resolve().parents[1]), os.environ.get("PYTHONPATH")])))
+    p = subprocess.run([sys.executable, "-m", "nerf2gs_bench.faults", str(work), str(n_files), str(seed), method, str(out)],
                        capture_output=True, text=True, timeout=600, env=env)
     if p.returncode != 0:
         raise RuntimeError(f"fault worker failed ({p.returncode}): {p.stderr[-2000:]}")
@@ -365,7 +365,7 @@ if __name__ == "__main__":
 def write_results(doc: dict[str, Any], out_dir: Path) -> tuple[Path, Path]:
     """``faults.json`` (summary at the top level, then every case) and ``faults.md``."""
     from nerf2gs_plugin.utils.io import atomic_write_text
-    from nerf2gs_plugin.eval.machine import machine_info, machine_line
+    from nerf2gs_bench.machine import machine_info, machine_line
 
     s = doc["summary"]
     out_dir = Path(out_dir)

@@ -5,12 +5,12 @@ import json
 
 import pytest
 
-from nerf2gs_plugin.eval.bench_runs import RunSpec
+from nerf2gs_bench.runs import RunSpec
 
 
 def test_paper_bench_runs_a_plan_with_one_bar_and_log(tiny_scene, tmp_path, monkeypatch):
     from nerf2gs_plugin.eval import lpips as lpips_mod
-    from nerf2gs_plugin.eval.bench_paper import run_named_bench
+    from nerf2gs_bench.paper import run_named_bench
 
     monkeypatch.setattr(lpips_mod.importlib.util, "find_spec", lambda name: None)
     monkeypatch.delenv(lpips_mod.ENV_VAR, raising=False)
@@ -48,7 +48,7 @@ def test_bench_cli_dispatches_subcommands(tmp_path):
     p = subprocess.run([exe, "speed-quality", "--results", str(res), "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=120)
     assert p.returncode == 0, p.stderr
     assert json.loads((tmp_path / "o" / "speed_quality.json").read_text())["front_fps"] == ["b", "a"]
-    from nerf2gs_plugin.cli.bench import Stability
+    from nerf2gs_bench.cli import Stability
     from nerf2gs_plugin.errors import ConfigError
 
     with pytest.raises(ConfigError, match="unknown stress 'nothing'"):  # before any work: no dataset made
@@ -63,8 +63,8 @@ def test_paper_bench_records_failed_runs_and_goes_on(tiny_scene, tmp_path, monke
     from ns2gs_example_method import VoxelGridModel
 
     from nerf2gs_plugin.eval import lpips as lpips_mod
-    from nerf2gs_plugin.eval.bench_io import BenchFailed
-    from nerf2gs_plugin.eval.bench_paper import run_named_bench
+    from nerf2gs_bench.runner import BenchFailed
+    from nerf2gs_bench.paper import run_named_bench
 
     monkeypatch.setattr(lpips_mod.importlib.util, "find_spec", lambda name: None)
     monkeypatch.delenv(lpips_mod.ENV_VAR, raising=False)
@@ -109,10 +109,10 @@ def test_paper_bench_records_failed_runs_and_goes_on(tiny_scene, tmp_path, monke
 
 
 def test_bench_cli_exits_nonzero_on_failed_runs(monkeypatch, capsys):
-    from nerf2gs_plugin.cli import bench as bench_cli
+    from nerf2gs_bench import cli as bench_cli
     from nerf2gs_plugin.cli.common import run_cli
-    from nerf2gs_plugin.eval import bench_paper
-    from nerf2gs_plugin.eval.bench_io import BenchFailed
+    from nerf2gs_bench import paper as bench_paper
+    from nerf2gs_bench.runner import BenchFailed
 
     def failing(*args, **kwargs):
         raise BenchFailed("1 of 3 runs failed: 'x' (TrainingDiverged: boom); results written to out/quick.md")

@@ -1,11 +1,11 @@
 """Which code produced a trained model or an evaluation: hashes that key bench runs and caches.
 
-The rule (stated once, used by :mod:`nerf2gs_plugin.eval.bench_runs` and
-:mod:`nerf2gs_plugin.eval.bench_io`): a trained model depends on every ``.py``/``.cpp``/``.h``/``.cu``
-file of the package except those under ``eval/``, ``cli/`` and ``viewer/``, which read models but
+The rule (stated once, used by :mod:`nerf2gs_bench.runs` and
+:mod:`nerf2gs_bench.runner`): a trained model depends on every ``.py``/``.cpp``/``.h``/``.cu``
+file of ``nerf2gs_plugin`` except those under ``eval/``, ``cli/`` and ``viewer/``, which read models but
 never change one, and the dataset makers ``masks/``, ``data/process/`` and ``blocks/`` (city-block partition and merge), which write the files a run reads or merge finished
 runs (those files key the run through the dataset fingerprint instead). No model code imports the
-excluded folders, but for ``MODEL_METRIC_CODE``, which is hashed (``tests/eval/test_bench_keys.py``
+excluded folders, but for ``MODEL_METRIC_CODE``, which is hashed (``tests/bench/test_bench_keys.py``
 checks it on the import graph). That is coarser than the files a method imports (an edit to another
 method retrains every bench run), but it can never miss a dependency. An evaluation depends on the
 model plus the metric code: ``eval/metrics.py``, ``eval/lpips.py`` and ``eval/evaluate.py``.

@@ -2,7 +2,7 @@
 
 A run is keyed by (dataset fingerprint, method, resolved config, reference run, augment settings,
 hash of the model code, device): regenerating a table after a change retrains only what changed,
-an edit to a loss or a kernel retrains (:mod:`nerf2gs_plugin.eval.code_version` says which files
+an edit to a loss or a kernel retrains (:mod:`nerf2gs_bench.code_version` says which files
 count), a GPU run never reuses a CPU one, and an interrupted bench resumes from the run's last
 checkpoint. ``rerun=True`` retrains even when a finished run with the key exists.
 """
@@ -42,8 +42,8 @@ class RunSpec:
 
 def run_key(dataset: str, spec: RunSpec, reference_key: Optional[str], device: str = "cpu") -> str:
     """Keyed by the fully resolved config, not only the overrides (a changed method default
-    retrains), the model code's hash and the device label (:func:`~nerf2gs_plugin.eval.code_version.device_label`)."""
-    from nerf2gs_plugin.eval.code_version import model_code_hash
+    retrains), the model code's hash and the device label (:func:`~nerf2gs_bench.code_version.device_label`)."""
+    from nerf2gs_bench.code_version import model_code_hash
     from nerf2gs_plugin.registry import get_method
 
     resolved = to_plain(apply_plain(get_method(spec.method).config, spec.overrides, where=f"bench run {spec.label}"))
@@ -97,8 +97,8 @@ def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, ref
     its directory is replaced); a partial one resumes. ``step_hook(step)`` is called after every
     training step (a bench-wide progress bar). ``bench_run.json`` records where and when it trained."""
     from nerf2gs_plugin.engine.trainer import pick_device
-    from nerf2gs_plugin.eval.code_version import device_label
-    from nerf2gs_plugin.eval.machine import machine_line
+    from nerf2gs_bench.code_version import device_label
+    from nerf2gs_bench.machine import machine_line
     from nerf2gs_plugin.registry import get_method
 
     torch_device = pick_device(device)

@@ -21,7 +21,7 @@ import torch
 from torch import Tensor
 
 from nerf2gs_plugin.utils.io import atomic_write_text
-from nerf2gs_plugin.eval.machine import machine_info, machine_line
+from nerf2gs_bench.machine import machine_info, machine_line
 from nerf2gs_plugin.fields.hash_encoding import HashGridSpec, grid_resolutions, hash_encode, load_kernel
 
 GRIDS = {

@@ -17,7 +17,7 @@ into the estimated ``transforms.json`` as an eval split; the parser then normali
 estimated dataset's own normalisation, exactly as the training cameras. The ground-truth dataset
 goes through the same mapping with its own (identity) alignment, so both columns are produced by
 one code path, and a mapping that is the identity reproduces the original eval cameras
-(``tests/eval/test_bench_real.py``).
+(``tests/bench/test_bench_real.py``).
 """
 
 from __future__ import annotations
@@ -255,7 +255,7 @@ def reference_dir(root: Path, est: Path, steps: int, options: str = "") -> Path:
 
     from nerf2gs_plugin.masks.mask_reference import REFERENCE_OVERRIDES
     from nerf2gs_plugin.masks.maskless import strip_frame_keys
-    from nerf2gs_plugin.eval.code_version import model_code_hash
+    from nerf2gs_bench.code_version import model_code_hash
 
     meta = strip_frame_keys(json.loads((Path(est) / "transforms.json").read_text()))
     for k in ("eval_splits", "process"):  # the eval cameras and the stage times are no part of the capture
@@ -293,8 +293,8 @@ def process_capture(video: Path, out: Path, n: int, fov_deg: float, camera_heigh
 def real_plan(opts: RealBenchOptions, camera_optimizer: str = "off") -> list:
     """The bench's runs: StreetNeRF (with ``camera_optimizer`` refining its poses unless "off"), then
     Splatfacto without and with its NeRF views."""
-    from nerf2gs_plugin.eval.bench_paper import _merge, step_overrides
-    from nerf2gs_plugin.eval.bench_runs import RunSpec
+    from nerf2gs_bench.paper import _merge, step_overrides
+    from nerf2gs_bench.runs import RunSpec
 
     def ov(method: str, steps: int) -> dict:
         seed = {} if opts.seed is None else {"seed": opts.seed}  # absent by default: the run keys stay the plain bench's
@@ -310,7 +310,7 @@ def real_plan(opts: RealBenchOptions, camera_optimizer: str = "off") -> list:
 
 def run_plan_for(data: Path, runs_root: Path, opts: RealBenchOptions, name: str, rerun: bool,
                  camera_optimizer: str = "off") -> dict[str, dict]:
-    from nerf2gs_plugin.eval.bench_paper import run_plan
+    from nerf2gs_bench.paper import run_plan
 
     return run_plan(real_plan(opts, camera_optimizer), data, runs_root, name=name, rerun=rerun)
 
@@ -419,8 +419,8 @@ def _f(v: Optional[float], fmt: str = "{:.2f}") -> str:
 
 def results_md(doc: dict) -> str:
     from nerf2gs_plugin.data.process.scale_check import MAX_HEIGHT_JUMP, MAX_STEP_JUMP
-    from nerf2gs_plugin.eval.bench_paper import markdown_table, target_groups
-    from nerf2gs_plugin.eval.machine import machine_line
+    from nerf2gs_bench.paper import markdown_table, target_groups
+    from nerf2gs_bench.machine import machine_line
 
     o = doc["options"]
     lines = [
@@ -476,8 +476,8 @@ def results_md(doc: dict) -> str:
 
 
 def write_results(out_dir: Path, doc: dict) -> None:
-    from nerf2gs_plugin.eval.bench_paper import psnr_bar_chart, succeeded
-    from nerf2gs_plugin.eval.machine import machine_info
+    from nerf2gs_bench.paper import psnr_bar_chart, succeeded
+    from nerf2gs_bench.machine import machine_info
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -15,7 +15,7 @@ from typing import Literal, Optional
 import tyro
 
 from nerf2gs_plugin.cli.common import run_cli
-from nerf2gs_plugin.eval.bench_real_photos import RealPhotosOptions
+from nerf2gs_bench.real_photos import RealPhotosOptions
 
 RESULTS = Path("benchmarks/results")
 RUNS = Path("benchmarks/runs")
@@ -50,7 +50,7 @@ class Quick:
     """Retrain and re-evaluate every run of the bench even when a finished one with its key exists."""
 
     def main(self) -> None:
-        from nerf2gs_plugin.eval.bench_paper import paper_table_plan, run_named_bench
+        from nerf2gs_bench.paper import paper_table_plan, run_named_bench
 
         data = ensure_street(self.data, self.runs)
         plan = paper_table_plan("quick", targets=("splatfacto",))
@@ -71,8 +71,8 @@ class Demo:
     """Where the runs (runs/), their readable links, the table and the charts go."""
 
     def main(self) -> None:
-        from nerf2gs_plugin.eval.bench_paper import paper_table_plan, run_named_bench
-        from nerf2gs_plugin.eval.demo import link_runs, next_steps
+        from nerf2gs_bench.paper import paper_table_plan, run_named_bench
+        from nerf2gs_bench.demo import link_runs, next_steps
 
         data = self.data
         if data is None:
@@ -109,7 +109,7 @@ class PaperTable:
     """Retrain and re-evaluate every run of the bench even when a finished one with its key exists."""
 
     def main(self) -> None:
-        from nerf2gs_plugin.eval.bench_paper import paper_table_pairs, paper_table_plan, run_named_bench
+        from nerf2gs_bench.paper import paper_table_pairs, paper_table_plan, run_named_bench
 
         data = ensure_street(self.data, self.runs)
         enh = bench_enhancer(data, self.runs, self.scale, self.enhancer_prior, self.enhancer_fine_tune) if self.enhancer else None
@@ -138,7 +138,7 @@ class Ablation:
     """Retrain and re-evaluate every run of the bench even when a finished one with its key exists."""
 
     def main(self) -> None:
-        from nerf2gs_plugin.eval.bench_paper import ablation_plan, confidence_label, run_named_bench
+        from nerf2gs_bench.paper import ablation_plan, confidence_label, run_named_bench
 
         data = ensure_street(self.data, self.runs)
         enh = bench_enhancer(data, self.runs, self.scale, self.enhancer_prior, self.enhancer_fine_tune) if self.enhancer else None
@@ -163,7 +163,7 @@ class SpeedQuality:
     out: Path = RESULTS
 
     def main(self) -> None:
-        from nerf2gs_plugin.eval.bench_speed_quality import run
+        from nerf2gs_bench.speed_quality import run
 
         run(self.results, self.out, self.sources or None)
 
@@ -193,7 +193,7 @@ class Stability:
     """Retrain and re-evaluate every run of the bench even when a finished one with its key exists."""
 
     def main(self) -> None:
-        from nerf2gs_plugin.eval.bench_stability import run, stability_plan
+        from nerf2gs_bench.stability import run, stability_plan
 
         plan = stability_plan(self.scale, self.methods, stresses=self.stresses or None, steps_fraction=self.steps_fraction,
                               n_seeds=self.seeds)  # bad names fail before any work
@@ -220,7 +220,7 @@ class ModelSize:
     """Retrain and re-evaluate every run of the bench even when a finished one with its key exists."""
 
     def main(self) -> None:
-        from nerf2gs_plugin.eval.bench_size import run, size_plan
+        from nerf2gs_bench.size import run, size_plan
 
         plan = size_plan(self.scale, self.methods, self.augment, self.sweep_fields)  # bad names fail before any work
         data = ensure_street(self.data, self.runs)
@@ -233,14 +233,14 @@ def bench_enhancer(data: Path, runs_root: Path, scale: str, prior: Optional[Path
     the reference's own renders the enhancer learns only synthetic degradations, which made real
     bird's-eye renders worse (measured once, -0.14 dB; not a committed result)."""
     from nerf2gs_plugin.data import folder_fingerprint
-    from nerf2gs_plugin.enhancer.bench import bench_prior, ensure_bench_enhancer
+    from nerf2gs_bench.enhancer import bench_prior, ensure_bench_enhancer
 
     if prior is not None:
         prior = bench_prior(prior, runs_root)
         if not fine_tune:  # the prior as it is: nothing to train on this capture
             return f"onnx:{prior}"
-    from nerf2gs_plugin.eval.bench_paper import _overrides
-    from nerf2gs_plugin.eval.bench_runs import RunSpec, train_or_reuse
+    from nerf2gs_bench.paper import _overrides
+    from nerf2gs_bench.runs import RunSpec, train_or_reuse
 
     dataset = folder_fingerprint(data)
     reference, _ = train_or_reuse(RunSpec("StreetNeRF", "streetnerf", _overrides(scale, "streetnerf")), data, runs_root, dataset)
@@ -257,7 +257,7 @@ class Raster:
     out: Path = RESULTS
 
     def main(self) -> None:
-        from nerf2gs_plugin.eval.bench_raster import run
+        from nerf2gs_bench.raster import run
 
         run(self.out, self.scale, self.device)
 
@@ -270,7 +270,7 @@ class Field:
     out: Path = RESULTS
 
     def main(self) -> None:
-        from nerf2gs_plugin.eval.bench_field import run
+        from nerf2gs_bench.field import run
 
         run(self.out, self.scale)
 
@@ -288,7 +288,7 @@ class Faults:
     def main(self) -> None:
         import shutil
 
-        from nerf2gs_plugin.eval.bench_faults import run_suite, write_results
+        from nerf2gs_bench.faults import run_suite, write_results
 
         shutil.rmtree(self.work, ignore_errors=True)
         doc = run_suite(self.work, n_files=self.cases, n_kills=self.kills, seed=self.seed)
@@ -321,7 +321,7 @@ class Real:
     """The synthetic street's seed (0: the embedded street); another street is another capture."""
 
     def main(self) -> None:
-        from nerf2gs_plugin.eval.bench_real import RealBenchOptions, results_md, run_real_bench
+        from nerf2gs_bench.real import RealBenchOptions, results_md, run_real_bench
 
         opts = RealBenchOptions(frames=self.frames, video_scale=self.video_scale, reference_steps=self.reference_steps,
                                 streetnerf_steps=self.streetnerf_steps, splatfacto_steps=self.splatfacto_steps,
@@ -342,7 +342,7 @@ class RealPhotos(RealPhotosOptions):
     """Retrain and re-evaluate every run of the bench even when a finished one with its key exists."""
 
     def main(self) -> None:
-        from nerf2gs_plugin.eval.bench_real_photos import results_md, run_real_photos
+        from nerf2gs_bench.real_photos import results_md, run_real_photos
 
         opts = RealPhotosOptions(**{f.name: getattr(self, f.name) for f in fields(RealPhotosOptions)})
         doc = run_real_photos(opts, self.runs, self.out, rerun=self.rerun)
@@ -361,7 +361,7 @@ class Scale:
     """Keep the measurements in OUT/scale.json; redo the fits, the projection and the chart."""
 
     def main(self) -> None:
-        from nerf2gs_plugin.eval.bench_scale import run
+        from nerf2gs_bench.scale import run
 
         doc = run(self.out, self.runs, refit=self.refit)
         print(f"results: {self.out}/scale.md ({doc['bench_seconds']:.0f} s)")
@@ -376,7 +376,7 @@ class Blocks:
     steps: int = 200
 
     def main(self) -> None:
-        from nerf2gs_plugin.eval.bench_blocks import run
+        from nerf2gs_bench.blocks import run
 
         doc = run(self.out, self.runs, self.steps)
         print(f"results: {self.out}/blocks.md; whole minus merged (dB): {doc['gaps']}")

@@ -1,12 +1,12 @@
 """stability: every method under stress, swept level by level to its breaking point.
 
 Cases per method: 3 seeds (mean and std: the unstressed baseline), then each stress of
-:mod:`nerf2gs_plugin.eval.stability_levels` walked mild -> harsh (pose noise, fraction of views
+:mod:`nerf2gs_bench.stability_levels` walked mild -> harsh (pose noise, fraction of views
 kept, transient share, mask errors (erosion, dilation, drop: one ladder each), per-frame exposure, random init; for "target + NeRF views"
 also the reference's training length, the reference always trained on the stressed data). A
-stress stops at its first failure, its breaking point (:mod:`nerf2gs_plugin.eval.breaking_point`).
+stress stops at its first failure, its breaking point (:mod:`nerf2gs_bench.breaking_point`).
 Datasets for the stress cases are perturbed copies of the bench's dataset
-(:mod:`nerf2gs_plugin.eval.perturb`); runs are reused from the bench's runs folder by key.
+(:mod:`nerf2gs_bench.perturb`); runs are reused from the bench's runs folder by key.
 
 Outcomes: ``ok``; ``diverged`` (training stopped on NaN/inf; the last good checkpoint is kept by
 the trainer); ``nan`` (metrics not finite); ``collapse`` (a quality collapse: street or BEV PSNR
@@ -27,13 +27,13 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from nerf2gs_plugin.utils.io import atomic_write_text
-from nerf2gs_plugin.eval.bench_io import (BenchLog, BenchProgress, BenchRunner, failure_reason, fmt, mean_psnr, nonfinite_metrics,
+from nerf2gs_bench.runner import (BenchLog, BenchProgress, BenchRunner, failure_reason, fmt, mean_psnr, nonfinite_metrics,
                                          planned_steps, progress_log, write_bench_files)
-from nerf2gs_plugin.eval.bench_runs import RunSpec
-from nerf2gs_plugin.eval.breaking_point import (COLLAPSE_DB, FAILURES, breaking_markdown, breaking_points, level_chart,
+from nerf2gs_bench.runs import RunSpec
+from nerf2gs_bench.breaking_point import (COLLAPSE_DB, FAILURES, breaking_markdown, breaking_points, level_chart,
                                                mark_collapses, sweep)
-from nerf2gs_plugin.eval.perturb import Perturbation, perturbed_copy
-from nerf2gs_plugin.eval.stability_levels import AUGMENTED_LABEL, REFERENCE_METHOD, STRESS_LEVELS, parse_method, stresses_for
+from nerf2gs_bench.perturb import Perturbation, perturbed_copy
+from nerf2gs_bench.stability_levels import AUGMENTED_LABEL, REFERENCE_METHOD, STRESS_LEVELS, parse_method, stresses_for
 from nerf2gs_plugin.utils.image_metrics import psnr
 from nerf2gs_plugin.utils.config import apply_plain
 from nerf2gs_plugin.errors import ConfigError, DataError, UserError
@@ -75,7 +75,7 @@ class StressCase:
 def steps_overrides(scale: str, method: str, fraction: float = 1.0) -> dict:
     """The bench overrides of ``method`` at ``scale`` with its steps times ``fraction`` (schedules
     rescaled); fraction 1 is exactly the paper table's run (same key: trained once)."""
-    from nerf2gs_plugin.eval.bench_paper import SCALE_STEPS, _overrides, step_overrides
+    from nerf2gs_bench.paper import SCALE_STEPS, _overrides, step_overrides
     from nerf2gs_plugin.registry import get_method
 
     if fraction == 1.0:
@@ -122,7 +122,7 @@ def stability_plan(scale: str, methods=METHODS, seeds: Optional[tuple[int, ...]]
 
 def classify(result: Optional[dict], error: Optional[str], initial_psnr: Optional[float], final_psnr: Optional[float]) -> str:
     """The outcome of one case (see the module docstring). An error or non-finite metrics fail a
-    case exactly as they fail a paper-table run (:func:`~nerf2gs_plugin.eval.bench_io.failure_reason`);
+    case exactly as they fail a paper-table run (:func:`~nerf2gs_bench.runner.failure_reason`);
     collapse is this bench's extra check."""
     if error is not None:
         if error.startswith("unsupported"):

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from nerf2gs_plugin.eval.bench_io import fmt, write_bench_files
+from nerf2gs_bench.runner import fmt, write_bench_files
 
 BASE = dict(width=64, height=40, num_train=16, num_street=4, num_bev=4, num_val_street=0, num_val_bev=0, num_cars=2,
             spp=1, num_points=600, progress=False)

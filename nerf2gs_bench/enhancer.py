@@ -50,7 +50,7 @@ def ensure_bench_enhancer(data: Path, runs_root: Path, scale: str, reference: Op
     settings = {k: v for k, v in dataclasses.asdict(probe).items() if k not in ("data", "out", "progress", "reference", "init")}
     if init is not None:  # the prior by content, not by path
         settings["init"] = file_hash(Path(init))
-    from nerf2gs_plugin.eval.code_version import model_code_hash  # the enhancer's training code counts too
+    from nerf2gs_bench.code_version import model_code_hash  # the enhancer's training code counts too
 
     doc = {"data": fingerprint, "cfg": settings, "reference": ref_hash, "code": model_code_hash()}
     key = hashlib.sha1(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()[:12]

@@ -20,9 +20,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Optional
 
-from nerf2gs_plugin.eval.bench_io import (EVAL_SPLITS, VAL_SPLITS, BenchLog, BenchProgress, BenchRunner, fmt, mean_psnr,
+from nerf2gs_bench.runner import (EVAL_SPLITS, VAL_SPLITS, BenchLog, BenchProgress, BenchRunner, fmt, mean_psnr,
                                          planned_steps, progress_log, write_bench_files)
-from nerf2gs_plugin.eval.bench_runs import RunSpec
+from nerf2gs_bench.runs import RunSpec
 from nerf2gs_plugin.utils.plotting import pyplot, save_figure
 from nerf2gs_plugin.data import dataparser_config
 from nerf2gs_plugin.progress import make_progress
@@ -90,7 +90,7 @@ def model_overrides(items: list[str]) -> dict:
 def size_plan(scale: str, methods=tuple(SWEEPS), augment: bool = False, fields: Optional[tuple[str, ...]] = None) -> list[RunSpec]:
     """The default run, then one run per swept value that differs from the default (of the swept
     ``fields`` only when given, by their last name: ``prune_margin_db``)."""
-    from nerf2gs_plugin.eval.bench_paper import _overrides
+    from nerf2gs_bench.paper import _overrides
 
     from nerf2gs_plugin.registry import get_method
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from nerf2gs_plugin.eval import bench_real as br
+from nerf2gs_bench import real as br
 from nerf2gs_plugin.eval.pose_eval import LocalAlignment, Sim3, align_poses, rotation_angle_deg
 
 SMALL = dict(width=48, height=32, num_train=6, num_street=2, num_bev=3, num_val_street=0, num_val_bev=0, num_cars=2,
@@ -285,7 +285,7 @@ def test_masks_reference_keyed_by_the_capture_not_its_stage_times(tmp_path):
 
 def test_masks_reference_keyed_by_the_model_code(tmp_path, monkeypatch):
     """A changed model (a new default) trains a new first reference: the old one is stale."""
-    import nerf2gs_plugin.eval.code_version as cv
+    import nerf2gs_bench.code_version as cv
 
     (tmp_path / "transforms.json").write_text(json.dumps({"frames": [], "metres_per_unit": 1.0}))
     a = br.reference_dir(tmp_path, tmp_path, 1000)

@@ -8,7 +8,7 @@ import json
 import pytest
 
 from nerf2gs_plugin.data import parse_dataset
-from nerf2gs_plugin.eval import bench_scale
+from nerf2gs_bench import scale as bench_scale
 
 
 def test_long_street_stitches_segments(tmp_path, monkeypatch):

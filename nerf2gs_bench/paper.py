@@ -9,10 +9,10 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from nerf2gs_plugin.errors import ConfigError
-from nerf2gs_plugin.eval.bench_io import BenchFailed, fmt  # noqa: F401
-from nerf2gs_plugin.eval.bench_runs import RunSpec
+from nerf2gs_bench.runner import BenchFailed, fmt  # noqa: F401
+from nerf2gs_bench.runs import RunSpec
 from nerf2gs_plugin.eval.figures import image_row
-from nerf2gs_plugin.eval.machine import machine_info, machine_line
+from nerf2gs_bench.machine import machine_info, machine_line
 from nerf2gs_plugin.progress import make_progress
 from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.utils.plotting import pyplot, save_figure
@@ -117,7 +117,7 @@ def run_plan(plan: list[RunSpec], data: Path, runs_root: Path, log: Optional[Cal
     is a row with ``failed: True`` and its ``error``, as in the stability bench, and the plan goes
     on; runs that augment from a failed run fail too. One progress bar over the whole plan (in
     training steps); log lines also go to ``<runs_root>/logs/<name>.log``."""
-    from nerf2gs_plugin.eval.bench_io import BenchLog, BenchProgress, BenchRunner, failure_reason, planned_steps, progress_log
+    from nerf2gs_bench.runner import BenchLog, BenchProgress, BenchRunner, failure_reason, planned_steps, progress_log
 
     done: dict[str, tuple[Path, str]] = {}
     results: dict[str, dict] = {}
@@ -247,7 +247,7 @@ def target_groups(results: dict[str, dict]) -> dict[str, list[str]]:
 # ----------------------------------------------------------------------------- charts
 def speed_quality_chart(results: dict[str, dict], path: Path, title: str) -> None:
     """FPS and training time against BEV PSNR for this bench's runs, Pareto fronts marked."""
-    from nerf2gs_plugin.eval.bench_speed_quality import chart, points_from_results
+    from nerf2gs_bench.speed_quality import chart, points_from_results
 
     if not results:
         return

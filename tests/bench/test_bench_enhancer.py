@@ -2,12 +2,12 @@
 
 from pathlib import Path
 
-from nerf2gs_plugin.cli import bench as bench_cli
+from nerf2gs_bench import cli as bench_cli
 
 
 def test_bench_enhancer_trains_on_the_bench_reference(tiny_scene, tmp_path, monkeypatch):
-    import nerf2gs_plugin.enhancer.bench as enh
-    import nerf2gs_plugin.eval.bench_runs as runs
+    import nerf2gs_bench.enhancer as enh
+    import nerf2gs_bench.runs as runs
 
     calls = {}
 
@@ -44,6 +44,6 @@ def test_bench_enhancer_trains_on_the_bench_reference(tiny_scene, tmp_path, monk
     with pytest.raises(ConfigError, match="absent.onnx does not exist"):
         bench_cli.bench_enhancer(tiny_scene, tmp_path / "runs", "quick", prior=tmp_path / "absent.onnx")
     # the same run the paper table's plan trains (same label, method and overrides)
-    from nerf2gs_plugin.eval.bench_paper import paper_table_plan
+    from nerf2gs_bench.paper import paper_table_plan
 
     assert paper_table_plan("quick", ("splatfacto",))[0] == calls["spec"]

@@ -1,7 +1,7 @@
 """The stability bench's stresses: each a ladder of levels, mild -> harsh, walked until it breaks.
 
 A level is what changes in the run against the unstressed seed run: a perturbed dataset copy
-(:class:`~nerf2gs_plugin.eval.perturb.Perturbation`), more transients (the synthetic street only)
+(:class:`~nerf2gs_bench.perturb.Perturbation`), more transients (the synthetic street only)
 or, for the augmented pipeline, a shorter reference. In "target + NeRF views" the reference is
 trained on the same stressed data that the target trains on (the reference's own stress), so
 every data stress also stresses the NeRF views.
@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import Optional
 
 from nerf2gs_plugin.errors import ConfigError
-from nerf2gs_plugin.eval.perturb import Perturbation
+from nerf2gs_bench.perturb import Perturbation
 
 NOISE_SEED = 7  # the pose-noise / mask-drop / exposure draws (the committed mild pose-noise run used 7)
 AUGMENTED_SUFFIX = "+nerf"  # --methods splatfacto+nerf: Splatfacto trained with StreetNeRF's views

@@ -67,7 +67,7 @@ class RealPhotosOptions:
 
 
 def run_overrides(opts: RealPhotosOptions, method: str, steps: int) -> dict:
-    from nerf2gs_plugin.eval.bench_paper import step_overrides
+    from nerf2gs_bench.paper import step_overrides
 
     dm = {"downscale": opts.downscale, "holdout_every": opts.holdout_every}
     ov = step_overrides(method, steps)
@@ -99,8 +99,8 @@ def run_real_photos(opts: RealPhotosOptions, runs_root: Path, out_dir: Path, rer
                     log: Callable[[str], None] = print, name: Optional[str] = None) -> dict:
     """The whole bench; writes ``real_photos.{json,md,png}`` into ``out_dir``; returns the JSON document."""
     from nerf2gs_plugin.masks.make_masks import MasksConfig, make_masks
-    from nerf2gs_plugin.eval.bench_io import BenchRunner, failure_reason
-    from nerf2gs_plugin.eval.bench_runs import RunSpec
+    from nerf2gs_bench.runner import BenchRunner, failure_reason
+    from nerf2gs_bench.runs import RunSpec
     from nerf2gs_plugin.eval.reference_check import reference_report
 
     if not Path(opts.images).is_dir():
@@ -123,7 +123,7 @@ def run_real_photos(opts: RealPhotosOptions, runs_root: Path, out_dir: Path, rer
     report = timed("process", lambda: process_photos(opts, data))
     for line in report.lines():
         log(f"[bench] process: {line}")
-    from nerf2gs_plugin.eval.bench_real import reference_dir
+    from nerf2gs_bench.real import reference_dir
 
     # keyed by the processed capture: a re-processed one (another up, other intrinsics) trains its own
     reference = reference_dir(root, data, opts.reference_steps, f"downscale {opts.downscale}")
@@ -291,7 +291,7 @@ def per_photo_lines(results: dict[str, dict]) -> list[str]:
 
 
 def results_md(doc: dict) -> str:
-    from nerf2gs_plugin.eval.machine import machine_line
+    from nerf2gs_bench.machine import machine_line
 
     o, p = doc["options"], doc["process"]
     lines = [
@@ -327,7 +327,7 @@ def results_md(doc: dict) -> str:
 
 
 def write_results(out_dir: Path, doc: dict) -> None:
-    from nerf2gs_plugin.eval.machine import machine_info
+    from nerf2gs_bench.machine import machine_info
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)

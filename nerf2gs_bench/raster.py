@@ -20,7 +20,7 @@ from typing import Any, Callable, Optional
 import torch
 
 from nerf2gs_plugin.utils.io import atomic_write_text
-from nerf2gs_plugin.eval.machine import machine_info, machine_line
+from nerf2gs_bench.machine import machine_info, machine_line
 
 SCALES = {
     # fwd+bwd scenes (gaussians, width, height); the torch reference runs only on those up to

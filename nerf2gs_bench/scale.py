@@ -31,8 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from nerf2gs_plugin.eval.bench_io import fmt, write_bench_files
-from nerf2gs_plugin.eval.machine import machine_info
+from nerf2gs_bench.runner import fmt, write_bench_files
+from nerf2gs_bench.machine import machine_info
 from nerf2gs_plugin.utils.io import atomic_write_text
 
 SEGMENT_FRAMES = 30

@@ -7,7 +7,7 @@ import os
 from pathlib import Path
 
 from nerf2gs_plugin.runs.load import find_dataset
-from nerf2gs_plugin.eval.demo import link_runs, next_steps, readable_name
+from nerf2gs_bench.demo import link_runs, next_steps, readable_name
 
 
 def test_readable_names():

@@ -8,12 +8,12 @@ import pytest
 
 from nerf2gs_plugin.utils.config import apply_plain
 from nerf2gs_plugin.errors import ConfigError, DataError
-from nerf2gs_plugin.eval import bench_size, bench_speed_quality, bench_stability
-from nerf2gs_plugin.eval.bench_runs import RunSpec
-from nerf2gs_plugin.eval.bench_size import size_plan, smallest_within
-from nerf2gs_plugin.eval.bench_speed_quality import collect_points, pareto_front
-from nerf2gs_plugin.eval.bench_stability import StressCase, classify, stability_plan, summarize
-from nerf2gs_plugin.eval.perturb import Perturbation
+from nerf2gs_bench import size as bench_size, speed_quality as bench_speed_quality, stability as bench_stability
+from nerf2gs_bench.runs import RunSpec
+from nerf2gs_bench.size import size_plan, smallest_within
+from nerf2gs_bench.speed_quality import collect_points, pareto_front
+from nerf2gs_bench.stability import StressCase, classify, stability_plan, summarize
+from nerf2gs_bench.perturb import Perturbation
 from nerf2gs_plugin.registry import get_method
 
 
@@ -28,7 +28,7 @@ def test_pareto_front():
 
 
 def test_pareto_front_on_three_axes():
-    from nerf2gs_plugin.eval.bench_speed_quality import pareto_front_nd
+    from nerf2gs_bench.speed_quality import pareto_front_nd
 
     fps = [10.0, 20.0, 20.0, 5.0, float("nan")]
     psnr = [20.0, 19.0, 19.0, 21.0, 30.0]
@@ -74,7 +74,7 @@ def test_speed_quality_reads_results_and_writes_outputs(tmp_path):
 
 
 def test_stability_plan_walks_each_stress_mild_to_harsh():
-    from nerf2gs_plugin.eval.stability_levels import STRESS_LEVELS
+    from nerf2gs_bench.stability_levels import STRESS_LEVELS
 
     plan = stability_plan("quick")
     own = get_method("splatfacto").config.seed
@@ -95,7 +95,7 @@ def test_stability_plan_walks_each_stress_mild_to_harsh():
     assert next(c for c in sf if c.variant == "pose noise 0.5deg/5cm").perturbation == Perturbation(rotation_deg=0.5, translation_m=0.05, seed=7)
     assert next(c for c in sf if c.variant == "no masks").perturbation == Perturbation(drop_masks=True)
     assert next(c for c in sf if c.variant == "random init").perturbation == Perturbation(drop_points=True)
-    from nerf2gs_plugin.eval.bench_paper import paper_table_plan
+    from nerf2gs_bench.paper import paper_table_plan
 
     baseline = next(s for s in paper_table_plan("quick") if s.label == "splatfacto")
     assert sf[0].overrides == baseline.overrides  # the own-seed run is the paper-table run: trained once
@@ -133,7 +133,7 @@ def _level_row(method, stress, level, street, bev=15.0, status="ok", error=None)
 
 
 def test_sweep_stops_each_stress_at_its_first_failure():
-    from nerf2gs_plugin.eval.breaking_point import sweep
+    from nerf2gs_bench.breaking_point import sweep
 
     seeds = [{"method": "m", "variant": f"seed {i}", "status": "ok", "street_psnr": 20.0, "bev_psnr": 15.0} for i in range(2)]
     outcomes = {("pose", 1): 19.0, ("pose", 2): 16.5, ("pose", 3): 18.0, ("views", 1): 19.5, ("views", 2): 19.0,
@@ -160,7 +160,7 @@ def test_sweep_stops_each_stress_at_its_first_failure():
     err = next(r for r in rows if r.get("error_kind"))
     assert err["status"] == "error" and err["error"] == "RuntimeError: kernel exploded" and err["method"] == "m"
 
-    from nerf2gs_plugin.eval.breaking_point import breaking_points
+    from nerf2gs_bench.breaking_point import breaking_points
 
     err.update(stress="exp", level=1, level_label="L1")  # plain tuples carry no tags; real cases do
     points = breaking_points(rows)["m"]
@@ -172,7 +172,7 @@ def test_sweep_stops_each_stress_at_its_first_failure():
 
 
 def test_breaking_points_table_json_and_chart(tmp_path):
-    from nerf2gs_plugin.eval.breaking_point import breaking_markdown, breaking_points, level_chart
+    from nerf2gs_bench.breaking_point import breaking_markdown, breaking_points, level_chart
 
     rows = [{"method": m, "variant": f"seed {i}", "status": "ok", "street_psnr": 20.0 + i * 0.1, "bev_psnr": 16.0}
             for m in ("a", "a + NeRF views") for i in range(2)]
@@ -221,7 +221,7 @@ def test_classify_and_summary_count_failures():
 def test_a_quality_collapse_is_a_failure():
     """A case more than 3 dB below its method's unstressed seed mean (street or BEV) fails, even
     though it ends above the untrained model; 2.9 dB below does not."""
-    from nerf2gs_plugin.eval.bench_stability import mark_collapses
+    from nerf2gs_bench.stability import mark_collapses
 
     rows = [{"method": "m", "variant": f"seed {i}", "status": "ok", "street_psnr": 22.0 + d, "bev_psnr": 19.0} for i, d in enumerate((-0.1, 0.0, 0.1))]
     rows += [{"method": "m", "variant": "random init", "status": "ok", "street_psnr": 17.0, "bev_psnr": 18.5, "error": None},
@@ -243,14 +243,14 @@ def test_committed_stability_results_use_the_collapse_definition():
     """benchmarks/results/stability.json was regenerated with the > 3 dB collapse rule."""
     from pathlib import Path
 
-    from nerf2gs_plugin.eval.bench_stability import COLLAPSE_DB, mark_collapses
+    from nerf2gs_bench.stability import COLLAPSE_DB, mark_collapses
 
     d = json.loads((Path(__file__).resolve().parents[2] / "benchmarks/results/stability.json").read_text())
     assert d["collapse_db"] == COLLAPSE_DB
     assert [r["status"] for r in mark_collapses(d["rows"])] == [r["status"] for r in d["rows"]]
     assert summarize(d["rows"]) == d["summary"]
     if "breaking_point" in d:  # the sweep's format; the one-level bench's file has none
-        from nerf2gs_plugin.eval.breaking_point import breaking_points
+        from nerf2gs_bench.breaking_point import breaking_points
 
         assert breaking_points(d["rows"]) == d["breaking_point"]
 
@@ -351,7 +351,7 @@ def test_stability_and_size_end_to_end_on_plugin_method(tiny_scene, tmp_path, mo
 
 
 def test_quick_scale_rescales_schedules_and_merges_extras(tmp_path):
-    from nerf2gs_plugin.eval.bench_paper import _overrides, ablation_plan, speed_quality_chart
+    from nerf2gs_bench.paper import _overrides, ablation_plan, speed_quality_chart
 
     sf = apply_plain(get_method("splatfacto").config, _overrides("quick", "splatfacto"))
     default = get_method("splatfacto").config
@@ -374,7 +374,7 @@ def test_quick_scale_rescales_schedules_and_merges_extras(tmp_path):
 
 
 def test_case_dataset_reports_unsupported_stresses(tiny_scene, tmp_path):
-    from nerf2gs_plugin.eval.bench_stability import case_dataset
+    from nerf2gs_bench.stability import case_dataset
 
     colmap_like = tmp_path / "colmap"
     colmap_like.mkdir()
@@ -391,7 +391,7 @@ def test_run_key_follows_the_resolved_config(monkeypatch):
     """A changed method default (not only a changed override) must retrain, never reuse a stale run."""
     import dataclasses
 
-    from nerf2gs_plugin.eval import bench_runs
+    from nerf2gs_bench import runs as bench_runs
     from nerf2gs_plugin import registry
 
     spec = RunSpec("sf", "splatfacto", {"max_num_iterations": 50})
@@ -407,7 +407,7 @@ def test_run_key_follows_the_resolved_config(monkeypatch):
 
 def test_raster_bench_writes_tables_on_a_tiny_scale(tmp_path, monkeypatch):
     """Both backends time the same scenes; the files name the fast backend and the speedup is real."""
-    from nerf2gs_plugin.eval import bench_raster
+    from nerf2gs_bench import raster as bench_raster
 
     tiny = {"fwdbwd": [(300, 48, 32)], "fps": (300, 48, 32), "repeats": 1, "torch_max_pixels": 48 * 32,
             "torch_max_gaussians": 300, "surfels_fwdbwd": [(300, 48, 32)], "surfels_torch_max_pixels": 48 * 32}
@@ -423,7 +423,7 @@ def test_raster_bench_writes_tables_on_a_tiny_scale(tmp_path, monkeypatch):
 
 
 def test_model_overrides_merge_nested_fields():
-    from nerf2gs_plugin.eval.bench_size import model_overrides
+    from nerf2gs_bench.size import model_overrides
 
     assert model_overrides([]) == {}
     assert model_overrides(["strategy.max_gaussians=8000", "strategy.prune_weight_fraction=0.2", "depth_loss_weight=0"]) == {

@@ -1,7 +1,7 @@
 """``ns2gs-bench real-photos`` output: the held-out-photo table and the Markdown (the training path is
 the shared bench runner, exercised by the other benches' tests)."""
 
-from nerf2gs_plugin.eval.bench_real_photos import LABELS, RealPhotosOptions, held_out_table, results_md, run_overrides
+from nerf2gs_bench.real_photos import LABELS, RealPhotosOptions, held_out_table, results_md, run_overrides
 
 
 def _doc():
@@ -50,7 +50,7 @@ def test_renders_from_above_on_a_tiny_scene(tiny_scene, tmp_path):
     import dataclasses
 
     from nerf2gs_plugin.engine.trainer import Trainer
-    from nerf2gs_plugin.eval.bench_real_photos import renders_from_above
+    from nerf2gs_bench.real_photos import renders_from_above
     from nerf2gs_plugin.registry import get_method
 
     runs = []
