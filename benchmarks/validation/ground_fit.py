@@ -11,9 +11,8 @@ real-capture bench's synthetic drive as a second scene.
 Usage: python benchmarks/validation/ground_fit.py OUT_STEM NAME:DATA:TRUE:CAMERA_HEIGHT ...
 with DATA a processed capture (transforms.json + sparse_pc.ply) and TRUE either a folder of
 Strecha ``.camera`` files (true up: -z) or a dataset whose transforms.json holds the true cameras
-(frames named ``frame_<index>``; true up: its ``up``). Produced benchmarks/results/ground_fit.{json,md}:
-  castle-P30:/work/data/castle_exh:<castle-P30>/gt_dense_cameras:1.6
-  real-bench drive:benchmarks/runs/real/estimated:benchmarks/runs/real/gt:3
+(frames named ``frame_<index>``; true up: its ``up``). Produced benchmarks/results/ground_fit.{json,md}
+through the plan benchmarks/plans/ground_fit.yaml (castle-P30 and the real-capture bench's drive).
 """
 import json
 import sys

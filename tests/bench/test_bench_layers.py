@@ -15,7 +15,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("runs",),  # run specs, keys and reuse of trained runs
     ("runner",),  # training, evaluating and writing a bench's results
     ("paper", "speed_quality", "size", "stability", "raster", "field", "faults", "real", "real_photos", "scale",
-     "blocks", "enhancer", "demo"),
+     "blocks", "enhancer", "demo", "plans"),  # plans: the validation studies' runner
     ("cli",),
 ]
 RANK = {name: i for i, names in enumerate(LAYERS) for name in names}

@@ -1,7 +1,7 @@
 """What a change of defaults did to the committed tables: each row of a paper-table JSON now against
 the same file at an earlier commit (the tables made before the change), PSNR per split and size.
 
-Usage: python benchmarks/validation/defaults_change.py BEFORE_COMMIT OUT_STEM RESULT_JSON...
+Usage: python benchmarks/archive/defaults_change.py BEFORE_COMMIT OUT_STEM RESULT_JSON...
 (RESULT_JSON relative to the repository, e.g. benchmarks/results/paper_table.json; writes
 OUT_STEM.json and OUT_STEM.md). Made for the 2026-11-24 change (Splatfacto / 2DGS weight prune 0.1,
 --augment.real-only-from 0.9), where BEFORE_COMMIT is the last commit with the old tables.
