@@ -16,7 +16,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 MERGED = "Rows retrained in a later run of the bench and merged here"
 sys.path.insert(0, str(ROOT))
-from nerf2gs_plugin.eval.bench_paper import TARGETS, paper_table_pairs, ratios_md, write_results  # noqa: E402
+from nerf2gs_bench.paper import TARGETS, paper_table_pairs, ratios_md, write_results  # noqa: E402
 
 
 def main(table_dir: Path, new_dir: Path, labels: list[str]) -> None:

@@ -18,8 +18,8 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from nerf2gs_plugin.eval.bench_io import write_bench_files  # noqa: E402
-from nerf2gs_plugin.eval.bench_size import chart, markdown, smallest_within  # noqa: E402
+from nerf2gs_bench.runner import write_bench_files  # noqa: E402
+from nerf2gs_bench.size import chart, markdown, smallest_within  # noqa: E402
 
 
 def relabel(rows: list[dict], new_default: str, suffix: str, keep: tuple[str, ...] = ()) -> list[dict]:

@@ -89,7 +89,7 @@ def pose_figures(row: dict, gt: Path) -> dict:
 
 
 def markdown(doc: dict) -> str:
-    from nerf2gs_plugin.eval.machine import machine_line
+    from nerf2gs_bench.machine import machine_line
 
     lines = [f"# SfM time of `ns2gs-data process images` on {doc['photos']} photos ({doc['size']})", "",
              f"Machine: {machine_line(doc.get('machine'))}; `--num-threads {doc['threads']}`; other jobs were running "
@@ -126,7 +126,7 @@ def main() -> None:
     ap.add_argument("--provenance", default="")
     ap.add_argument("--summarize-only", action="store_true", help="re-read finished variants' databases and rewrite OUT.md")
     a = ap.parse_args()
-    from nerf2gs_plugin.eval.machine import machine_info
+    from nerf2gs_bench.machine import machine_info
     from nerf2gs_plugin.utils.io import atomic_write_text
 
     out_json = a.out.with_suffix(".json")

@@ -37,9 +37,9 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-from nerf2gs_plugin.eval.bench_io import write_bench_files  # noqa: E402
-from nerf2gs_plugin.eval.bench_size import SIZE_TARGET, TOLERANCE_DB, draw  # noqa: E402
-from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
+from nerf2gs_bench.runner import write_bench_files  # noqa: E402
+from nerf2gs_bench.size import SIZE_TARGET, TOLERANCE_DB, draw  # noqa: E402
+from nerf2gs_bench.machine import machine_line  # noqa: E402
 from nerf2gs_plugin.utils.plotting import pyplot, save_figure  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 

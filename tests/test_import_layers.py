@@ -20,8 +20,8 @@ LAYERS: list[tuple[str, ...]] = [
     ("", "utils", "errors", "progress", "warn"),
     ("cameras", "data"),
     ("masks", "rendering", "fields"),  # masks: mask files, segmenters, masks from renders, their evaluation
-    # the image metrics (images in, numbers out) and the source hash: the enhancer's training uses them
-    ("eval.metrics", "eval.lpips", "eval.code_version"),
+    # the image metrics (images in, numbers out): the enhancer's training uses them
+    ("eval.metrics", "eval.lpips"),
     ("datamanagers", "augment.config"),  # augment.config: the --augment.* values the trainer's config holds
     ("engine",),  # the contracts methods implement: Model, Pipeline, Trainer(Config), optimizers
     # MethodSpecification; built-in methods are named by string, not imported. runs: a trained run
@@ -48,7 +48,7 @@ def all_modules() -> dict[str, Path]:
     return {module_name(p): p for p in sorted(ROOT.rglob("*.py"))}
 
 
-def imports_of(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
+def imports_of(name: str, path: Path, modules: dict[str, Path], package: str = PACKAGE) -> set[str]:
     """The package's modules that ``name`` imports anywhere in its source, type-only imports included
     (``from a import b`` counts as importing ``a.b`` when that is a module)."""
     is_pkg = path.name == "__init__.py"
@@ -65,7 +65,7 @@ def imports_of(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
             targets = [f"{base}.{a.name}" if f"{base}.{a.name}" in modules else base for a in node.names]
         else:
             continue
-        found |= {t for t in targets if t.split(".")[0] == PACKAGE and t != name}
+        found |= {t for t in targets if t.split(".")[0] == package and t != name}
     return found
 
 
@@ -145,3 +145,14 @@ def test_the_checker_sees_function_level_imports(tmp_path):
     assert found == {"nerf2gs_plugin.eval.metrics", "nerf2gs_plugin.cli.train", "nerf2gs_plugin.viewer.server"}
     assert layer_of("nerf2gs_plugin.masks.make_masks") > layer_of("nerf2gs_plugin.methods.x") > layer_of("nerf2gs_plugin.masks.auto")
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+BENCH = "nerf2gs_bench"
+
+
+def test_the_package_never_imports_the_bench():
+    """``nerf2gs_bench`` (``ns2gs-bench``, its benches, the validation plans) sits above every layer: the
+    product never imports it, not even for a type annotation."""
+    modules = all_modules()
+    found = sorted(f"{a} -> {b}" for a, path in modules.items() for b in imports_of(a, path, modules, package=BENCH))
+    assert not found, "the package imports the bench:\n  " + "\n  ".join(found)

@@ -51,9 +51,9 @@ for stage in "$@"; do
     # GPU_TESTS: more test paths to run with these (e.g. ones that failed in the full run)
     gsplat-tests) timeout 300 python3 -m pytest -q -s -p no:cacheprovider tests/rendering/test_gsplat_backend.py \
                     tests/methods/splatfacto/test_splatfacto_run.py ${GPU_TESTS:-} >/tmp/stage.log 2>&1 ;;
-    raster) timeout 300 python3 -m nerf2gs_plugin.cli.bench raster --device cuda --out "$OUT"  >/tmp/stage.log 2>&1 ;;
+    raster) timeout 300 python3 -m nerf2gs_bench.cli raster --device cuda --out "$OUT"  >/tmp/stage.log 2>&1 ;;
     tests) timeout 420 python3 -m pytest -q -p no:cacheprovider --timeout 120 tests --ignore=tests/data --ignore=tests/viewer  >/tmp/stage.log 2>&1 ;;
-    quick) timeout 420 python3 -m nerf2gs_plugin.cli.bench quick --out "$OUT/quick" --runs /tmp/runs  >/tmp/stage.log 2>&1 ;;
+    quick) timeout 420 python3 -m nerf2gs_bench.cli quick --out "$OUT/quick" --runs /tmp/runs  >/tmp/stage.log 2>&1 ;;
     *) echo "unknown stage $stage"; continue ;;
   esac
   rc=$?; { echo "== $stage"; cat /tmp/stage.log; } >>"$OUT/log.txt"

@@ -11,9 +11,8 @@ photos (``test``), so there the figures are a measurement, not a selection.
 Usage: python benchmarks/validation/augment_variants.py OUT_STEM SCENE:RUN:BASELINE:REFERENCE:SPLITS WORK VARIANT...
   SPLITS comma-separated; VARIANT name=key=json[,key=json] e.g. ro09=augment.real_only_from=0.9
   Variants already trained under WORK/<scene>/<name> (with eval.json) are reused.
-Produced benchmarks/results/augment_variants.{json,md} with
-  castle-P30:/work/data/benchruns/data/splatfacto/7e1d31e91e31:<...>/1f7fca845292:<...>/a505aefbc22a:test
-  second street (default scale):benchmarks/runs/street-seed7/splatfacto/62ddbebc1d4a:...:val_street,val_bev,street,bev_1,bev_2
+Produced benchmarks/results/augment_variants.{json,md} and augment_spread.{json,md}: the calls are the plans
+benchmarks/plans/augment_variants.yaml and augment_spread.yaml (``python -m nerf2gs_bench.plans run augment_variants``).
 """
 import dataclasses
 import json
@@ -25,9 +24,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from nerf2gs_plugin.engine.config import load_config, read_config_doc  # noqa: E402
 from nerf2gs_plugin.runs.load import load_run  # noqa: E402
 from nerf2gs_plugin.engine.trainer import Trainer  # noqa: E402
-from nerf2gs_plugin.eval.bench_size import _nested  # noqa: E402
+from nerf2gs_bench.size import _nested  # noqa: E402
 from nerf2gs_plugin.eval.evaluate import evaluate_run  # noqa: E402
-from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
+from nerf2gs_bench.machine import machine_line  # noqa: E402
 from nerf2gs_plugin.registry import get_method  # noqa: E402
 from nerf2gs_plugin.utils.config import apply_plain  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402

@@ -30,8 +30,8 @@ from nerf2gs_plugin.data.images import load_mask  # noqa: E402
 from nerf2gs_plugin.masks.auto import AutoOptions, masks_from_renders  # noqa: E402
 from nerf2gs_plugin.masks.maskless import maskless_view  # noqa: E402
 from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_street  # noqa: E402
-from nerf2gs_plugin.eval import bench_real as br  # noqa: E402
-from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
+from nerf2gs_bench import real as br  # noqa: E402
+from nerf2gs_bench.machine import machine_line  # noqa: E402
 from nerf2gs_plugin.masks.evaluate import resample_mask  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 

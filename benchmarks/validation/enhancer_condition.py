@@ -17,9 +17,9 @@ import torch
 
 torch.set_num_threads(1)
 from nerf2gs_plugin.cli.enhance import evaluate_enhancer  # noqa: E402
-from nerf2gs_plugin.enhancer.bench import bench_enhancer_config  # noqa: E402
+from nerf2gs_bench.enhancer import bench_enhancer_config  # noqa: E402
 from nerf2gs_plugin.enhancer.train import TrainReport, report_path, train_enhancer  # noqa: E402
-from nerf2gs_plugin.eval.machine import machine_info, machine_line  # noqa: E402
+from nerf2gs_bench.machine import machine_info, machine_line  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
 SPLITS = ("val_street", "val_bev")

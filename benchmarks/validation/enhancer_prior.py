@@ -20,9 +20,9 @@ import torch
 
 torch.set_num_threads(1)
 from nerf2gs_plugin.cli.enhance import evaluate_enhancer  # noqa: E402
-from nerf2gs_plugin.enhancer.bench import bench_enhancer_config  # noqa: E402
+from nerf2gs_bench.enhancer import bench_enhancer_config  # noqa: E402
 from nerf2gs_plugin.enhancer.train import report_path, train_enhancer  # noqa: E402
-from nerf2gs_plugin.eval.bench_io import write_bench_files  # noqa: E402
+from nerf2gs_bench.runner import write_bench_files  # noqa: E402
 
 SPLITS = ("val_street", "val_bev")
 reference, data, out_dir, prior = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3]), Path(sys.argv[4])

@@ -23,7 +23,7 @@ import torch
 
 torch.set_num_threads(1)
 from nerf2gs_plugin.runs.load import load_run  # noqa: E402
-from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
+from nerf2gs_bench.machine import machine_line  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
 MODES = ("mean", "identity", "nearest")

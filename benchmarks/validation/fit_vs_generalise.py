@@ -26,7 +26,7 @@ torch.set_num_threads(1)
 from nerf2gs_plugin.augment.datamanager import AugmentConfig, bev_cameras  # noqa: E402
 from nerf2gs_plugin.runs.load import load_run  # noqa: E402
 from nerf2gs_plugin.runs.model import load_run_model  # noqa: E402
-from nerf2gs_plugin.eval.bench_io import write_bench_files  # noqa: E402
+from nerf2gs_bench.runner import write_bench_files  # noqa: E402
 from nerf2gs_plugin.utils.image_metrics import psnr  # noqa: E402
 
 out = Path(sys.argv[1])

@@ -11,9 +11,8 @@ real-capture bench's synthetic drive as a second scene.
 Usage: python benchmarks/validation/ground_fit.py OUT_STEM NAME:DATA:TRUE:CAMERA_HEIGHT ...
 with DATA a processed capture (transforms.json + sparse_pc.ply) and TRUE either a folder of
 Strecha ``.camera`` files (true up: -z) or a dataset whose transforms.json holds the true cameras
-(frames named ``frame_<index>``; true up: its ``up``). Produced benchmarks/results/ground_fit.{json,md}:
-  castle-P30:/work/data/castle_exh:<castle-P30>/gt_dense_cameras:1.6
-  real-bench drive:benchmarks/runs/real/estimated:benchmarks/runs/real/gt:3
+(frames named ``frame_<index>``; true up: its ``up``). Produced benchmarks/results/ground_fit.{json,md}
+through the plan benchmarks/plans/ground_fit.yaml (castle-P30 and the real-capture bench's drive).
 """
 import json
 import sys
@@ -26,7 +25,7 @@ from sfm_speed import read_strecha  # noqa: E402
 
 from nerf2gs_plugin.data.ground import MAX_TILT_DEG, estimate_metric_scale, fit_ground_plane  # noqa: E402
 from nerf2gs_plugin.data.ply import read_ply_points  # noqa: E402
-from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
+from nerf2gs_bench.machine import machine_line  # noqa: E402
 from nerf2gs_plugin.eval.pose_eval import pose_errors  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 

@@ -21,8 +21,8 @@ import torch
 
 torch.set_num_threads(1)
 from nerf2gs_plugin.engine.trainer import Trainer  # noqa: E402
-from nerf2gs_plugin.eval.bench_paper import _overrides  # noqa: E402
-from nerf2gs_plugin.eval.bench_size import model_overrides  # noqa: E402
+from nerf2gs_bench.paper import _overrides  # noqa: E402
+from nerf2gs_bench.size import model_overrides  # noqa: E402
 from nerf2gs_plugin.methods.splatfacto import strategy as S  # noqa: E402
 from nerf2gs_plugin.registry import get_method  # noqa: E402
 from nerf2gs_plugin.utils.config import apply_plain  # noqa: E402

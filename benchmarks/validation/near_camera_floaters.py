@@ -9,10 +9,11 @@ views the augmentation rendered (``--augment.delta-h``, ``--augment.theta-pitch`
 as given), so a floater copied from the reference's views from above tells itself apart.
 
 Usage: python benchmarks/validation/near_camera_floaters.py OUT_STEM RUN SPLIT VIEW DELTA_H THETA_PITCH EVERY_N
-Produced benchmarks/results/near_camera_floaters.{json,md} with the castle-P30 run of 2026-11-24
-(/work/data/benchruns/data/splatfacto/044c3f225834 test 1 3 30 2); near_camera_floaters_castle_val.{json,md}
+Produced benchmarks/results/near_camera_floaters.{json,md} with the augmented castle-P30 run of the
+real-photos bench (test 1 3 30 2); near_camera_floaters_castle_val.{json,md}
 with plain Splatfacto on castle-P30's validation photos (augment_appearance.md; the view 3 of its "test" split,
 photo 0028; the last three arguments only place the views from above it reports weights in).
+The calls: benchmarks/plans/near_camera_floaters.yaml.
 """
 import json
 import sys
@@ -24,7 +25,7 @@ torch.set_num_threads(1)
 from nerf2gs_plugin.augment.datamanager import bev_cameras  # noqa: E402
 from nerf2gs_plugin.runs.load import load_run  # noqa: E402
 from nerf2gs_plugin.methods.capture_path import capture_path  # noqa: E402
-from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
+from nerf2gs_bench.machine import machine_line  # noqa: E402
 from nerf2gs_plugin.utils.image_metrics import psnr_from_mse  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 

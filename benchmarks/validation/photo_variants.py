@@ -13,10 +13,10 @@ import json
 import sys
 from pathlib import Path
 
-from nerf2gs_plugin.eval.bench_io import BenchRunner
-from nerf2gs_plugin.eval.bench_paper import _merge
-from nerf2gs_plugin.eval.bench_real_photos import RealPhotosOptions, augment_overrides, run_overrides
-from nerf2gs_plugin.eval.bench_runs import RunSpec
+from nerf2gs_bench.runner import BenchRunner
+from nerf2gs_bench.paper import _merge
+from nerf2gs_bench.real_photos import RealPhotosOptions, augment_overrides, run_overrides
+from nerf2gs_bench.runs import RunSpec
 from reference_length import show  # the same JSON line per run (this folder is the script's sys.path[0])
 
 

@@ -16,8 +16,8 @@ import shutil
 import sys
 from pathlib import Path
 
-from nerf2gs_plugin.eval import bench_real as br
-from nerf2gs_plugin.eval.machine import machine_line
+from nerf2gs_bench import real as br
+from nerf2gs_bench.machine import machine_line
 from nerf2gs_plugin.utils.io import atomic_write_text
 
 SCALE = 4

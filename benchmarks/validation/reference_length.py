@@ -10,9 +10,9 @@ import json
 import sys
 from pathlib import Path
 
-from nerf2gs_plugin.eval.bench_io import BenchRunner, failure_reason
-from nerf2gs_plugin.eval.bench_real_photos import RealPhotosOptions, augment_overrides, run_overrides
-from nerf2gs_plugin.eval.bench_runs import RunSpec
+from nerf2gs_bench.runner import BenchRunner, failure_reason
+from nerf2gs_bench.real_photos import RealPhotosOptions, augment_overrides, run_overrides
+from nerf2gs_bench.runs import RunSpec
 
 
 def show(label: str, out) -> None:

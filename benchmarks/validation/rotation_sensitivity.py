@@ -19,8 +19,8 @@ torch.set_num_threads(1)
 from nerf2gs_plugin.data import parse_dataset  # noqa: E402
 from nerf2gs_plugin.data.images import load_image  # noqa: E402
 from nerf2gs_plugin.runs.load import load_run  # noqa: E402
-from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
-from nerf2gs_plugin.eval.perturb import random_rotation  # noqa: E402
+from nerf2gs_bench.machine import machine_line  # noqa: E402
+from nerf2gs_bench.perturb import random_rotation  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
 run_dir, data, out = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3])

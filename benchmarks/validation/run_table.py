@@ -4,7 +4,8 @@ records), without retraining anything.
 
 Usage: python benchmarks/validation/run_table.py OUT_STEM ROWS.json
 ROWS.json: {"title": ..., "about": ..., "rows": [{"scene": ..., "variant": ..., "run": RUN_DIR,
-"splits": "val" | "test" | "eval"}, ...]}; "val" reads the run's validation evaluation
+"splits": "val" | "test" | "eval"}, ...]}; RUN_DIR may start with a root of the plans' runner
+(``{bench_runs}``, ``{val_runs}``: ``NS2GS_BENCH_RUNS``, ``NS2GS_VAL_RUNS``, see ``nerf2gs_bench/plans.py``); "val" reads the run's validation evaluation
 (val_street, val_bev), "test" / "eval" its bench evaluation (a photo set's held-out photos, or the
 street / bird's-eye views).
 Produced: benchmarks/results/appearance_reg.{json,md} (rows: benchmarks/validation/appearance_reg_rows.json),
@@ -24,8 +25,9 @@ import json
 import sys
 from pathlib import Path
 
-from nerf2gs_plugin.eval.bench_io import EVAL_SPLITS, VAL_SPLITS, eval_cache_name
-from nerf2gs_plugin.eval.machine import machine_line
+from nerf2gs_bench.runner import EVAL_SPLITS, VAL_SPLITS, eval_cache_name
+from nerf2gs_bench.machine import machine_line
+from nerf2gs_bench.plans import expand_roots
 from nerf2gs_plugin.registry import get_method
 from nerf2gs_plugin.utils.io import atomic_write_text
 
@@ -39,6 +41,7 @@ def main(out: Path, rows_path: Path) -> None:
     doc = json.loads(rows_path.read_text())
     rows = []
     for r in doc["rows"]:
+        r = {**r, "run": expand_roots(r["run"])}
         res = results(Path(r["run"]), r["splits"])
         psnr = {k: round(v["psnr"], 2) for k, v in res.items()}
         spec = json.loads((Path(r["run"]) / "bench_run.json").read_text())

@@ -23,8 +23,8 @@ from nerf2gs_plugin.data.process.frames import extract_video_frames  # noqa: E40
 from nerf2gs_plugin.data.process.pipeline import ProcessOptions, run_process  # noqa: E402
 from nerf2gs_plugin.data.process.sfm import SfmOptions  # noqa: E402
 from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_street  # noqa: E402
-from nerf2gs_plugin.eval.bench_real import c2w_array, frame_index, read_frames, write_video  # noqa: E402
-from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
+from nerf2gs_bench.real import c2w_array, frame_index, read_frames, write_video  # noqa: E402
+from nerf2gs_bench.machine import machine_line  # noqa: E402
 from nerf2gs_plugin.eval.pose_eval import capture_report  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 

@@ -10,7 +10,7 @@ import torch
 torch.set_num_threads(1)
 from nerf2gs_plugin.engine.config import apply_plain
 from nerf2gs_plugin.engine.trainer import Trainer
-from nerf2gs_plugin.eval.bench_paper import step_overrides, _merge
+from nerf2gs_bench.paper import step_overrides, _merge
 from nerf2gs_plugin.registry import get_method
 from nerf2gs_plugin.runs.load import load_run
 from nerf2gs_plugin.eval.evaluate import evaluate_run

@@ -12,8 +12,8 @@ import torch
 torch.set_num_threads(1)
 from nerf2gs_plugin.utils.config import apply_plain
 from nerf2gs_plugin.engine.trainer import Trainer
-from nerf2gs_plugin.eval.bench_paper import _overrides
-from nerf2gs_plugin.eval.bench_size import model_overrides
+from nerf2gs_bench.paper import _overrides
+from nerf2gs_bench.size import model_overrides
 from nerf2gs_plugin.registry import get_method
 from nerf2gs_plugin.runs.load import load_run
 from nerf2gs_plugin.eval.evaluate import evaluate_run

@@ -93,7 +93,7 @@ def test_cli_train_apply_eval(tiny_scene, tmp_path, monkeypatch, capsys):
 
 
 def test_bench_enhancer_trains_once(tiny_scene, tmp_path, monkeypatch):
-    from nerf2gs_plugin.enhancer import bench
+    from nerf2gs_bench import enhancer as bench
 
     monkeypatch.setitem(bench.SCALES, "quick", {"steps": 3, "batch_size": 2, "crop": 16})
     calls = []

@@ -52,20 +52,3 @@ def test_eval_summary_reports_a_nerf_in_parameters_not_primitives(capsys):
     res["size"].update(primitive_kind="Gaussians", primitives=12251)
     eval_table(res)
     assert "12,251 Gaussians" in capsys.readouterr().out
-
-
-def test_bench_log_lines_keep_a_long_path_on_one_line(tmp_path):
-    """A bench's log line above its progress bar: a run folder longer than the terminal stays on the line that
-    names it (a narrow, non-tty console wrapped it onto the next line: "reuse <label>: " looked empty)."""
-    from types import SimpleNamespace
-
-    from rich.console import Console
-
-    from nerf2gs_plugin.eval.bench_io import BenchLog, progress_log
-
-    out = io.StringIO()
-    log = progress_log(SimpleNamespace(console=Console(file=out, width=40)), BenchLog(tmp_path, "demo"))
-    line = "[bench] reuse scaffold-gs default: /work/benchruns/street/scaffold-gs/93afe4172087"
-    log(line)
-    assert out.getvalue().splitlines() == [line]
-    assert (tmp_path / "logs" / "demo.log").read_text().rstrip().endswith(line)

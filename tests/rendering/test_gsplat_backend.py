@@ -12,7 +12,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from nerf2gs_plugin.eval.bench_raster import street_scene
+from nerf2gs_bench.raster import street_scene
 from nerf2gs_plugin.rendering import rasterize_gaussians, rasterize_surfels
 from nerf2gs_plugin.rendering.backend import gsplat_available
 
