@@ -11,13 +11,14 @@ from typing import Any, Callable, Optional
 from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_bench.runner import BenchFailed, fmt  # noqa: F401
 from nerf2gs_bench.runs import RunSpec
+from nerf2gs_plugin.eval.extrapolated import EXTRAPOLATED, EXTRAPOLATED_SPLITS, extrapolated_mean
 from nerf2gs_plugin.eval.figures import image_row
 from nerf2gs_bench.machine import machine_info, machine_line
 from nerf2gs_plugin.progress import make_progress
 from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.utils.plotting import pyplot, save_figure
 
-SPLITS = ("street", "bev_1", "bev_2")
+SPLITS = ("street", "bev_1", "bev_2", "lane_2", "lane_4", EXTRAPOLATED)
 METRICS = (("psnr", "PSNR", True), ("ssim", "SSIM", True), ("lpips", "LPIPS", False), ("psnr_ground", "PSNR road", True))
 TARGETS = ("splatfacto", "scaffold-gs", "2dgs")
 
@@ -161,18 +162,26 @@ def succeeded(results: dict[str, dict]) -> dict[str, dict]:
 
 # ----------------------------------------------------------------------------- tables
 def _value(res: dict, metric: str, split: str) -> Optional[float]:
+    if split == EXTRAPOLATED:  # computed here, so results evaluated before the column existed have it too
+        return extrapolated_mean(res.get("results", {}), metric)
     r = res.get("results", {}).get(split, {})
     return r.get(metric)
 
 
-def _group_ranks(rows: list[dict], groups: dict[str, list[str]]) -> dict[tuple[str, str, str], int]:
+def table_splits(results: dict[str, dict]) -> tuple[str, ...]:
+    """The columns of :data:`SPLITS` some run has a PSNR for: a street without lane views (an older
+    dataset, the real-capture bench's) keeps its three columns instead of n/a ones."""
+    return tuple(s for s in SPLITS if any(_value(r, "psnr", s) is not None for r in results.values() if not r.get("failed")))
+
+
+def _group_ranks(rows: list[dict], groups: dict[str, list[str]], splits: tuple[str, ...] = SPLITS) -> dict[tuple[str, str, str], int]:
     """(label, metric, split) -> 1 (best) or 2 (second) within each target group."""
     ranks = {}
     for labels in groups.values():
         if len(labels) < 2:
             continue
         for metric, _, higher in METRICS:
-            for split in SPLITS:
+            for split in splits:
                 vals = [(r["label"], _value(r, metric, split)) for r in rows if r["label"] in labels]
                 vals = [(lab, v) for lab, v in vals if v is not None]
                 vals.sort(key=lambda x: -x[1] if higher else x[1])
@@ -183,8 +192,9 @@ def _group_ranks(rows: list[dict], groups: dict[str, list[str]]) -> dict[tuple[s
 
 def markdown_table(results: dict[str, dict], groups: dict[str, list[str]], title: str) -> str:
     rows = list(results.values())
-    ranks = _group_ranks([r for r in rows if not r.get("failed")], groups)
-    head = ["method"] + [f"{name} {s}" for _, name, _ in METRICS for s in SPLITS] + ["FPS", "primitives", "MB", "train s"]
+    splits = table_splits(results)
+    ranks = _group_ranks([r for r in rows if not r.get("failed")], groups, splits)
+    head = ["method"] + [f"{name} {s}" for _, name, _ in METRICS for s in splits] + ["FPS", "primitives", "MB", "train s"]
     lines = [f"### {title}", "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in rows:
         cells = [r["label"]]
@@ -193,7 +203,7 @@ def markdown_table(results: dict[str, dict], groups: dict[str, list[str]], title
             lines.append("| " + " | ".join(cells + [f"failed: {reason}"] + ["-"] * (len(head) - 2)) + " |")
             continue
         for metric, _, _ in METRICS:
-            for s in SPLITS:
+            for s in splits:
                 v = _value(r, metric, s)
                 txt = "n/a" if v is None else (f"{v:.2f}" if metric.startswith("psnr") else f"{v:.3f}")
                 rank = ranks.get((r["label"], metric, s))
@@ -202,6 +212,8 @@ def markdown_table(results: dict[str, dict], groups: dict[str, list[str]], title
         cells += [fmt(r.get("fps")), primitives_cell(size), fmt(size.get("checkpoint_megabytes", size["megabytes"]), 1), fmt(r.get("train_seconds"), 0)]
         lines.append("| " + " | ".join(cells) + " |")
     lines += ["", "Bold: best, italic: second best within each target method (rows sharing a target)."]
+    if EXTRAPOLATED in splits:
+        lines += [f"{EXTRAPOLATED}: the mean over {', '.join(EXTRAPOLATED_SPLITS)} (views no training camera took)."]
     return "\n".join(lines)
 
 
@@ -218,19 +230,20 @@ def rich_table(results: dict[str, dict], title: str):
     from rich.text import Text
 
     table = Table(title=title)
+    splits = table_splits(results)
     table.add_column("method")
-    for s in SPLITS:
+    for s in splits:
         table.add_column(f"PSNR {s}", justify="right")
-    for s in SPLITS:
+    for s in splits:
         table.add_column(f"SSIM {s}", justify="right")
     table.add_column("FPS", justify="right")
     table.add_column("prims", justify="right")
     for r in results.values():
         if r.get("failed"):
-            table.add_row(r["label"], Text(f"failed: {r.get('error')}", style="red"), *[""] * (2 * len(SPLITS) + 1))
+            table.add_row(r["label"], Text(f"failed: {r.get('error')}", style="red"), *[""] * (2 * len(splits) + 1))
             continue
-        ps = [_value(r, "psnr", s) for s in SPLITS]
-        ss = [_value(r, "ssim", s) for s in SPLITS]
+        ps = [_value(r, "psnr", s) for s in splits]
+        ss = [_value(r, "ssim", s) for s in splits]
         table.add_row(r["label"], *[f"{v:.2f}" if v is not None else "n/a" for v in ps],
                       *[f"{v:.3f}" if v is not None else "n/a" for v in ss], fmt(r.get("fps")), primitives_cell(r["size"]))
     return table
@@ -257,17 +270,20 @@ def speed_quality_chart(results: dict[str, dict], path: Path, title: str) -> Non
 def psnr_bar_chart(results: dict[str, dict], path: Path, title: str) -> None:
     if not results:  # every run failed: nothing to draw
         return
+    splits = table_splits(results)
+    if not splits:
+        return
     plt = pyplot()
     labels = list(results)
     fig, ax = plt.subplots(figsize=(max(6, 1.1 * len(labels)), 4.2))
-    width = 0.27
-    for k, s in enumerate(SPLITS):
+    width = 0.8 / len(splits)
+    for k, s in enumerate(splits):
         vals = [_value(results[l], "psnr", s) or 0.0 for l in labels]
-        ax.bar([i + (k - 1) * width for i in range(len(labels))], vals, width, label=s)
+        ax.bar([i + (k - (len(splits) - 1) / 2) * width for i in range(len(labels))], vals, width, label=s)
     ax.set_xticks(range(len(labels)))
     ax.set_xticklabels(labels, rotation=25, ha="right", fontsize=8)
     ax.set_ylabel("PSNR (dB)")
-    lo = min((_value(r, "psnr", s) or 99) for r in results.values() for s in SPLITS)
+    lo = min((_value(r, "psnr", s) or 99) for r in results.values() for s in splits)
     ax.set_ylim(max(0, lo - 3), None)
     ax.legend()
     ax.grid(axis="y", alpha=0.3)
@@ -314,12 +330,14 @@ def write_results(out_dir: Path, name: str, results: dict[str, dict], title: str
 
 def ratios_md(results: dict[str, dict], pairs: list[tuple[str, str]]) -> str:
     """Augmented vs baseline, measured in the same run of the bench (absolute times drift)."""
-    lines = ["| comparison | d PSNR street | d PSNR bev_1 | d PSNR bev_2 | FPS ratio |", "|---|---|---|---|---|"]
+    splits = table_splits(results)
+    lines = ["| comparison | " + " | ".join(f"d PSNR {s}" for s in splits) + " | FPS ratio |", "|---|" + "---|" * (len(splits) + 1)]
     for a, b in pairs:
         if a in results and b in results and not results[a].get("failed") and not results[b].get("failed"):
-            d = [(_value(results[a], "psnr", s) or 0) - (_value(results[b], "psnr", s) or 0) for s in SPLITS]
+            d = [(_value(results[a], "psnr", s), _value(results[b], "psnr", s)) for s in splits]
+            cells = [f"{x - y:+.2f}" if x is not None and y is not None else "n/a" for x, y in d]
             fr = results[a]["fps"] / results[b]["fps"] if results[a].get("fps") and results[b].get("fps") else float("nan")
-            lines.append(f"| {a} vs {b} | {d[0]:+.2f} | {d[1]:+.2f} | {d[2]:+.2f} | {fr:.2f}x |")
+            lines.append(f"| {a} vs {b} | " + " | ".join(cells) + f" | {fr:.2f}x |")
     return "\n".join(lines)
 
 

@@ -18,8 +18,8 @@ from nerf2gs_plugin.eval.metrics import LPIPS
 from nerf2gs_plugin.utils.config import apply_plain
 from nerf2gs_plugin.utils.io import atomic_write_text
 
-EVAL_SPLITS = ("street", "bev_1", "bev_2")
-VAL_SPLITS = ("val_street", "val_bev")  # the synthetic street's validation views: choose defaults on these
+EVAL_SPLITS = ("street", "bev_1", "bev_2", "lane_1", "lane_2", "lane_4")  # a dataset's missing ones are skipped
+VAL_SPLITS = ("val_street", "val_bev", "val_lane")  # the synthetic street's validation views: choose defaults on these
 
 
 def eval_cache_name(splits: tuple[str, ...]) -> str:

@@ -10,7 +10,8 @@ import pytest
 
 from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_street
 
-SMALL = dict(width=48, height=32, num_train=6, num_street=2, num_bev=3, num_val_street=2, num_val_bev=2, num_cars=4,
+SMALL = dict(width=48, height=32, num_train=6, num_street=2, num_bev=3, num_val_street=2, num_val_bev=2, num_lane=2,
+             num_val_lane=2, num_cars=4,
              spp=2, num_points=300, progress=False)
 
 

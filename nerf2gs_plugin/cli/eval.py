@@ -1,4 +1,4 @@
-"""ns2gs-eval RUN [--split street,bev_1,bev_2] [--output out.json]"""
+"""ns2gs-eval RUN [--split street,bev_1,bev_2,lane_2,lane_4] [--output out.json]"""
 
 from __future__ import annotations
 
@@ -44,6 +44,10 @@ def print_table(result: dict) -> None:
         lp = f"{r['lpips']:.3f}" if r.get("lpips") is not None else "n/a"
         fps = f"{r['fps']:.2f}" if r.get("fps") is not None else "n/a"
         table.add_row(split, f"{r['psnr']:.2f}", f"{r['ssim']:.3f}", lp, fps, str(r["num_images"]))
+    ext = result.get("extrapolated")
+    if ext:
+        lp = f"{ext['lpips']:.3f}" if ext.get("lpips") is not None else "n/a"
+        table.add_row(f"extrapolated ({', '.join(ext['splits'])})", f"{ext['psnr']:.2f}", f"{ext['ssim']:.3f}", lp, "", "")
     size = result["size"]
     print_whole(table)
     fps = f"{result['fps']:.2f}" if result.get("fps") is not None else "n/a"

@@ -9,10 +9,11 @@ all of it and is made in seconds on a CPU. See :mod:`nerf2gs_plugin.data.synthet
 Output folder::
 
     transforms.json        PINHOLE intrinsics, train frames, eval_splits {street, bev_1, bev_2,
-                           val_street, val_bev}, 
+                           val_street, val_bev, lane_1, lane_2, lane_4, val_lane},
                            metres_per_unit = 1, up = +z, ply_file_path
     images/<name>.png      train_XXXX (with cars, +-exposure), street_XXXX / bev1_XXXX / bev2_XXXX (no cars),
-                           valstreet_XXXX / valbev_XXXX (no cars)
+                           valstreet_XXXX / valbev_XXXX, lane1_XXXX / lane2_XXXX / lane4_XXXX /
+                           vallane_XXXX (no cars)
     masks/{sky,ground,transient}/<name>.png   exact masks (ground = road + sidewalk)
     depth/<name>.npy       z-depth in metres, 0 = sky
     sparse_pc.ply          SfM-like points: static surfaces seen by the training views, with noise
@@ -24,6 +25,12 @@ Validation splits: ``val_street`` (street-level views between the test street vi
 for choosing defaults; ``street``/``bev_1``/``bev_2`` are the reported test views and tune nothing.
 The validation poses come from their own random generator and are rendered last, so adding them
 left every train/test image and the sparse points byte-identical (generator version 2 vs 1).
+
+Lane-shift splits (the XLD benchmark's cross-lane views): ``lane_1``, ``lane_2``, ``lane_4`` are level
+cameras at the training height 1, 2 and 4 m across the road from the driven lanes, half to each side
+where the road allows (else toward the other lane); ``val_lane`` (1.5 and 3 m) chooses defaults for
+them. Their poses come from a third generator and are rendered after everything else, so every
+earlier file is byte-identical (generator version 3 vs 2; only transforms.json grows).
 """
 
 from __future__ import annotations
@@ -41,14 +48,14 @@ import tyro
 from nerf2gs_plugin.data.images import write_depth_atomic, write_image_atomic, write_mask_atomic
 from nerf2gs_plugin.data.ply import write_ply_points
 from nerf2gs_plugin.data.synthetic.coverage import ground_coverage
-from nerf2gs_plugin.data.synthetic.layout import SKY, TRANSIENT_MATERIALS, build_layout, empty_boxes
+from nerf2gs_plugin.data.synthetic.layout import ROAD_HALF, SKY, TRANSIENT_MATERIALS, build_layout, empty_boxes
 from nerf2gs_plugin.data.synthetic.poses import bev_poses, street_poses, train_poses
 from nerf2gs_plugin.data.synthetic.raycast import Pinhole, ShadowMap, render_view
 from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.progress import make_progress
 from nerf2gs_plugin.utils.io import atomic_write_text
 
-GENERATOR_VERSION = 2  # 2: val_street, val_bev added (train/test files unchanged)
+GENERATOR_VERSION = 3  # 2: val_street, val_bev added; 3: lane_* and val_lane added (earlier files unchanged)
 
 
 @dataclass
@@ -87,6 +94,13 @@ class SynthStreetConfig:
     val_bev_a: tuple[float, float] = (11.5, 27.5)
     """val_bev first half: (metres above the training height, pitch down in degrees)."""
     val_bev_b: tuple[float, float] = (8.0, 22.0)
+    num_lane: int = 8
+    """Views per lane-shift eval split (one split ``lane_<d>`` per offset in lane_offsets; 0: none)."""
+    lane_offsets: tuple[float, ...] = (1.0, 2.0, 4.0)
+    """Lane-shift eval offsets: metres across the road from the driven lane, at the training height."""
+    num_val_lane: int = 6
+    """Validation lane-shift views (val_lane), alternating over val_lane_offsets."""
+    val_lane_offsets: tuple[float, ...] = (1.5, 3.0)
     spp: int = 5
     """Rays per pixel (1 = pixel centre only; up to 5, rotated grid) for anti-aliasing."""
     exposure_jitter: float = 0.05
@@ -111,8 +125,12 @@ def _check(cfg: SynthStreetConfig) -> None:
         problems.append(f"num_train must be at least 2, got {cfg.num_train}")
     if cfg.num_street < 1 or cfg.num_bev < 1:
         problems.append("num_street and num_bev must be at least 1")
-    if cfg.num_val_street < 0 or cfg.num_val_bev < 0:
-        problems.append("num_val_street and num_val_bev must be >= 0")
+    if cfg.num_val_street < 0 or cfg.num_val_bev < 0 or cfg.num_lane < 0 or cfg.num_val_lane < 0:
+        problems.append("num_val_street, num_val_bev, num_lane and num_val_lane must be >= 0")
+    if not all(0 < d <= 2 * ROAD_HALF for d in (*cfg.lane_offsets, *cfg.val_lane_offsets)):
+        problems.append(f"lane offsets must be within (0, {2 * ROAD_HALF:g}] m (the road's width)")
+    if cfg.num_val_lane and not cfg.val_lane_offsets:
+        problems.append("num_val_lane needs at least one val_lane_offsets entry")
     if not 10.0 <= cfg.fov_deg <= 150.0:
         problems.append(f"fov_deg must be within [10, 150], got {cfg.fov_deg}")
     if cfg.num_cars < 0 or cfg.num_points < 0 or cfg.spp < 1:
@@ -169,7 +187,7 @@ def _generate(cfg: SynthStreetConfig) -> dict[str, Any]:
         "bev_1": ("bev1", bev_poses(cfg.num_bev, L, h0 + cfg.bev_1[0], cfg.bev_1[1], 0.0, gen)),
         "bev_2": ("bev2", bev_poses(cfg.num_bev, L, h0 + cfg.bev_2[0], cfg.bev_2[1], 0.5, gen)),
     }
-    val_splits = _val_splits(cfg)
+    val_splits = {**_val_splits(cfg), **_lane_splits(cfg)}  # rendered after train/test: those stay byte-identical
     exposure = 1.0 + (torch.rand(cfg.num_train, generator=gen) * 2 - 1) * cfg.exposure_jitter
     tint = 1.0 + (torch.rand(cfg.num_train, 3, generator=gen) * 2 - 1) * 0.015
 
@@ -247,7 +265,8 @@ def _generate(cfg: SynthStreetConfig) -> dict[str, Any]:
                              "bev_1": {"delta_h_m": cfg.bev_1[0], "pitch_deg": cfg.bev_1[1]},
                              "bev_2": {"delta_h_m": cfg.bev_2[0], "pitch_deg": cfg.bev_2[1]},
                              "val_bev": [{"delta_h_m": h, "pitch_deg": p} for h, p in (cfg.val_bev_a, cfg.val_bev_b)],
-                             "cam_height_m": cfg.cam_height},
+                             "cam_height_m": cfg.cam_height,
+                             "lane": {"offsets_m": list(cfg.lane_offsets), "val_offsets_m": list(cfg.val_lane_offsets)}},
         "frames": frames,
         "eval_splits": eval_frames,
     }
@@ -289,6 +308,30 @@ def _val_splits(cfg: SynthStreetConfig) -> dict[str, tuple[str, torch.Tensor]]:
         out["val_street"] = ("valstreet", street_poses_between(cfg.num_val_street, L, h0, vgen))
     if cfg.num_val_bev:
         out["val_bev"] = ("valbev", torch.cat([b for b in bev if b.shape[0]]))
+    return out
+
+
+def lane_split_name(offset: float) -> str:
+    """The eval split of the lane-shift views ``offset`` metres to the side: ``lane_1``, ``lane_2.5``."""
+    return f"lane_{offset:g}"
+
+
+def _lane_splits(cfg: SynthStreetConfig) -> dict[str, tuple[str, torch.Tensor]]:
+    """Lane-shift poses (test splits, then val_lane), from a generator of their own."""
+    from nerf2gs_plugin.data.synthetic.poses import lane_shift_poses
+
+    lgen = torch.Generator().manual_seed(cfg.seed * 7919 + 43)
+    L, h0 = cfg.drive_half_len, cfg.cam_height
+    out = {}
+    if cfg.num_lane:
+        for d in cfg.lane_offsets:
+            out[lane_split_name(d)] = (lane_split_name(d).replace("_", ""), lane_shift_poses(cfg.num_lane, L, h0, d, lgen))
+    if cfg.num_val_lane:
+        offs = cfg.val_lane_offsets
+        parts = [lane_shift_poses(cfg.num_val_lane, L, h0, d, lgen) for d in offs]
+        # view i at offset i mod len(offs): the offsets interleave along the street
+        poses = torch.stack([parts[i % len(offs)][i] for i in range(cfg.num_val_lane)])
+        out["val_lane"] = ("vallane", poses)
     return out
 
 

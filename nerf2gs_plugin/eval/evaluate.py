@@ -11,6 +11,7 @@ import torch
 
 from nerf2gs_plugin.runs.load import LoadedRun
 from nerf2gs_plugin.errors import DataError
+from nerf2gs_plugin.eval.extrapolated import extrapolated_summary
 from nerf2gs_plugin.eval.figures import save_eval_grid
 from nerf2gs_plugin.eval.metrics import IMAGE_METRICS, LPIPS
 from nerf2gs_plugin.utils.image_metrics import psnr
@@ -109,6 +110,7 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
         "checkpoint": str(run.checkpoint),
         "step": run.step,
         "results": results,
+        "extrapolated": extrapolated_summary(results),  # mean over bev_1, bev_2, lane_2, lane_4 (None without them)
         "fps": fps,
         "fps_resolution": fps_resolution,
         "size": {**model.size_report(), "checkpoint_megabytes": Path(run.checkpoint).stat().st_size / 2**20},

@@ -122,3 +122,42 @@ def test_bench_cli_exits_nonzero_on_failed_runs(monkeypatch, capsys):
     with pytest.raises(SystemExit) as exc:
         run_cli(bench_cli.Quick().main)
     assert exc.value.code == 2 and "1 of 3 runs failed" in capsys.readouterr().err
+
+
+def test_tables_gain_lane_and_extrapolated_columns(tiny_scene, tmp_path, monkeypatch):
+    """A dataset with lane splits: the bench evaluates them, the Markdown has lane_2 / lane_4 and the
+    extrapolated mean (of bev_1, bev_2, lane_2, lane_4) as columns and in the differences; a result
+    without lane views keeps the three old columns."""
+    import shutil
+
+    from nerf2gs_plugin.eval import lpips as lpips_mod
+    from nerf2gs_plugin.eval.bench_paper import markdown_table, run_named_bench, target_groups
+
+    monkeypatch.setattr(lpips_mod.importlib.util, "find_spec", lambda name: None)
+    monkeypatch.delenv(lpips_mod.ENV_VAR, raising=False)
+    data = tmp_path / "scene"
+    shutil.copytree(tiny_scene, data)
+    meta = json.loads((data / "transforms.json").read_text())
+    ev = meta["eval_splits"]
+    ev.update(bev_2=ev["bev_1"], lane_2=ev["street"][:1], lane_4=ev["street"][1:])  # stand-ins: only the names matter here
+    (data / "transforms.json").write_text(json.dumps(meta))
+    base = {"max_num_iterations": 4, "steps_per_save": 4, "steps_per_eval_image": 0,
+            "pipeline": {"model": {"resolution": 10, "num_samples": 8}}}
+    plan = [RunSpec("grid", "voxel-grid", base), RunSpec("grid + views", "voxel-grid", base, augment_from="grid")]
+    out = tmp_path / "results"
+    results = run_named_bench("lanes", plan, data, tmp_path / "runs", out, "Lanes", compare=[("grid + views", "grid")])
+    r = results["grid"]["results"]
+    assert {"lane_2", "lane_4", "bev_2"} <= set(r)
+    mean = sum(r[s]["psnr"] for s in ("bev_1", "bev_2", "lane_2", "lane_4")) / 4
+    assert results["grid"]["extrapolated"]["psnr"] == pytest.approx(mean)  # ns2gs-eval's result has the mean too
+    md = (out / "lanes.md").read_text()
+    head = next(line for line in md.splitlines() if line.startswith("| method"))
+    assert "PSNR lane_2 | PSNR lane_4 | PSNR extrapolated |" in head
+    row = next(line for line in md.splitlines() if line.startswith("| grid |"))
+    cells = [c.strip().strip("*_") for c in row.split("|")[1:-1]]
+    assert cells[head.split("|")[1:-1].index(" PSNR extrapolated ")] == f"{mean:.2f}"
+    assert "d PSNR extrapolated" in md
+    old = {"a": {"label": "a", "target": "t", "fps": 1.0, "size": {"primitives": 1, "megabytes": 1.0},
+                 "results": {s: {"psnr": 20.0, "ssim": 0.5} for s in ("street", "bev_1", "bev_2")}}}
+    old_md = markdown_table(old, target_groups(old), "old")
+    assert "PSNR bev_2 | SSIM street" in old_md and "lane" not in old_md and "extrapolated" not in old_md

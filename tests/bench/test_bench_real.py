@@ -13,7 +13,7 @@ import torch
 from nerf2gs_bench import real as br
 from nerf2gs_plugin.eval.pose_eval import LocalAlignment, Sim3, align_poses, rotation_angle_deg
 
-SMALL = dict(width=48, height=32, num_train=6, num_street=2, num_bev=3, num_val_street=0, num_val_bev=0, num_cars=2,
+SMALL = dict(width=48, height=32, num_train=6, num_street=2, num_bev=3, num_val_street=0, num_val_bev=0, num_lane=0, num_val_lane=0, num_cars=2,
              spp=1, num_points=300, progress=False)
 
 

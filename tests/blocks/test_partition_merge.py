@@ -35,7 +35,7 @@ STEPS = 200
 def street(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("blocks") / "street"
     generate_street(SynthStreetConfig(out=out, width=64, height=40, num_train=16, num_street=4, num_bev=4, num_val_street=0,
-                                      num_val_bev=0, num_cars=2, spp=1, num_points=600, progress=False))
+                                      num_val_bev=0, num_lane=0, num_val_lane=0, num_cars=2, spp=1, num_points=600, progress=False))
     return out
 
 

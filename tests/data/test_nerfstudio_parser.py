@@ -181,5 +181,5 @@ def test_downscale_caches_half_size(small_street):
 
 def test_config_object(small_street):
     cfg = NerfstudioDataParserConfig(data=small_street / "transforms.json")
-    assert cfg.splits() == ["train", "street", "bev_1", "bev_2", "val_street", "val_bev"]
+    assert cfg.splits() == ["train", "street", "bev_1", "bev_2", "val_street", "val_bev", "lane_1", "lane_2", "lane_4", "val_lane"]
     assert len(cfg.parse("street")) == 2

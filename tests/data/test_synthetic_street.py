@@ -34,9 +34,10 @@ def test_same_seed_same_bytes_other_seed_differs(small_street, make_config, tmp_
 
 
 def test_splits_sizes_and_metadata(small_street):
-    assert list_splits(small_street) == ["train", "street", "bev_1", "bev_2", "val_street", "val_bev"]
+    assert list_splits(small_street) == ["train", "street", "bev_1", "bev_2", "val_street", "val_bev", "lane_1", "lane_2", "lane_4", "val_lane"]
     sizes = {s: len(parse_dataset(small_street, s)) for s in list_splits(small_street)}
-    assert sizes == {"train": 6, "street": 2, "bev_1": 3, "bev_2": 3, "val_street": 2, "val_bev": 2}
+    assert sizes == {"train": 6, "street": 2, "bev_1": 3, "bev_2": 3, "val_street": 2, "val_bev": 2,
+                     "lane_1": 2, "lane_2": 2, "lane_4": 2, "val_lane": 2}
     train = parse_dataset(small_street, "train")
     assert set(train.mask_filenames) == {"sky", "ground", "transient"}
     assert train.points3D_xyz is not None and len(train.points3D_xyz) == 300
@@ -114,14 +115,14 @@ def test_validation_splits_are_new_views_and_leave_train_test_bytes_alone(small_
     """Adding val_street/val_bev must not change a single train/test file (the committed figures
     stay valid), and no validation camera may coincide with a test camera."""
     bare = tmp_path / "bare"
-    generate_street(make_config(bare, num_val_street=0, num_val_bev=0))
+    generate_street(make_config(bare, num_val_street=0, num_val_bev=0, num_lane=0, num_val_lane=0))
     a, b = _files(small_street), _files(bare)
     shared = [k for k in b if k != "transforms.json"]
     assert len(shared) > 50 and [k for k in shared if a[k] != b[k]] == []
     meta_a, meta_b = (json.loads((d / "transforms.json").read_text()) for d in (small_street, bare))
     assert meta_a["frames"] == meta_b["frames"]
     assert {k: meta_a["eval_splits"][k] for k in meta_b["eval_splits"]} == meta_b["eval_splits"]
-    assert meta_a["synthetic_street"]["generator_version"] == 2
+    assert meta_a["synthetic_street"]["generator_version"] == 3
     test_c = torch.cat([parse_dataset(small_street, s).cameras.camera_to_worlds for s in ("street", "bev_1", "bev_2")])
     train = parse_dataset(small_street, "train")
     for split, pitches in (("val_street", {0.0}), ("val_bev", {27.5, 22.0})):
@@ -131,3 +132,32 @@ def test_validation_splits_are_new_views_and_leave_train_test_bytes_alone(small_
         fwd = -val_c[:, :, 2]
         got = {round(float(v), 1) for v in torch.rad2deg(torch.asin(-fwd[:, 2]))}
         assert got == pitches, split
+
+
+def test_lane_splits_sit_beside_the_drive_on_the_road(small_street):
+    """lane_<d>: level cameras at the training height, d metres across the road from a driven lane
+    (the lane centres are at y = -+ROAD_HALF/2), inside the road, facing along it."""
+    from nerf2gs_plugin.data.synthetic.layout import ROAD_HALF
+
+    meta = json.loads((small_street / "transforms.json").read_text())
+    assert meta["synthetic_street"]["lane"]["offsets_m"] == [1.0, 2.0, 4.0]
+    for split, d in (("lane_1", 1.0), ("lane_2", 2.0), ("lane_4", 4.0)):
+        c2w = torch.tensor([f["transform_matrix"] for f in meta["eval_splits"][split]])[:, :3]
+        y = c2w[:, 1, 3]
+        lane_y = torch.where(-c2w[:, 0, 2] > 0, -ROAD_HALF / 2, ROAD_HALF / 2)  # driving +x: right-hand lane
+        assert torch.allclose((y - lane_y).abs(), torch.full_like(y, d), atol=1e-4), split
+        assert float(y.abs().max()) <= ROAD_HALF, split
+        assert torch.allclose(c2w[:, 2, 3], torch.full_like(y, 3.0), atol=1e-5)
+        assert float(c2w[:, 2, 2].abs().max()) < 1e-5  # level: the view axis has no vertical part
+
+
+def test_lane_split_sides_alternate_where_the_road_allows():
+    from nerf2gs_plugin.data.synthetic.layout import ROAD_HALF
+    from nerf2gs_plugin.data.synthetic.poses import lane_shift_poses
+
+    c2w = lane_shift_poses(8, 24.0, 3.0, 1.0, torch.Generator().manual_seed(0))
+    lane_y = torch.where(torch.arange(8) % 2 == 1, ROAD_HALF / 2, -ROAD_HALF / 2)
+    side = torch.sign(c2w[:, 1, 3] - lane_y)
+    assert int((side > 0).sum()) == 4 and int((side < 0).sum()) == 4
+    far = lane_shift_poses(8, 24.0, 3.0, 4.0, torch.Generator().manual_seed(0))
+    assert float(far[:, 1, 3].abs().max()) <= ROAD_HALF  # flipped toward the other lane, never off the road

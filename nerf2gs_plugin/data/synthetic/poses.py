@@ -79,3 +79,19 @@ def bev_poses(n: int, half_len: float, height: float, pitch_deg: float, phase: f
     x = -0.75 * half_len * torch.cos(yaw)
     y = -1.8 * torch.sin(yaw)
     return heading_pose(x, y, torch.full((n,), height), yaw, pitch_deg)
+
+
+def lane_shift_poses(n: int, half_len: float, cam_height: float, offset: float, gen: torch.Generator,
+                     road_half: float = ROAD_HALF - 0.25) -> Tensor:
+    """Level cameras ``offset`` metres to the side of the drive (the XLD benchmark's cross-lane views):
+    along the training lanes in both directions, shifted across the road (y) to alternating sides,
+    each flipped to the other side where the shift would leave the road (``|y| > road_half``)."""
+    x = torch.linspace(-half_len * 0.85, half_len * 0.85, n) + (torch.rand(n, generator=gen) - 0.5) * 1.5
+    k = torch.arange(n)
+    back = k % 2 == 1
+    lane = torch.where(back, ROAD_HALF / 2, -ROAD_HALF / 2)
+    side = torch.where((k // 2) % 2 == 0, 1.0, -1.0)
+    y = lane + side * offset
+    y = torch.where(y.abs() > road_half, lane - side * offset, y)
+    yaw = torch.where(back, math.pi, 0.0) + torch.deg2rad((torch.rand(n, generator=gen) - 0.5) * 6.0)
+    return heading_pose(x, y, torch.full((n,), cam_height), yaw, 0.0)
