@@ -286,12 +286,7 @@ def birds_eye_poses_absolute(camera_to_worlds: Tensor, up: Tensor, delta_h: "flo
     pointing 9-24 deg up it is what "30 deg down" means."""
     up = torch.nn.functional.normalize(up.to(camera_to_worlds), dim=0)
     R = camera_to_worlds[:, :, :3]
-    fwd = -R[:, :, 2]
-    flat = fwd - (fwd @ up)[:, None] * up
-    # A camera looking straight up or down has no horizontal forward: use its own up axis instead.
-    cam_up = R[:, :, 1] - (R[:, :, 1] @ up)[:, None] * up
-    weak = flat.norm(dim=-1, keepdim=True) < 1e-4
-    flat = torch.nn.functional.normalize(torch.where(weak, cam_up, flat), dim=-1)
+    flat = flat_forward(camera_to_worlds, up)
     if isinstance(theta_pitch_deg, Tensor):
         a = torch.deg2rad(theta_pitch_deg.to(R))[:, None]
         f = torch.cos(a) * flat - torch.sin(a) * up
@@ -302,6 +297,26 @@ def birds_eye_poses_absolute(camera_to_worlds: Tensor, up: Tensor, delta_h: "flo
     new_up = torch.cross(right, f, dim=-1)
     t = camera_to_worlds[:, :, 3] + _per_view(delta_h, R) * up
     return torch.stack([right, new_up, -f, t], dim=-1)
+
+
+def flat_forward(camera_to_worlds: Tensor, up: Tensor) -> Tensor:
+    """``[N, 3]`` each camera's viewing direction projected on the ground plane (``up``: its unit
+    normal), unit length; a camera looking straight up or down has no horizontal forward: its own up
+    axis instead."""
+    R = camera_to_worlds[:, :, :3]
+    fwd = -R[:, :, 2]
+    flat = fwd - (fwd @ up)[:, None] * up
+    cam_up = R[:, :, 1] - (R[:, :, 1] @ up)[:, None] * up
+    weak = flat.norm(dim=-1, keepdim=True) < 1e-4
+    return torch.nn.functional.normalize(torch.where(weak, cam_up, flat), dim=-1)
+
+
+def ground_lateral(camera_to_worlds: Tensor, up: Tensor) -> Tensor:
+    """``[N, 3]`` the ground plane's lateral axis at each camera: level, to the right of its heading,
+    whatever the camera's own roll (a rolled camera's x axis leaves the plane; this one does not)."""
+    up = torch.nn.functional.normalize(up.to(camera_to_worlds), dim=0)
+    flat = flat_forward(camera_to_worlds, up)
+    return torch.nn.functional.normalize(torch.cross(flat, up.expand_as(flat), dim=-1), dim=-1)
 
 
 def _axis_angle(axis: Tensor, angle: "float | Tensor") -> Tensor:

@@ -23,6 +23,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from nerf2gs_plugin.augment.config import FAMILY_FIELDS
 from nerf2gs_plugin.cameras import Cameras
 
 CACHE_FORMAT_VERSION = 1
@@ -44,6 +45,10 @@ class CacheManifest:
     num_extra: int
     extra_camera_to_worlds: list = field(default_factory=list)  # [num_extra][3][4]
     extra_indices: list = field(default_factory=list)  # which input poses' views were kept (the rest dropped)
+    # per kept view: its family and the input view it was made from (empty: an entry of birds-eye
+    # views only, written before the families, whose sources follow from every_n)
+    extra_families: list = field(default_factory=list)
+    extra_sources: list = field(default_factory=list)
     dropped_outside_box: int = 0
     dropped_empty: int = 0
     render_seconds: float = 0.0  # the reference's render time for this entry
@@ -77,7 +82,7 @@ class CacheManifest:
 
     def write(self, entry: Path) -> None:
         doc = {k: v for k, v in asdict(self).items() if k != "path"}
-        (Path(entry) / MANIFEST_NAME).write_text(json.dumps(doc, indent=1))
+        (Path(entry) / MANIFEST_NAME).write_text(json.dumps(doc, indent=1, default=str))  # str: a pose file's path
 
 
 def read_manifest(path: Path) -> CacheManifest:
@@ -98,9 +103,13 @@ def read_manifest(path: Path) -> CacheManifest:
             extra_indices=[int(i) for i in doc.get("extra_indices", range(int(doc["num_extra"])))],
             dropped_outside_box=int(doc.get("dropped_outside_box", 0)), dropped_empty=int(doc.get("dropped_empty", 0)),
             render_seconds=float(doc.get("render_seconds", 0.0)), path=path,
+            extra_families=[str(f) for f in doc.get("extra_families", [])],
+            extra_sources=[int(i) for i in doc.get("extra_sources", [])],
         )
         if manifest.num_extra and manifest.extra_poses().shape[0] != manifest.num_extra:
             raise ValueError("extra_camera_to_worlds does not match num_extra")
+        if any(len(x) not in (0, manifest.num_extra) for x in (manifest.extra_families, manifest.extra_sources)):
+            raise ValueError("extra_families / extra_sources do not match num_extra")
     except (KeyError, TypeError, RuntimeError, json.JSONDecodeError) as e:
         raise ValueError(f"{path}: malformed augment cache manifest ({e})") from None
     return manifest
@@ -121,13 +130,19 @@ def cache_manifests(cache_root: Path) -> list[CacheManifest]:
 def cache_key(ref_key: str, dataset: str, config: dict[str, Any], bev: Optional[Cameras], train: Cameras, enhancer_key: str) -> str:
     """The entry name: everything that changes a rendered image (``config`` is the plain AugmentConfig)."""
     relevant = {k: v for k, v in config.items() if k not in UNKEYED_FIELDS}
+    views = list(relevant.pop("views", ["birds-eye"]))
+    for family, name in FAMILY_FIELDS.items():  # a family's parameters key the entry only when it is used
+        if family not in views:
+            relevant.pop(name, None)
+    if views != ["birds-eye"]:  # the bird's-eye views alone: the entries of runs before the families
+        relevant["views"] = views
     if relevant.get("confidence", "none") == "none":  # no confidence maps: the entries of runs before the option
         relevant = {k: v for k, v in relevant.items() if not k.startswith("confidence")}
     for spread in ("delta_h_spread", "theta_pitch_spread"):  # no spread: the entries of runs before the option
         if not relevant.get(spread):
             relevant.pop(spread, None)
     h = hashlib.sha1()
-    h.update(json.dumps({"v": CACHE_FORMAT_VERSION, "ref": ref_key, "data": dataset, "cfg": relevant, "enh": enhancer_key}, sort_keys=True).encode())
+    h.update(json.dumps({"v": CACHE_FORMAT_VERSION, "ref": ref_key, "data": dataset, "cfg": relevant, "enh": enhancer_key}, sort_keys=True, default=str).encode())
     for cams in (train, bev):
         if cams is not None:
             h.update(np.round(cams.camera_to_worlds.cpu().numpy(), 5).tobytes())

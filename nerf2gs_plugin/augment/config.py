@@ -3,8 +3,50 @@ augmentation itself so that the engine below it can name them."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Literal, Optional
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Annotated, Literal, Optional
+
+import tyro
+
+
+@dataclass
+class LaneShiftConfig:
+    """The lane-shift view family: the drive re-driven sideways."""
+
+    offsets: tuple[float, ...] = (-2.0, 2.0)
+    """Metres along the ground plane's lateral axis (positive: to the right of the input camera's
+    heading); one view per input pose and offset."""
+    look_ahead: float = 0.0
+    """Metres: > 0 turns each shifted camera (yaw about the up axis) toward the point this far ahead
+    on its input camera's line of travel (0: the input's own heading)."""
+    every_n: int = 1
+    """Use every n-th input pose."""
+
+
+@dataclass
+class RaiseConfig:
+    """The raise view family: the input views raised without pitch."""
+
+    heights: tuple[float, ...] = (2.0,)
+    """Metres above each input view along the scene's up vector; one view per input pose and height."""
+    every_n: int = 1
+    """Use every n-th input pose."""
+
+
+@dataclass
+class PosesFileConfig:
+    """The poses view family: views at poses the user gives."""
+
+    file: Optional[Path] = None
+    """A JSON file: {"camera_to_worlds": [a 3x4 or 4x4 matrix per view]} (or a nerfstudio camera_path.json:
+    its camera_path[].camera_to_world), OpenGL axes, in the run's normalised
+    world frame (the frame of the cache manifest's saved poses); each view takes the intrinsics of
+    the input camera nearest it."""
+
+
+FAMILY_FIELDS = {"lane-shift": "lane_shift", "raise": "raise_", "poses": "poses"}
+"""The built-in view families with parameters -> their AugmentConfig field."""
 
 
 @dataclass
@@ -18,7 +60,14 @@ class AugmentConfig:
     feather_px: int = 0
     """Soften the composite seam over this many pixels (0 = hard mask)."""
     extra_views: bool = True
-    """Add bird's-eye views rendered by the reference."""
+    """Add the additional views (of every family in views) rendered by the reference."""
+    views: tuple[str, ...] = ("birds-eye",)
+    """View families that make the additional views from the input poses (augment/views.py): birds-eye
+    (the --augment.delta-h/theta-pitch/... fields below), lane-shift, raise, poses; their parameters
+    under their names (--augment.lane-shift.offsets ...). One cache entry, manifest and sampling share."""
+    lane_shift: LaneShiftConfig = field(default_factory=LaneShiftConfig)
+    raise_: Annotated[RaiseConfig, tyro.conf.arg(name="raise")] = field(default_factory=RaiseConfig)
+    poses: PosesFileConfig = field(default_factory=PosesFileConfig)
     delta_h: float = 10.0
     """Height of the additional views above the input views, in metres."""
     theta_pitch: float = 30.0

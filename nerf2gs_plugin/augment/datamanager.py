@@ -33,10 +33,11 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from nerf2gs_plugin.cameras import Cameras, birds_eye_poses, birds_eye_poses_absolute
+from nerf2gs_plugin.cameras import Cameras
 from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
-from nerf2gs_plugin.augment.config import AugmentConfig
+from nerf2gs_plugin.augment.config import FAMILY_FIELDS, AugmentConfig
+from nerf2gs_plugin.augment.views import AdditionalViews, WorldFrame, additional_views, bev_cameras
 from nerf2gs_plugin.augment.cache import (
     CACHE_DIR_NAME,
     CacheManifest,
@@ -77,26 +78,6 @@ class Reference:
     train_cameras: Optional[Callable[[Cameras], Optional[Cameras]]] = None
     """The training cameras -> the reference's refined ones (``Model.refined_train_cameras``), or None
     / a None result: the reference renders input views at the dataset's poses."""
-
-
-def bev_cameras(train: Cameras, up: Tensor, delta_h_world: float, theta_pitch: float, every_n: int = 1,
-                pitch_mode: str = "relative", delta_h_spread_world: float = 0.0, theta_pitch_spread: float = 0.0) -> Cameras:
-    """The additional-view cameras: input intrinsics, raised and pitched poses (with spreads: each view's
-    height and pitch drawn uniformly around delta-h / theta-pitch, the same draws on every call)."""
-    sub = train[torch.arange(0, len(train), max(every_n, 1))]
-    if pitch_mode not in ("absolute", "relative"):
-        raise ConfigError(f"--augment.pitch-mode must be absolute or relative, got {pitch_mode!r}")
-    if delta_h_spread_world < 0 or not 0 <= theta_pitch_spread < 90:
-        raise ConfigError(f"spreads must be >= 0 (pitch < 90 deg), got {delta_h_spread_world}, {theta_pitch_spread}",
-                          "--augment.delta-h-spread / --augment.theta-pitch-spread")
-    poses = birds_eye_poses_absolute if pitch_mode == "absolute" else birds_eye_poses
-    dh: float | Tensor = delta_h_world
-    pitch: float | Tensor = theta_pitch
-    if delta_h_spread_world > 0 or theta_pitch_spread > 0:
-        u = torch.rand(2, len(sub), generator=torch.Generator().manual_seed(0), dtype=torch.float64) * 2 - 1
-        dh = (delta_h_world + delta_h_spread_world * u[0]).clamp_min(0.0)
-        pitch = (theta_pitch + theta_pitch_spread * u[1]).clamp(0.0, 89.0)
-    return sub.with_poses(poses(sub.camera_to_worlds, up, dh, pitch))
 
 
 def inside_box(centres: Tensor, box: Optional[Tensor]) -> Tensor:
@@ -183,12 +164,13 @@ def _warped_source(out: dict[str, Tensor], camera: Cameras, train: ImageSet, ren
 
 def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn: RenderFn, config: AugmentConfig,
                   enhancer: Optional[ViewEnhancer], comp_idx: list[int], scene_box: Optional[Tensor],
-                  depth_along: str = "z") -> dict[str, Any]:
+                  depth_along: str = "z", sources: Optional[list[int]] = None) -> dict[str, Any]:
     """Render every image of a cache entry into ``work`` (not yet the entry: it is renamed after).
     Bird's-eye views outside the scene box or with mostly empty renders are left out; returns the
     manifest fields that say which were kept and how long it took. With a confidence, every
     training view is rendered (its depth is the occlusion test) and each render gets a
-    ``_conf.npy`` beside its PNG."""
+    ``_conf.npy`` beside its PNG. ``sources``: per additional view, the input view it was made from
+    (an image-conditioned enhancer's reference; None: every ``every_n``-th, the bird's-eye views')."""
     import time
 
     from nerf2gs_plugin.augment.confidence import depth_to_z
@@ -251,7 +233,7 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
                 if getattr(enhancer, "reference_kind", "image") == "warped":
                     src = _warped_source(out, bev[j], train, render_fn, renders, source_depths, depth_along)
                 else:
-                    src = train.image(j * max(config.every_n, 1)).cpu()
+                    src = train.image(sources[j] if sources is not None else j * max(config.every_n, 1)).cpu()
                 rgb = enhancer.enhance(rgb, reference=src)
             save_png(work / "extra" / f"{k:05d}.png", rgb)
             progress.update(task, advance=1, stats=f"bird's-eye {j}")
@@ -263,14 +245,25 @@ def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, re
                            dataset: str, cache_root: Path, config: AugmentConfig,
                            enhancer: Optional[ViewEnhancer] = None, scene_box: Optional[Tensor] = None,
                            depth_along: str = "z", render_cameras: Optional[Cameras] = None,
-                           delta_h_spread_world: float = 0.0) -> AugmentedViews:
+                           delta_h_spread_world: float = 0.0, world: Optional[WorldFrame] = None) -> AugmentedViews:
     """Render (or reuse from the cache) the composites and the additional views. ``render_cameras``:
     the training cameras at the poses the reference renders the input views from (its refined
     poses; the ``ref_key``'s checkpoint hash keys them); None: ``train``'s own. The bird's-eye
     cameras and the returned image sets keep ``train``'s poses. ``delta_h_spread_world``:
-    ``config.delta_h_spread`` in world units, as ``delta_h_world`` is ``config.delta_h``."""
-    bev = bev_cameras(train.cameras, up, delta_h_world, config.theta_pitch, config.every_n, config.pitch_mode, delta_h_spread_world,
-                      config.theta_pitch_spread) if config.extra_views else None
+    ``config.delta_h_spread`` in world units, as ``delta_h_world`` is ``config.delta_h``. ``world``:
+    the dataset's up vector and metric scale, which the view families other than birds-eye need
+    (``config.views``; their cameras follow the bird's-eye ones in the one list of additional views)."""
+    if world is not None:
+        views = additional_views(train.cameras, world, config)
+    elif not config.extra_views:
+        views = None
+    elif list(config.views) != ["birds-eye"]:
+        raise ConfigError(f"view families {list(config.views)} need the dataset's world frame", "--augment.views")
+    else:
+        cams = bev_cameras(train.cameras, up, delta_h_world, config.theta_pitch, config.every_n, config.pitch_mode, delta_h_spread_world,
+                           config.theta_pitch_spread)
+        views = AdditionalViews(cams, list(range(0, len(train), max(config.every_n, 1))), ["birds-eye"] * len(cams))
+    bev = views.cameras if views is not None else None
     has_transient = "transient" in train.masks and config.composites
     enhancer_key = enhancer.cache_key() if enhancer is not None else "none"
     key = cache_key(ref_key, dataset, asdict(config), bev, train.cameras, enhancer_key)
@@ -281,11 +274,14 @@ def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, re
         shutil.rmtree(work, ignore_errors=True)
         comp_idx = [i for i in range(len(train)) if has_transient and bool(train.mask("transient", i).any())]
         seen_from = train if render_cameras is None else replace(train, cameras=render_cameras)
-        done = _render_entry(work, seen_from, bev, render_fn, config, enhancer, comp_idx, scene_box, depth_along)
+        done = _render_entry(work, seen_from, bev, render_fn, config, enhancer, comp_idx, scene_box, depth_along,
+                             views.sources if views is not None else None)
         kept = done["extra_indices"]
         CacheManifest(reference=ref_key, dataset=dataset, config=asdict(config), enhancer=enhancer_key,
                       composited_images=comp_idx, num_extra=len(kept),
                       extra_camera_to_worlds=bev[torch.tensor(kept, dtype=torch.long)].camera_to_worlds.cpu().tolist() if kept else [],
+                      extra_families=[views.families[j] for j in kept] if views is not None else [],
+                      extra_sources=[views.sources[j] for j in kept] if views is not None else [],
                       **done).write(work)
         if cache_dir.exists():
             shutil.rmtree(cache_dir)
@@ -293,7 +289,8 @@ def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, re
     manifest = read_manifest(cache_dir)
     dropped = manifest.dropped_outside_box + manifest.dropped_empty
     if dropped:
-        warn(f"{dropped} of {dropped + manifest.num_extra} bird's-eye views dropped",
+        what = "bird's-eye" if views is None or set(views.families) == {"birds-eye"} else "additional"
+        warn(f"{dropped} of {dropped + manifest.num_extra} {what} views dropped",
              f"never trained on: {manifest.dropped_outside_box} outside the scene box (lower --augment.delta-h), "
              f"{manifest.dropped_empty} mostly empty renders (coverage < {config.min_coverage})")
     if bev is not None:
@@ -315,10 +312,17 @@ def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, re
         imgs = [load_png(manifest.extra_png(j)) for j in range(manifest.num_extra)]
         extra_raw = [load_png(manifest.extra_png(j, raw=True)) for j in range(manifest.num_extra)]
         extra = ImageSet.from_images(bev.to("cpu"), imgs, weights=torch.full((len(imgs),), float(config.extra_weight)),
-                                     names=[f"bev_{j:05d}" for j in range(len(imgs))])
+                                     names=_extra_names(manifest))
         if with_conf:
             extra = extra.with_confidence([load_confidence(manifest.extra_png(j)) for j in range(manifest.num_extra)])
     return AugmentedViews(composites, extra, extra_raw, cache_dir, reused, manifest)
+
+
+def _extra_names(manifest: CacheManifest) -> list[str]:
+    """The additional views' image names: ``bev_00003`` (the bird's-eye family's, as before the
+    families), ``lane-shift_00004``: the family and the view's place in the list."""
+    families = manifest.extra_families or ["birds-eye"] * manifest.num_extra
+    return [f"bev_{j:05d}" if f == "birds-eye" else f"{f}_{j:05d}" for j, f in enumerate(families)]
 
 
 class AugmentedDataManager(DataManager):
@@ -350,7 +354,7 @@ class AugmentedDataManager(DataManager):
         self.views: AugmentedViews = render_augmented_views(
             inner.train_images, td.up, td.metres_to_world(augment.delta_h), reference.render, reference.key,
             dataset_fingerprint(td.image_filenames), reference.cache_root, augment, enhancer, td.scene_box, reference.depth_along,
-            refined, td.metres_to_world(augment.delta_h_spread),
+            refined, td.metres_to_world(augment.delta_h_spread), world=td,
         )
         print(f"reference renders: {self.views.render_seconds:.1f} s" + (" (reused from the cache)" if self.views.reused else ""))
         if self.views.composites is not None:
@@ -435,13 +439,24 @@ class AugmentedDataManager(DataManager):
         self.inner.load_state_dict(state)
 
 
+def same_families(recorded: dict[str, Any], augment: AugmentConfig) -> bool:
+    """Whether a manifest's plain config made the view families of ``augment`` (the names, in order,
+    and the parameters of each one used; an entry from before the families: birds-eye alone)."""
+    import json
+
+    views = list(recorded.get("views", ["birds-eye"]))
+    if views != list(augment.views):
+        return False
+    plain = json.loads(json.dumps(asdict(augment), default=str))
+    return all(recorded.get(name) == plain[name] for family, name in FAMILY_FIELDS.items() if family in views)
+
+
 def find_cached_extra_views(cache_root: Path, dataset: str, augment: AugmentConfig, num_views: int) -> Optional[CacheManifest]:
-    """The newest cache entry under a reference run whose bird's-eye views are those of ``augment``
-    for ``num_views`` input poses (some may have been dropped: ``extra_indices``), or None."""
+    """The newest cache entry under a reference run whose additional views are those of ``augment``
+    for ``num_views`` cameras of its families (some may have been dropped: ``extra_indices``), or None."""
     for manifest in cache_manifests(cache_root):
         same = manifest.same_geometry(dataset, augment.delta_h, augment.theta_pitch, max(int(augment.every_n), 1), augment.pitch_mode,
-                                      augment.delta_h_spread, augment.theta_pitch_spread)
+                                      augment.delta_h_spread, augment.theta_pitch_spread) and same_families(manifest.config, augment)
         if same and manifest.num_extra == len(manifest.extra_indices) and all(0 <= i < num_views for i in manifest.extra_indices):
             return manifest
     return None
-

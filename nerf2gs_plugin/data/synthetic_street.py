@@ -48,7 +48,8 @@ import tyro
 from nerf2gs_plugin.data.images import write_depth_atomic, write_image_atomic, write_mask_atomic
 from nerf2gs_plugin.data.ply import write_ply_points
 from nerf2gs_plugin.data.synthetic.coverage import ground_coverage
-from nerf2gs_plugin.data.synthetic.layout import ROAD_HALF, SKY, TRANSIENT_MATERIALS, build_layout, empty_boxes
+from nerf2gs_plugin.data.synthetic.layout import SKY, TRANSIENT_MATERIALS, build_layout, empty_boxes
+from nerf2gs_plugin.data.synthetic.layout import ROAD_HALF
 from nerf2gs_plugin.data.synthetic.poses import bev_poses, street_poses, train_poses
 from nerf2gs_plugin.data.synthetic.raycast import Pinhole, ShadowMap, render_view
 from nerf2gs_plugin.errors import ConfigError

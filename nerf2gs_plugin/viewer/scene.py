@@ -99,7 +99,7 @@ def frustum_scale(centers: Tensor) -> float:
 
 @dataclass
 class ExtraViews:
-    """The bird's-eye additional views of an augmented run."""
+    """The additional views of an augmented run (every view family's)."""
 
     cameras: Cameras
     thumbnails: list[Optional[np.ndarray]]
@@ -114,15 +114,18 @@ def find_extra_views(config, train_data, train_cameras: Cameras, thumb_side: int
     thumbnails; when the cache is gone, recomputed from the config exactly as the augmentation does.
     """
     from nerf2gs_plugin.augment.cache import load_png
-    from nerf2gs_plugin.augment.datamanager import bev_cameras, find_cached_extra_views
+    from nerf2gs_plugin.augment.datamanager import find_cached_extra_views
+    from nerf2gs_plugin.augment.views import additional_views
     from nerf2gs_plugin.engine.checkpoints import dataset_fingerprint, resolve_checkpoint
     from nerf2gs_plugin.errors import UserError
 
     aug = config.augment
     if config.augment_from is None or not aug.extra_views:
         return None
-    every_n = max(int(aug.every_n), 1)
-    sub = train_cameras[torch.arange(0, len(train_cameras), every_n)]
+    made = additional_views(train_cameras, train_data, aug)  # every family's cameras, as the augmentation makes them
+    if made is None:
+        return None
+    sub = made.cameras
     try:
         ref_dir, _ = resolve_checkpoint(Path(config.augment_from))
     except UserError:
@@ -136,6 +139,4 @@ def find_extra_views(config, train_data, train_cameras: Cameras, thumb_side: int
             thumbs.append(thumbnail(load_png(png), thumb_side) if png.is_file() else None)
         return ExtraViews(sub[torch.tensor(manifest.extra_indices, dtype=torch.long)].with_poses(manifest.extra_poses().to(sub.device)),
                           thumbs, str(manifest.path))
-    cams = bev_cameras(train_cameras, train_data.up, train_data.metres_to_world(aug.delta_h), aug.theta_pitch, every_n,
-                       aug.pitch_mode, train_data.metres_to_world(aug.delta_h_spread), aug.theta_pitch_spread)
-    return ExtraViews(cams, [None] * len(cams), "recomputed from the run's --augment config (no cache manifest found)")
+    return ExtraViews(sub, [None] * len(sub), "recomputed from the run's --augment config (no cache manifest found)")

@@ -1,0 +1,227 @@
+"""View families: the rules that make the augmentation's additional cameras from the input poses.
+
+``--augment.views birds-eye lane-shift`` names the families; each makes cameras (with the input
+views' intrinsics) and says which input view each one came from. The augmentation renders the
+concatenation of every family's cameras, in the order given, as one set of additional views: one
+cache entry, one manifest (the poses and each view's family saved), one share of the training
+samples, and the same drop rules (outside the scene box, mostly empty render).
+
+Built-in families (their parameters under their names, ``augment/config.py``):
+  * ``birds-eye``: raised by delta-h and pitched down by theta-pitch (the paper's views);
+  * ``lane-shift``: moved sideways along the ground plane's lateral axis (level, to the right of the
+    heading: not the camera's own x axis, which its roll tilts), optionally turned toward the road ahead;
+  * ``raise``: moved up along the scene's up vector, orientation kept (no pitch);
+  * ``poses``: the poses of a user's file, each with the intrinsics of the nearest input camera.
+A plugin adds a family through the ``nerf2gs.view_families`` entry-point group (a :class:`ViewFamily`).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Callable, Optional, Protocol
+
+import torch
+from torch import Tensor
+
+from nerf2gs_plugin.cameras import Cameras, _axis_angle, birds_eye_poses, birds_eye_poses_absolute, ground_lateral
+from nerf2gs_plugin.errors import ConfigError, DataError
+from nerf2gs_plugin.utils.plugins import load_entry_points, load_ref
+
+ENTRY_POINT_GROUP = "nerf2gs.view_families"
+
+
+class WorldFrame(Protocol):
+    """What the families need of a dataset (``DataparserOutputs`` is one)."""
+
+    up: Tensor
+
+    def metres_to_world(self, metres: float) -> float: ...
+
+
+@dataclass
+class FamilyViews:
+    """One family's cameras and, per camera, the input view it was made from."""
+
+    cameras: Cameras
+    sources: list[int]
+
+
+@dataclass
+class ViewFamily:
+    """A registered family: ``make(train_cameras, world, augment_config) -> FamilyViews``."""
+
+    make: Callable[[Cameras, WorldFrame, Any], FamilyViews]
+    description: str
+
+
+BUILTIN_FAMILIES: dict[str, str] = {
+    "birds-eye": "nerf2gs_plugin.augment.views:BIRDS_EYE",
+    "lane-shift": "nerf2gs_plugin.augment.views:LANE_SHIFT",
+    "raise": "nerf2gs_plugin.augment.views:RAISE",
+    "poses": "nerf2gs_plugin.augment.views:POSES",
+}
+
+
+@lru_cache(maxsize=1)
+def view_families() -> dict[str, ViewFamily]:
+    """Every family: the built-in ones, then those of installed plugins (a broken plugin is skipped)."""
+    found = {name: load_ref(ref) for name, ref in BUILTIN_FAMILIES.items()}
+    plugins, _ = load_entry_points(ENTRY_POINT_GROUP, ViewFamily, found)
+    return {**found, **plugins}  # type: ignore[dict-item]
+
+
+def get_family(name: str) -> ViewFamily:
+    families = view_families()
+    if name not in families:
+        raise ConfigError(f"unknown view family '{name}'; known: {', '.join(families)}", "--augment.views")
+    return families[name]
+
+
+def _every(train: Cameras, every_n: int) -> list[int]:
+    return list(range(0, len(train), max(int(every_n), 1)))
+
+
+def _repeat(train: Cameras, idx: list[int], k: int) -> tuple[Cameras, list[int]]:
+    """The input cameras ``idx``, each ``k`` times in a row (one per offset), and their indices."""
+    src = [i for i in idx for _ in range(k)]
+    return train[torch.tensor(src, dtype=torch.long)], src
+
+
+def bev_cameras(train: Cameras, up: Tensor, delta_h_world: float, theta_pitch: float, every_n: int = 1,
+                pitch_mode: str = "relative", delta_h_spread_world: float = 0.0, theta_pitch_spread: float = 0.0) -> Cameras:
+    """The additional-view cameras: input intrinsics, raised and pitched poses (with spreads: each view's
+    height and pitch drawn uniformly around delta-h / theta-pitch, the same draws on every call)."""
+    sub = train[torch.arange(0, len(train), max(every_n, 1))]
+    if pitch_mode not in ("absolute", "relative"):
+        raise ConfigError(f"--augment.pitch-mode must be absolute or relative, got {pitch_mode!r}")
+    if delta_h_spread_world < 0 or not 0 <= theta_pitch_spread < 90:
+        raise ConfigError(f"spreads must be >= 0 (pitch < 90 deg), got {delta_h_spread_world}, {theta_pitch_spread}",
+                          "--augment.delta-h-spread / --augment.theta-pitch-spread")
+    poses = birds_eye_poses_absolute if pitch_mode == "absolute" else birds_eye_poses
+    dh: float | Tensor = delta_h_world
+    pitch: float | Tensor = theta_pitch
+    if delta_h_spread_world > 0 or theta_pitch_spread > 0:
+        u = torch.rand(2, len(sub), generator=torch.Generator().manual_seed(0), dtype=torch.float64) * 2 - 1
+        dh = (delta_h_world + delta_h_spread_world * u[0]).clamp_min(0.0)
+        pitch = (theta_pitch + theta_pitch_spread * u[1]).clamp(0.0, 89.0)
+    return sub.with_poses(poses(sub.camera_to_worlds, up, dh, pitch))
+
+
+def birds_eye(train: Cameras, world: WorldFrame, augment: Any) -> FamilyViews:
+    cams = bev_cameras(train, world.up, world.metres_to_world(augment.delta_h), augment.theta_pitch, augment.every_n,
+                       augment.pitch_mode, world.metres_to_world(augment.delta_h_spread), augment.theta_pitch_spread)
+    return FamilyViews(cams, _every(train, augment.every_n))
+
+
+def lane_shift_poses(camera_to_worlds: Tensor, up: Tensor, offset_world: Tensor, look_ahead_world: float = 0.0) -> Tensor:
+    """``[N, 3, 4]`` poses moved ``offset_world`` ``[N]`` along the ground's lateral axis (positive:
+    right); with ``look_ahead_world > 0`` each is turned about ``up`` toward the point that far ahead
+    of its input camera on the ground plane (the lane it left), else its orientation is kept."""
+    up = torch.nn.functional.normalize(up.to(camera_to_worlds), dim=0)
+    lateral = ground_lateral(camera_to_worlds, up)
+    out = camera_to_worlds.clone()
+    out[:, :, 3] = out[:, :, 3] + offset_world.to(out)[:, None] * lateral
+    if look_ahead_world > 0:
+        # from the shifted centre the point ahead lies at look_ahead along the heading and -offset across:
+        # a turn by atan(offset / look_ahead) about up (turning by a about up takes the heading toward -lateral)
+        angle = torch.atan2(offset_world.to(out), torch.full_like(offset_world.to(out), look_ahead_world))
+        out[:, :, :3] = _axis_angle(up.expand(len(out), 3), angle) @ out[:, :, :3]
+    return out
+
+
+def lane_shift(train: Cameras, world: WorldFrame, augment: Any) -> FamilyViews:
+    cfg = augment.lane_shift
+    if not cfg.offsets or cfg.look_ahead < 0:
+        raise ConfigError("needs at least one offset and look-ahead >= 0", "--augment.lane-shift.*")
+    cams, src = _repeat(train, _every(train, cfg.every_n), len(cfg.offsets))
+    offsets = torch.tensor([world.metres_to_world(d) for d in cfg.offsets] * (len(src) // len(cfg.offsets)), dtype=torch.float64)
+    c2w = lane_shift_poses(cams.camera_to_worlds, world.up, offsets, world.metres_to_world(cfg.look_ahead))
+    return FamilyViews(cams.with_poses(c2w), src)
+
+
+def raise_poses(camera_to_worlds: Tensor, up: Tensor, height_world: Tensor) -> Tensor:
+    """``[N, 3, 4]`` poses moved ``height_world`` ``[N]`` along ``up``, orientation kept."""
+    up = torch.nn.functional.normalize(up.to(camera_to_worlds), dim=0)
+    out = camera_to_worlds.clone()
+    out[:, :, 3] = out[:, :, 3] + height_world.to(out)[:, None] * up
+    return out
+
+
+def raise_views(train: Cameras, world: WorldFrame, augment: Any) -> FamilyViews:
+    cfg = augment.raise_
+    if not cfg.heights:
+        raise ConfigError("needs at least one height", "--augment.raise.heights")
+    cams, src = _repeat(train, _every(train, cfg.every_n), len(cfg.heights))
+    heights = torch.tensor([world.metres_to_world(h) for h in cfg.heights] * (len(src) // len(cfg.heights)), dtype=torch.float64)
+    return FamilyViews(cams.with_poses(raise_poses(cams.camera_to_worlds, world.up, heights)), src)
+
+
+def read_pose_file(path: Path) -> Tensor:
+    """``[N, 3, 4]`` camera-to-world poses of a pose file (see ``PosesFileConfig``); a missing or
+    malformed file raises :class:`DataError` naming it and what is wrong."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise DataError("pose file does not exist", path) from None
+    except (OSError, ValueError) as e:
+        raise DataError(f"not a readable JSON pose file ({e})", path) from None
+    try:
+        if isinstance(doc, dict) and "camera_path" in doc:  # nerfstudio's camera_path.json: row-major 4x4 each
+            rows = [torch.tensor(e["camera_to_world"], dtype=torch.float32).reshape(4, 4) for e in doc["camera_path"]]
+        else:
+            rows = [torch.tensor(m, dtype=torch.float32).reshape(-1, 4) for m in doc["camera_to_worlds"]]
+        if not rows:
+            raise ValueError("no poses")
+        if any(r.shape[0] not in (3, 4) for r in rows):
+            raise ValueError("a pose is not 3x4 or 4x4")
+        poses = torch.stack([r[:3] for r in rows])
+    except (KeyError, TypeError, ValueError, RuntimeError) as e:
+        what = f"missing key {e}" if isinstance(e, KeyError) else str(e)
+        raise DataError(f"malformed pose file ({what}; expected camera_to_worlds: a list of 3x4 or 4x4 matrices)", path) from None
+    if not bool(torch.isfinite(poses).all()):
+        raise DataError("malformed pose file (non-finite numbers)", path)
+    return poses
+
+
+def pose_file_views(train: Cameras, world: WorldFrame, augment: Any) -> FamilyViews:
+    if augment.poses.file is None:
+        raise ConfigError("the poses family needs a file", "--augment.poses.file")
+    poses = read_pose_file(augment.poses.file).to(train.camera_to_worlds)
+    nearest = torch.cdist(poses[:, :, 3], train.camera_to_worlds[:, :, 3]).argmin(dim=1).tolist()
+    return FamilyViews(train[torch.tensor(nearest, dtype=torch.long)].with_poses(poses), nearest)
+
+
+BIRDS_EYE = ViewFamily(birds_eye, "raised by delta-h and pitched down by theta-pitch (the paper's views)")
+LANE_SHIFT = ViewFamily(lane_shift, "moved sideways along the ground's lateral axis (--augment.lane-shift.offsets)")
+RAISE = ViewFamily(raise_views, "moved up without pitch (--augment.raise.heights)")
+POSES = ViewFamily(pose_file_views, "the poses of a file (--augment.poses.file)")
+
+
+@dataclass
+class AdditionalViews:
+    """Every family's cameras, concatenated in the order of ``--augment.views``."""
+
+    cameras: Cameras
+    sources: list[int]
+    families: list[str]
+
+
+def additional_views(train: Cameras, world: WorldFrame, augment: Any) -> Optional[AdditionalViews]:
+    """The additional cameras of ``augment.views`` (None when ``extra_views`` is off or no family makes one)."""
+    if not augment.extra_views:
+        return None
+    names = list(augment.views)
+    if len(set(names)) != len(names):
+        raise ConfigError(f"a family is named twice: {' '.join(names)}", "--augment.views")
+    parts = [(name, get_family(name).make(train, world, augment)) for name in names]
+    parts = [(n, p) for n, p in parts if len(p.cameras)]
+    if not parts:
+        return None
+    if len(parts) == 1:  # one family: its cameras as they are
+        return AdditionalViews(parts[0][1].cameras, parts[0][1].sources, [parts[0][0]] * len(parts[0][1].cameras))
+    return AdditionalViews(Cameras.cat([p.cameras for _, p in parts]), [i for _, p in parts for i in p.sources],
+                           [n for n, p in parts for _ in range(len(p.cameras))])
