@@ -14,8 +14,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_street, read_generator_version  # noqa: E402
-from nerf2gs_plugin.eval.bench_paper import _overrides, ratios_md, run_plan, write_results  # noqa: E402
-from nerf2gs_plugin.eval.bench_runs import RunSpec  # noqa: E402
+from nerf2gs_bench.paper import _overrides, ratios_md, run_plan, write_results  # noqa: E402
+from nerf2gs_bench.runs import RunSpec  # noqa: E402
 
 work = Path(sys.argv[1])
 seed = int(sys.argv[2]) if len(sys.argv) > 2 else 0

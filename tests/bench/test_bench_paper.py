@@ -131,7 +131,7 @@ def test_tables_gain_lane_and_extrapolated_columns(tiny_scene, tmp_path, monkeyp
     import shutil
 
     from nerf2gs_plugin.eval import lpips as lpips_mod
-    from nerf2gs_plugin.eval.bench_paper import markdown_table, run_named_bench, target_groups
+    from nerf2gs_bench.paper import markdown_table, run_named_bench, target_groups
 
     monkeypatch.setattr(lpips_mod.importlib.util, "find_spec", lambda name: None)
     monkeypatch.delenv(lpips_mod.ENV_VAR, raising=False)
