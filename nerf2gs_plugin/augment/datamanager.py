@@ -33,10 +33,11 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from nerf2gs_plugin.cameras import Cameras, birds_eye_poses, birds_eye_poses_absolute
+from nerf2gs_plugin.cameras import Cameras
 from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
 from nerf2gs_plugin.augment.config import AugmentConfig
+from nerf2gs_plugin.augment.geometry import ViewGeometry, WorldFrame
 from nerf2gs_plugin.augment.cache import (
     CACHE_DIR_NAME,
     CacheManifest,
@@ -77,26 +78,6 @@ class Reference:
     train_cameras: Optional[Callable[[Cameras], Optional[Cameras]]] = None
     """The training cameras -> the reference's refined ones (``Model.refined_train_cameras``), or None
     / a None result: the reference renders input views at the dataset's poses."""
-
-
-def bev_cameras(train: Cameras, up: Tensor, delta_h_world: float, theta_pitch: float, every_n: int = 1,
-                pitch_mode: str = "relative", delta_h_spread_world: float = 0.0, theta_pitch_spread: float = 0.0) -> Cameras:
-    """The additional-view cameras: input intrinsics, raised and pitched poses (with spreads: each view's
-    height and pitch drawn uniformly around delta-h / theta-pitch, the same draws on every call)."""
-    sub = train[torch.arange(0, len(train), max(every_n, 1))]
-    if pitch_mode not in ("absolute", "relative"):
-        raise ConfigError(f"--augment.pitch-mode must be absolute or relative, got {pitch_mode!r}")
-    if delta_h_spread_world < 0 or not 0 <= theta_pitch_spread < 90:
-        raise ConfigError(f"spreads must be >= 0 (pitch < 90 deg), got {delta_h_spread_world}, {theta_pitch_spread}",
-                          "--augment.delta-h-spread / --augment.theta-pitch-spread")
-    poses = birds_eye_poses_absolute if pitch_mode == "absolute" else birds_eye_poses
-    dh: float | Tensor = delta_h_world
-    pitch: float | Tensor = theta_pitch
-    if delta_h_spread_world > 0 or theta_pitch_spread > 0:
-        u = torch.rand(2, len(sub), generator=torch.Generator().manual_seed(0), dtype=torch.float64) * 2 - 1
-        dh = (delta_h_world + delta_h_spread_world * u[0]).clamp_min(0.0)
-        pitch = (theta_pitch + theta_pitch_spread * u[1]).clamp(0.0, 89.0)
-    return sub.with_poses(poses(sub.camera_to_worlds, up, dh, pitch))
 
 
 def inside_box(centres: Tensor, box: Optional[Tensor]) -> Tensor:
@@ -259,18 +240,16 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
             "render_seconds": round(time.perf_counter() - t0, 2)}
 
 
-def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, render_fn: RenderFn, ref_key: str,
+def render_augmented_views(train: ImageSet, world: WorldFrame, render_fn: RenderFn, ref_key: str,
                            dataset: str, cache_root: Path, config: AugmentConfig,
                            enhancer: Optional[ViewEnhancer] = None, scene_box: Optional[Tensor] = None,
-                           depth_along: str = "z", render_cameras: Optional[Cameras] = None,
-                           delta_h_spread_world: float = 0.0) -> AugmentedViews:
-    """Render (or reuse from the cache) the composites and the additional views. ``render_cameras``:
-    the training cameras at the poses the reference renders the input views from (its refined
-    poses; the ``ref_key``'s checkpoint hash keys them); None: ``train``'s own. The bird's-eye
-    cameras and the returned image sets keep ``train``'s poses. ``delta_h_spread_world``:
-    ``config.delta_h_spread`` in world units, as ``delta_h_world`` is ``config.delta_h``."""
-    bev = bev_cameras(train.cameras, up, delta_h_world, config.theta_pitch, config.every_n, config.pitch_mode, delta_h_spread_world,
-                      config.theta_pitch_spread) if config.extra_views else None
+                           depth_along: str = "z", render_cameras: Optional[Cameras] = None) -> AugmentedViews:
+    """Render (or reuse from the cache) the composites and the additional views. ``world``: the
+    dataset's up vector and metric scale (its ``DataparserOutputs``). ``render_cameras``: the training
+    cameras at the poses the reference renders the input views from (its refined poses; the
+    ``ref_key``'s checkpoint hash keys them); None: ``train``'s own. The bird's-eye cameras and the
+    returned image sets keep ``train``'s poses; the bird's-eye poses are those the manifest saved."""
+    bev = ViewGeometry.of(config).cameras(train.cameras, world) if config.extra_views else None
     has_transient = "transient" in train.masks and config.composites
     enhancer_key = enhancer.cache_key() if enhancer is not None else "none"
     key = cache_key(ref_key, dataset, asdict(config), bev, train.cameras, enhancer_key)
@@ -296,8 +275,10 @@ def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, re
         warn(f"{dropped} of {dropped + manifest.num_extra} bird's-eye views dropped",
              f"never trained on: {manifest.dropped_outside_box} outside the scene box (lower --augment.delta-h), "
              f"{manifest.dropped_empty} mostly empty renders (coverage < {config.min_coverage})")
-    if bev is not None:
+    if bev is not None:  # the views kept, at the poses they were rendered from
         bev = bev[torch.tensor(manifest.extra_indices, dtype=torch.long)]
+        if manifest.num_extra:
+            bev = bev.with_poses(manifest.extra_poses(bev.camera_to_worlds.dtype).to(bev.camera_to_worlds.device))
     with_conf = config.confidence != "none"
     composites = None
     if manifest.composited_images:
@@ -348,9 +329,8 @@ class AugmentedDataManager(DataManager):
         td = inner.train_data
         refined = reference.train_cameras(inner.train_images.cameras) if reference.train_cameras is not None else None
         self.views: AugmentedViews = render_augmented_views(
-            inner.train_images, td.up, td.metres_to_world(augment.delta_h), reference.render, reference.key,
-            dataset_fingerprint(td.image_filenames), reference.cache_root, augment, enhancer, td.scene_box, reference.depth_along,
-            refined, td.metres_to_world(augment.delta_h_spread),
+            inner.train_images, td, reference.render, reference.key, dataset_fingerprint(td.image_filenames),
+            reference.cache_root, augment, enhancer, td.scene_box, reference.depth_along, refined,
         )
         print(f"reference renders: {self.views.render_seconds:.1f} s" + (" (reused from the cache)" if self.views.reused else ""))
         if self.views.composites is not None:
@@ -439,8 +419,7 @@ def find_cached_extra_views(cache_root: Path, dataset: str, augment: AugmentConf
     """The newest cache entry under a reference run whose bird's-eye views are those of ``augment``
     for ``num_views`` input poses (some may have been dropped: ``extra_indices``), or None."""
     for manifest in cache_manifests(cache_root):
-        same = manifest.same_geometry(dataset, augment.delta_h, augment.theta_pitch, max(int(augment.every_n), 1), augment.pitch_mode,
-                                      augment.delta_h_spread, augment.theta_pitch_spread)
+        same = manifest.dataset == dataset and manifest.geometry == ViewGeometry.of(augment)
         if same and manifest.num_extra == len(manifest.extra_indices) and all(0 <= i < num_views for i in manifest.extra_indices):
             return manifest
     return None

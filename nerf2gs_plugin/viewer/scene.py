@@ -110,19 +110,21 @@ def find_extra_views(config, train_data, train_cameras: Cameras, thumb_side: int
     """The additional views a run was trained with (``None`` for a run without ``--augment-from``).
 
     Read from the reference run's augment cache (:func:`find_cached_extra_views`, the one manifest
-    reader) whose dataset and geometry match the run's config, with the rendered views as
-    thumbnails; when the cache is gone, recomputed from the config exactly as the augmentation does.
+    reader): the poses the manifest saved, with the rendered views as thumbnails. When the cache is
+    gone (it lives under the reference run, which may be moved or cleaned), the views are made again
+    from the run's config by the one geometry the augmentation uses.
     """
     from nerf2gs_plugin.augment.cache import load_png
-    from nerf2gs_plugin.augment.datamanager import bev_cameras, find_cached_extra_views
+    from nerf2gs_plugin.augment.datamanager import find_cached_extra_views
+    from nerf2gs_plugin.augment.geometry import ViewGeometry
     from nerf2gs_plugin.engine.checkpoints import dataset_fingerprint, resolve_checkpoint
     from nerf2gs_plugin.errors import UserError
 
     aug = config.augment
     if config.augment_from is None or not aug.extra_views:
         return None
-    every_n = max(int(aug.every_n), 1)
-    sub = train_cameras[torch.arange(0, len(train_cameras), every_n)]
+    geometry = ViewGeometry.of(aug)
+    sub = geometry.sources(train_cameras)
     try:
         ref_dir, _ = resolve_checkpoint(Path(config.augment_from))
     except UserError:
@@ -136,6 +138,5 @@ def find_extra_views(config, train_data, train_cameras: Cameras, thumb_side: int
             thumbs.append(thumbnail(load_png(png), thumb_side) if png.is_file() else None)
         return ExtraViews(sub[torch.tensor(manifest.extra_indices, dtype=torch.long)].with_poses(manifest.extra_poses().to(sub.device)),
                           thumbs, str(manifest.path))
-    cams = bev_cameras(train_cameras, train_data.up, train_data.metres_to_world(aug.delta_h), aug.theta_pitch, every_n,
-                       aug.pitch_mode, train_data.metres_to_world(aug.delta_h_spread), aug.theta_pitch_spread)
+    cams = geometry.cameras(train_cameras, train_data)
     return ExtraViews(cams, [None] * len(cams), "recomputed from the run's --augment config (no cache manifest found)")
