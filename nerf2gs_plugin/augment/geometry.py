@@ -10,7 +10,7 @@ from typing import Any, Protocol
 import torch
 from torch import Tensor
 
-from nerf2gs_plugin.cameras import Cameras, birds_eye_poses, birds_eye_poses_absolute
+from nerf2gs_plugin.cameras import Cameras, raise_and_pitch
 from nerf2gs_plugin.errors import ConfigError
 
 
@@ -77,11 +77,3 @@ class ViewGeometry:
             dh = (delta_h_world + spread_world * u[0]).clamp_min(0.0)
             pitch = (self.theta_pitch + self.theta_pitch_spread * u[1]).clamp(0.0, 89.0)
         return sub.with_poses(raise_and_pitch(sub.camera_to_worlds, world.up, dh, pitch, self.pitch_mode))
-
-
-def raise_and_pitch(camera_to_worlds: Tensor, up: Tensor, delta_h_world: float | Tensor, theta_pitch_deg: float | Tensor,
-                    pitch_mode: str = "relative") -> Tensor:
-    """``[N, 3, 4]`` poses raised by ``delta_h_world`` along ``up`` and pitched down by ``theta_pitch_deg``
-    (relative: about each camera's right axis; absolute: below the ground plane's horizon)."""
-    poses = birds_eye_poses_absolute if pitch_mode == "absolute" else birds_eye_poses
-    return poses(camera_to_worlds, up, delta_h_world, theta_pitch_deg)

@@ -31,7 +31,8 @@ from typing import Mapping, Optional, Sequence
 import torch
 import torch.nn.functional as F
 from torch import Tensor
-from nerf2gs_plugin.augment.geometry import raise_and_pitch
+
+from nerf2gs_plugin.cameras import raise_and_pitch
 from nerf2gs_plugin.data.normalize import load_dataparser_transform
 from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.enhancer.warp import clear_mask, warp_into, warped_reference

@@ -8,8 +8,8 @@ from types import SimpleNamespace
 import torch
 
 from nerf2gs_plugin.augment.config import AugmentConfig
-from nerf2gs_plugin.augment.geometry import ViewGeometry, raise_and_pitch
-from nerf2gs_plugin.cameras import Cameras, look_at
+from nerf2gs_plugin.augment.geometry import ViewGeometry
+from nerf2gs_plugin.cameras import Cameras, look_at, raise_and_pitch
 from nerf2gs_plugin.enhancer.pairs import PITCH_DEG, RAISE_M, SIDE_M, perturb_pose
 
 
