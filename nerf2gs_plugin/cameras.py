@@ -304,8 +304,8 @@ def birds_eye_poses_absolute(camera_to_worlds: Tensor, up: Tensor, delta_h: "flo
     return torch.stack([right, new_up, -f, t], dim=-1)
 
 
-def raise_and_pitch(camera_to_worlds: Tensor, up: Tensor, delta_h_world: float | Tensor, theta_pitch_deg: float | Tensor,
-                    pitch_mode: str = "relative") -> Tensor:
+def raise_and_pitch(camera_to_worlds: Tensor, up: Tensor, delta_h_world: float | Tensor,
+                    theta_pitch_deg: float | Tensor, pitch_mode: str = "relative") -> Tensor:
     """``[N, 3, 4]`` poses raised by ``delta_h_world`` along ``up`` and pitched down by ``theta_pitch_deg``
     (relative: about each camera's right axis; absolute: below the ground plane's horizon)."""
     poses = birds_eye_poses_absolute if pitch_mode == "absolute" else birds_eye_poses

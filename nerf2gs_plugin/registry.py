@@ -49,7 +49,8 @@ class MethodSpecification:
         """This method at preset ``name`` (its config and description; ConfigError for an unknown one)."""
         if name not in self.presets:
             known = ", ".join(sorted(self.presets)) or "none"
-            raise ConfigError(f"unknown preset '{name}' for method '{self.config.method_name}'; its presets: {known}", "--preset")
+            raise ConfigError(f"unknown preset '{name}' for method '{self.config.method_name}'; its presets: {known}",
+                              "--preset")
         chosen = self.presets[name]
         return MethodSpecification(chosen.apply(self.config), chosen.description)
 

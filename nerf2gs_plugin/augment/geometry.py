@@ -53,7 +53,8 @@ class ViewGeometry:
         """The geometry a cache manifest's plain config recorded; an entry written before an option
         existed has that option's old behaviour (relative pitch, no spreads)."""
         return cls(config.get("delta_h", -1), config.get("theta_pitch", -1), config.get("every_n", 1),
-                   config.get("pitch_mode", "relative"), config.get("delta_h_spread", 0.0), config.get("theta_pitch_spread", 0.0))
+                   config.get("pitch_mode", "relative"), config.get("delta_h_spread", 0.0),
+                   config.get("theta_pitch_spread", 0.0))
 
     def sources(self, train: Cameras) -> Cameras:
         """The input cameras the views are raised from (every ``every_n``-th)."""
