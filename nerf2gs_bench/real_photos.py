@@ -188,15 +188,15 @@ def run_real_photos(opts: RealPhotosOptions, runs_root: Path, out_dir: Path, rer
 # ----------------------------------------------------------------------------- renders from above
 def _above_cameras(run, opts: RealPhotosOptions, views: int, split: str = "test"):
     """Held-out photos' cameras (and photos) and the bird's-eye cameras above them, in ``run``'s frame."""
-    from nerf2gs_plugin.augment.datamanager import bev_cameras
+    from nerf2gs_plugin.augment.geometry import ViewGeometry
 
     dm = run.pipeline.datamanager
     td = dm.train_data
     pairs = list(dm.eval_images(split))
     step = max(1, len(pairs) // max(views, 1))
     picked = pairs[::step][:views]
-    above = [bev_cameras(cam, td.up, float(td.metres_to_world(opts.delta_h)), opts.theta_pitch, pitch_mode="absolute")
-             for cam, _ in picked]
+    geometry = ViewGeometry(opts.delta_h, opts.theta_pitch, pitch_mode="absolute")
+    above = [geometry.cameras(cam, td) for cam, _ in picked]
     return picked, above
 
 

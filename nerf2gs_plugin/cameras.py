@@ -319,6 +319,14 @@ def ground_lateral(camera_to_worlds: Tensor, up: Tensor) -> Tensor:
     return torch.nn.functional.normalize(torch.cross(flat, up.expand_as(flat), dim=-1), dim=-1)
 
 
+def raise_and_pitch(camera_to_worlds: Tensor, up: Tensor, delta_h_world: float | Tensor,
+                    theta_pitch_deg: float | Tensor, pitch_mode: str = "relative") -> Tensor:
+    """``[N, 3, 4]`` poses raised by ``delta_h_world`` along ``up`` and pitched down by ``theta_pitch_deg``
+    (relative: about each camera's right axis; absolute: below the ground plane's horizon)."""
+    poses = birds_eye_poses_absolute if pitch_mode == "absolute" else birds_eye_poses
+    return poses(camera_to_worlds, up, delta_h_world, theta_pitch_deg)
+
+
 def _axis_angle(axis: Tensor, angle: "float | Tensor") -> Tensor:
     """Rotation matrices ``[N, 3, 3]`` about unit axes ``[N, 3]`` by one angle or ``[N]`` angles (radians)."""
     axis = torch.nn.functional.normalize(axis, dim=-1)

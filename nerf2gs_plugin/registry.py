@@ -4,9 +4,9 @@ entry-point group. A plugin that fails to load is reported by name and skipped."
 from __future__ import annotations
 
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
 from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.utils.plugins import load_entry_points, load_ref
@@ -23,20 +23,36 @@ BUILTIN_METHODS: dict[str, str] = {
     "splatfacto": "nerf2gs_plugin.methods.splatfacto.config:splatfacto_method",
     "scaffold-gs": "nerf2gs_plugin.methods.scaffold_gs.config:scaffold_gs_method",
     "2dgs": "nerf2gs_plugin.methods.two_dgs.config:two_dgs_method",
-    # the original step counts and schedules, for a GPU (`ns2gs-train splatfacto-paper ...`)
-    "streetnerf-paper": "nerf2gs_plugin.methods.streetnerf.config:streetnerf_paper_method",
-    "splatfacto-paper": "nerf2gs_plugin.methods.splatfacto.config:splatfacto_paper_method",
-    "scaffold-gs-paper": "nerf2gs_plugin.methods.scaffold_gs.config:scaffold_gs_paper_method",
-    "2dgs-paper": "nerf2gs_plugin.methods.two_dgs.config:two_dgs_paper_method",
 }
+# older names of a method at a preset (``ns2gs-train splatfacto-paper`` = ``splatfacto --preset paper``)
+ALIASES: dict[str, tuple[str, str]] = {f"{name}-paper": (name, "paper") for name in BUILTIN_METHODS}
+
+
+@dataclass
+class Preset:
+    """A scale of a method (``--preset NAME``): its default config turned into the preset's."""
+
+    apply: Callable[[TrainerConfig], TrainerConfig]
+    description: str
 
 
 @dataclass
 class MethodSpecification:
-    """A method: its default config (a tyro-parsable TrainerConfig) and a one-line description."""
+    """A method: its default config (a tyro-parsable TrainerConfig), a one-line description, and its
+    presets (e.g. ``paper``: the original step counts and schedules, for a GPU)."""
 
     config: TrainerConfig
     description: str
+    presets: dict[str, Preset] = field(default_factory=dict)
+
+    def preset(self, name: str) -> MethodSpecification:
+        """This method at preset ``name`` (its config and description; ConfigError for an unknown one)."""
+        if name not in self.presets:
+            known = ", ".join(sorted(self.presets)) or "none"
+            raise ConfigError(f"unknown preset '{name}' for method '{self.config.method_name}'; its presets: {known}",
+                              "--preset")
+        chosen = self.presets[name]
+        return MethodSpecification(chosen.apply(self.config), chosen.description)
 
     def with_steps(self, steps: int) -> TrainerConfig:
         """The config with ``steps`` iterations and every schedule marked in its dataclasses
@@ -71,6 +87,9 @@ def discover_methods() -> Discovery:
             failures[name] = f"{type(e).__name__}: {e}"
             continue
         methods[name] = spec
+    for alias, (name, preset) in ALIASES.items():
+        if name in methods:
+            methods[alias] = methods[name].preset(preset)
     plugins, plugin_failures = load_entry_points(ENTRY_POINT_GROUP, MethodSpecification, methods)
     return Discovery({**methods, **plugins}, {**failures, **plugin_failures})
 

@@ -1,3 +1,4 @@
+import dataclasses
 import sys
 import textwrap
 
@@ -83,3 +84,25 @@ def test_plugin_calling_sys_exit_at_import_is_isolated(tmp_path, monkeypatch):
     finally:
         registry.discover_methods.cache_clear()
         sys.modules.pop("exiting_plugin_mod", None)
+
+
+@pytest.mark.parametrize("name", ["streetnerf", "splatfacto", "scaffold-gs", "2dgs"])
+def test_paper_preset_and_the_old_name_resolve_to_one_config(name, tmp_path):
+    """``<name> --preset paper`` is what ``<name>-paper`` was; the old name stays an alias of it."""
+    from nerf2gs_plugin.cli.train import parse_args
+    from nerf2gs_plugin.utils.config import to_plain
+
+    spec = registry.get_method(name)
+    assert registry.ALIASES[f"{name}-paper"] == (name, "paper")
+    assert to_plain(registry.get_method(f"{name}-paper").config) == to_plain(spec.preset("paper").config)
+    assert to_plain(spec.preset("paper").config) != to_plain(spec.config)
+    flags = ["--data", str(tmp_path), "--max-num-iterations", "7"]
+    by_preset, _ = parse_args([name, "--preset", "paper", *flags])
+    by_alias, _ = parse_args([f"{name}-paper", *flags])
+    by_equals, _ = parse_args([name, *flags, "--preset=paper"])
+    assert to_plain(by_preset) == to_plain(by_alias) == to_plain(by_equals)
+    assert by_preset.max_num_iterations == 7 and by_preset.method_name == name  # the flags apply on top of the preset
+    plain, _ = parse_args([name, *flags])
+    assert to_plain(plain) == to_plain(dataclasses.replace(spec.config, data=tmp_path, max_num_iterations=7))
+    with pytest.raises(ConfigError, match="unknown preset 'gpu'.*paper"):
+        parse_args([name, "--preset", "gpu", *flags])

@@ -3,7 +3,7 @@ reference's bird's-eye renders, or fit them and fail to carry that to other came
 
 For each "<target> + NeRF views" row of a paper table (and the table's StreetNeRF), it renders:
 * the augmentation's own bird's-eye cameras (the training pose raised by delta-h, pitched by theta,
-  as ``bev_cameras`` makes them): PSNR of the target against the reference's render there (what
+  as ``ViewGeometry.cameras`` makes them): PSNR of the target against the reference's render there (what
   it was trained on; the reference render is the only truth the target ever had there);
 * the test cameras from above (bev_1, bev_2): PSNR of the target against the reference's render
   there, and of both against the true images.
@@ -23,7 +23,8 @@ from pathlib import Path
 import torch
 
 torch.set_num_threads(1)
-from nerf2gs_plugin.augment.datamanager import AugmentConfig, bev_cameras  # noqa: E402
+from nerf2gs_plugin.augment.datamanager import AugmentConfig  # noqa: E402
+from nerf2gs_plugin.augment.geometry import ViewGeometry  # noqa: E402
 from nerf2gs_plugin.runs.load import load_run  # noqa: E402
 from nerf2gs_plugin.runs.model import load_run_model  # noqa: E402
 from nerf2gs_bench.runner import write_bench_files  # noqa: E402
@@ -40,7 +41,7 @@ for table, data in pairs:
         ref = load_run(Path(res["StreetNeRF"]["checkpoint"]), data=Path(data))
     dm = ref.pipeline.datamanager
     td = dm.inner.train_data if hasattr(dm, "inner") else dm.train_data
-    cams = bev_cameras(dm.train_images.cameras, td.up, td.metres_to_world(aug.delta_h), aug.theta_pitch, aug.every_n, aug.pitch_mode)
+    cams = ViewGeometry.of(aug).cameras(dm.train_images.cameras, td)
     with torch.no_grad():
         ref_aug = [ref.model.render_camera(cams[i])["rgb"].cpu() for i in range(len(cams))]
         tests = {}

@@ -22,7 +22,7 @@ from pathlib import Path
 import torch
 
 torch.set_num_threads(1)
-from nerf2gs_plugin.augment.datamanager import bev_cameras  # noqa: E402
+from nerf2gs_plugin.augment.geometry import ViewGeometry  # noqa: E402
 from nerf2gs_plugin.runs.load import load_run  # noqa: E402
 from nerf2gs_plugin.methods.capture_path import capture_path  # noqa: E402
 from nerf2gs_bench.machine import machine_line  # noqa: E402
@@ -50,7 +50,7 @@ with torch.no_grad():
     reach = torch.exp(g["scales"]).amax(-1)
 train = dm.all_train_cameras
 metre = dm.train_data.metres_to_world(1.0)
-bev = bev_cameras(train, dm.train_data.up, dm.train_data.metres_to_world(delta_h), pitch, every_n, "absolute")
+bev = ViewGeometry(delta_h, pitch, every_n, "absolute").cameras(train, dm.train_data)
 w_real, w_bev = model.blend_weights(train), model.blend_weights(bev)
 to_path = capture_path(train.camera_to_worlds[:, :3, 3]).distance(g["means"].detach()) / metre  # what the path clearance measures
 rows = []

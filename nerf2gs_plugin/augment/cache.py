@@ -24,6 +24,7 @@ import torch
 from torch import Tensor
 
 from nerf2gs_plugin.augment.config import FAMILY_FIELDS
+from nerf2gs_plugin.augment.geometry import ViewGeometry
 from nerf2gs_plugin.cameras import Cameras
 
 CACHE_FORMAT_VERSION = 1
@@ -66,19 +67,14 @@ class CacheManifest:
     def extra_png(self, j: int, raw: bool = False) -> Path:
         return self.entry / ("extra_raw" if raw else "extra") / f"{j:05d}.png"
 
-    def extra_poses(self) -> Tensor:
-        """``[num_extra, 3, 4]`` camera-to-world poses of the bird's-eye views."""
-        return torch.tensor(self.extra_camera_to_worlds, dtype=torch.float32).reshape(-1, 3, 4)
+    def extra_poses(self, dtype: torch.dtype = torch.float32) -> Tensor:
+        """``[num_extra, 3, 4]`` camera-to-world poses of the bird's-eye views, as they were rendered."""
+        return torch.tensor(self.extra_camera_to_worlds, dtype=dtype).reshape(-1, 3, 4)
 
-    def same_geometry(self, dataset: str, delta_h: float, theta_pitch: float, every_n: int, pitch_mode: str = "absolute",
-                      delta_h_spread: float = 0.0, theta_pitch_spread: float = 0.0) -> bool:
-        """True when this entry's bird's-eye views are those of a run with these settings."""
-        cfg = self.config
-        return (self.dataset == dataset and float(cfg.get("delta_h", -1)) == float(delta_h)
-                and float(cfg.get("theta_pitch", -1)) == float(theta_pitch) and int(cfg.get("every_n", 1)) == int(every_n)
-                and cfg.get("pitch_mode", "relative") == pitch_mode
-                and float(cfg.get("delta_h_spread", 0.0)) == float(delta_h_spread)
-                and float(cfg.get("theta_pitch_spread", 0.0)) == float(theta_pitch_spread))
+    @property
+    def geometry(self) -> ViewGeometry:
+        """Where this entry's bird's-eye views are (the poses themselves: :meth:`extra_poses`)."""
+        return ViewGeometry.recorded(self.config)
 
     def write(self, entry: Path) -> None:
         doc = {k: v for k, v in asdict(self).items() if k != "path"}

@@ -37,7 +37,8 @@ from nerf2gs_plugin.cameras import Cameras
 from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
 from nerf2gs_plugin.augment.config import FAMILY_FIELDS, AugmentConfig
-from nerf2gs_plugin.augment.views import AdditionalViews, WorldFrame, additional_views, bev_cameras
+from nerf2gs_plugin.augment.geometry import ViewGeometry, WorldFrame
+from nerf2gs_plugin.augment.views import additional_views
 from nerf2gs_plugin.augment.cache import (
     CACHE_DIR_NAME,
     CacheManifest,
@@ -241,28 +242,17 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
             "render_seconds": round(time.perf_counter() - t0, 2)}
 
 
-def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, render_fn: RenderFn, ref_key: str,
+def render_augmented_views(train: ImageSet, world: WorldFrame, render_fn: RenderFn, ref_key: str,
                            dataset: str, cache_root: Path, config: AugmentConfig,
                            enhancer: Optional[ViewEnhancer] = None, scene_box: Optional[Tensor] = None,
-                           depth_along: str = "z", render_cameras: Optional[Cameras] = None,
-                           delta_h_spread_world: float = 0.0, world: Optional[WorldFrame] = None) -> AugmentedViews:
-    """Render (or reuse from the cache) the composites and the additional views. ``render_cameras``:
-    the training cameras at the poses the reference renders the input views from (its refined
-    poses; the ``ref_key``'s checkpoint hash keys them); None: ``train``'s own. The bird's-eye
-    cameras and the returned image sets keep ``train``'s poses. ``delta_h_spread_world``:
-    ``config.delta_h_spread`` in world units, as ``delta_h_world`` is ``config.delta_h``. ``world``:
-    the dataset's up vector and metric scale, which the view families other than birds-eye need
-    (``config.views``; their cameras follow the bird's-eye ones in the one list of additional views)."""
-    if world is not None:
-        views = additional_views(train.cameras, world, config)
-    elif not config.extra_views:
-        views = None
-    elif list(config.views) != ["birds-eye"]:
-        raise ConfigError(f"view families {list(config.views)} need the dataset's world frame", "--augment.views")
-    else:
-        cams = bev_cameras(train.cameras, up, delta_h_world, config.theta_pitch, config.every_n, config.pitch_mode, delta_h_spread_world,
-                           config.theta_pitch_spread)
-        views = AdditionalViews(cams, list(range(0, len(train), max(config.every_n, 1))), ["birds-eye"] * len(cams))
+                           depth_along: str = "z", render_cameras: Optional[Cameras] = None) -> AugmentedViews:
+    """Render (or reuse from the cache) the composites and the additional views. ``world``: the
+    dataset's up vector and metric scale (its ``DataparserOutputs``). ``render_cameras``: the training
+    cameras at the poses the reference renders the input views from (its refined poses; the
+    ``ref_key``'s checkpoint hash keys them); None: ``train``'s own. The additional cameras (every view
+    family of ``config.views``, in that order: augment/views.py) and the returned image sets keep
+    ``train``'s poses; the additional views' poses are those the manifest saved."""
+    views = additional_views(train.cameras, world, config)
     bev = views.cameras if views is not None else None
     has_transient = "transient" in train.masks and config.composites
     enhancer_key = enhancer.cache_key() if enhancer is not None else "none"
@@ -293,8 +283,10 @@ def render_augmented_views(train: ImageSet, up: Tensor, delta_h_world: float, re
         warn(f"{dropped} of {dropped + manifest.num_extra} {what} views dropped",
              f"never trained on: {manifest.dropped_outside_box} outside the scene box (lower --augment.delta-h), "
              f"{manifest.dropped_empty} mostly empty renders (coverage < {config.min_coverage})")
-    if bev is not None:
+    if bev is not None:  # the views kept, at the poses they were rendered from
         bev = bev[torch.tensor(manifest.extra_indices, dtype=torch.long)]
+        if manifest.num_extra:
+            bev = bev.with_poses(manifest.extra_poses(bev.camera_to_worlds.dtype).to(bev.camera_to_worlds.device))
     with_conf = config.confidence != "none"
     composites = None
     if manifest.composited_images:
@@ -352,9 +344,8 @@ class AugmentedDataManager(DataManager):
         td = inner.train_data
         refined = reference.train_cameras(inner.train_images.cameras) if reference.train_cameras is not None else None
         self.views: AugmentedViews = render_augmented_views(
-            inner.train_images, td.up, td.metres_to_world(augment.delta_h), reference.render, reference.key,
-            dataset_fingerprint(td.image_filenames), reference.cache_root, augment, enhancer, td.scene_box, reference.depth_along,
-            refined, td.metres_to_world(augment.delta_h_spread), world=td,
+            inner.train_images, td, reference.render, reference.key, dataset_fingerprint(td.image_filenames),
+            reference.cache_root, augment, enhancer, td.scene_box, reference.depth_along, refined,
         )
         print(f"reference renders: {self.views.render_seconds:.1f} s" + (" (reused from the cache)" if self.views.reused else ""))
         if self.views.composites is not None:
@@ -455,8 +446,8 @@ def find_cached_extra_views(cache_root: Path, dataset: str, augment: AugmentConf
     """The newest cache entry under a reference run whose additional views are those of ``augment``
     for ``num_views`` cameras of its families (some may have been dropped: ``extra_indices``), or None."""
     for manifest in cache_manifests(cache_root):
-        same = manifest.same_geometry(dataset, augment.delta_h, augment.theta_pitch, max(int(augment.every_n), 1), augment.pitch_mode,
-                                      augment.delta_h_spread, augment.theta_pitch_spread) and same_families(manifest.config, augment)
+        same = (manifest.dataset == dataset and manifest.geometry == ViewGeometry.of(augment)
+                and same_families(manifest.config, augment))
         if same and manifest.num_extra == len(manifest.extra_indices) and all(0 <= i < num_views for i in manifest.extra_indices):
             return manifest
     return None

@@ -21,24 +21,17 @@ import json
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Callable, Optional, Protocol
+from typing import Any, Callable, Optional
 
 import torch
 from torch import Tensor
 
-from nerf2gs_plugin.cameras import Cameras, _axis_angle, birds_eye_poses, birds_eye_poses_absolute, ground_lateral
+from nerf2gs_plugin.augment.geometry import ViewGeometry, WorldFrame
+from nerf2gs_plugin.cameras import Cameras, _axis_angle, ground_lateral
 from nerf2gs_plugin.errors import ConfigError, DataError
 from nerf2gs_plugin.utils.plugins import load_entry_points, load_ref
 
 ENTRY_POINT_GROUP = "nerf2gs.view_families"
-
-
-class WorldFrame(Protocol):
-    """What the families need of a dataset (``DataparserOutputs`` is one)."""
-
-    up: Tensor
-
-    def metres_to_world(self, metres: float) -> float: ...
 
 
 @dataclass
@@ -90,30 +83,9 @@ def _repeat(train: Cameras, idx: list[int], k: int) -> tuple[Cameras, list[int]]
     return train[torch.tensor(src, dtype=torch.long)], src
 
 
-def bev_cameras(train: Cameras, up: Tensor, delta_h_world: float, theta_pitch: float, every_n: int = 1,
-                pitch_mode: str = "relative", delta_h_spread_world: float = 0.0, theta_pitch_spread: float = 0.0) -> Cameras:
-    """The additional-view cameras: input intrinsics, raised and pitched poses (with spreads: each view's
-    height and pitch drawn uniformly around delta-h / theta-pitch, the same draws on every call)."""
-    sub = train[torch.arange(0, len(train), max(every_n, 1))]
-    if pitch_mode not in ("absolute", "relative"):
-        raise ConfigError(f"--augment.pitch-mode must be absolute or relative, got {pitch_mode!r}")
-    if delta_h_spread_world < 0 or not 0 <= theta_pitch_spread < 90:
-        raise ConfigError(f"spreads must be >= 0 (pitch < 90 deg), got {delta_h_spread_world}, {theta_pitch_spread}",
-                          "--augment.delta-h-spread / --augment.theta-pitch-spread")
-    poses = birds_eye_poses_absolute if pitch_mode == "absolute" else birds_eye_poses
-    dh: float | Tensor = delta_h_world
-    pitch: float | Tensor = theta_pitch
-    if delta_h_spread_world > 0 or theta_pitch_spread > 0:
-        u = torch.rand(2, len(sub), generator=torch.Generator().manual_seed(0), dtype=torch.float64) * 2 - 1
-        dh = (delta_h_world + delta_h_spread_world * u[0]).clamp_min(0.0)
-        pitch = (theta_pitch + theta_pitch_spread * u[1]).clamp(0.0, 89.0)
-    return sub.with_poses(poses(sub.camera_to_worlds, up, dh, pitch))
-
-
 def birds_eye(train: Cameras, world: WorldFrame, augment: Any) -> FamilyViews:
-    cams = bev_cameras(train, world.up, world.metres_to_world(augment.delta_h), augment.theta_pitch, augment.every_n,
-                       augment.pitch_mode, world.metres_to_world(augment.delta_h_spread), augment.theta_pitch_spread)
-    return FamilyViews(cams, _every(train, augment.every_n))
+    geometry = ViewGeometry.of(augment)
+    return FamilyViews(geometry.cameras(train, world), _every(train, geometry.every_n))
 
 
 def lane_shift_poses(camera_to_worlds: Tensor, up: Tensor, offset_world: Tensor, look_ahead_world: float = 0.0) -> Tensor:

@@ -1,4 +1,4 @@
-"""ns2gs-train <method> --data DATA [--augment-from REF [--baseline RUN]] [--pipeline.model.x ...]"""
+"""ns2gs-train <method> [--preset NAME] --data DATA [--augment-from REF [--baseline RUN]] [--pipeline.model.x ...]"""
 
 from __future__ import annotations
 
@@ -18,25 +18,36 @@ BASELINE_HELP = ("With --augment-from REF, --baseline RUN names the target train
                  "training, the log says (with both runs' measured held-out PSNR) whether the reference is weaker.")
 
 
-def pop_baseline(argv: list[str]) -> tuple[list[str], Optional[Path]]:
-    """``--baseline RUN`` taken out of ``argv`` (the trainer's config is the method's own and has no
-    such field): (the rest, RUN or None)."""
-    rest, baseline, i = [], None, 0
+PRESET_FLAG = "--preset"
+PRESET_HELP = "--preset NAME (before the method's flags take effect): the method at that scale, e.g. paper (for a GPU)."
+
+
+def pop_option(argv: list[str], flag: str, what: str) -> tuple[list[str], Optional[str]]:
+    """``flag VALUE`` (or ``flag=VALUE``) taken out of ``argv``, for an option that is not a field of
+    the method's config: (the rest, VALUE or None); ConfigError "``flag`` needs ``what``" without one."""
+    rest, value, i = [], None, 0
     while i < len(argv):
         a = argv[i]
-        if a == BASELINE_FLAG:
+        if a == flag:
             if i + 1 >= len(argv) or argv[i + 1].startswith("--"):
                 from nerf2gs_plugin.errors import ConfigError
 
-                raise ConfigError(f"{BASELINE_FLAG} needs a run folder")
-            baseline, i = Path(argv[i + 1]), i + 2
+                raise ConfigError(f"{flag} needs {what}")
+            value, i = argv[i + 1], i + 2
             continue
-        if a.startswith(BASELINE_FLAG + "="):
-            baseline = Path(a.split("=", 1)[1])
+        if a.startswith(flag + "="):
+            value = a.split("=", 1)[1]
         else:
             rest.append(a)
         i += 1
-    return rest, baseline
+    return rest, value
+
+
+def pop_baseline(argv: list[str]) -> tuple[list[str], Optional[Path]]:
+    """``--baseline RUN`` taken out of ``argv`` (the trainer's config is the method's own and has no
+    such field): (the rest, RUN or None)."""
+    rest, baseline = pop_option(argv, BASELINE_FLAG, "a run folder")
+    return rest, None if baseline is None else Path(baseline)
 
 
 def train(config: TrainerConfig, baseline: Optional[Path] = None) -> None:
@@ -74,24 +85,35 @@ def train(config: TrainerConfig, baseline: Optional[Path] = None) -> None:
     print(f"run saved to {run_dir}")
 
 
-def main() -> None:
+def parse_args(args: list[str]) -> tuple[TrainerConfig, Optional[Path]]:
+    """``ns2gs-train``'s arguments -> (the run's config, the ``--baseline`` run or None)."""
     disc = discover_methods()
     report_failures(disc)
-    configs = {name: spec.config for name, spec in sorted(disc.methods.items())}
-    descriptions = {name: spec.description for name, spec in disc.methods.items()}
-    if not configs:
+    specs = dict(sorted(disc.methods.items()))
+    if not specs:
         raise SystemExit("no methods registered")
-    if len(sys.argv) > 1 and not sys.argv[1].startswith("-") and sys.argv[1] not in configs:
+    if args and not args[0].startswith("-") and args[0] not in specs:
         from nerf2gs_plugin.errors import ConfigError
 
-        raise ConfigError(f"unknown method '{sys.argv[1]}'; known methods: {', '.join(sorted(configs))}")
-    argv, baseline = pop_baseline(sys.argv[1:])
+        raise ConfigError(f"unknown method '{args[0]}'; known methods: {', '.join(specs)}")
+    argv, preset = pop_option(args, PRESET_FLAG, "a preset name (e.g. paper)")
+    if preset is not None and argv and argv[0] in specs:  # the method's defaults at that scale; its flags apply on top
+        specs[argv[0]] = specs[argv[0]].preset(preset)
+    argv, baseline = pop_baseline(argv)
     if baseline is not None and not baseline.exists():
         from nerf2gs_plugin.errors import DataError
 
         raise DataError("baseline run folder does not exist", f"{BASELINE_FLAG} {baseline}")
+    configs = {name: spec.config for name, spec in specs.items()}
+    descriptions = {name: spec.description for name, spec in specs.items()}
     union = tyro.extras.subcommand_type_from_defaults(defaults=configs, descriptions=descriptions)
-    config = tyro.cli(tyro.conf.FlagConversionOff[union], args=argv, description=f"Train a method (nerf2gs). {BASELINE_HELP}")
+    config = tyro.cli(tyro.conf.FlagConversionOff[union], args=argv,
+                      description=f"Train a method (nerf2gs). {PRESET_HELP} {BASELINE_HELP}")
+    return config, baseline
+
+
+def main() -> None:
+    config, baseline = parse_args(sys.argv[1:])
     from nerf2gs_plugin.engine.launch import launch
 
     launch(train, config, baseline)  # in this process, or on --machine.num-devices ranks / as a torchrun rank

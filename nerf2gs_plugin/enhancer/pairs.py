@@ -24,7 +24,6 @@ Everything is vectorised over pixels; the loops run over images.
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping, Optional, Sequence
@@ -32,6 +31,8 @@ from typing import Mapping, Optional, Sequence
 import torch
 import torch.nn.functional as F
 from torch import Tensor
+
+from nerf2gs_plugin.cameras import raise_and_pitch
 from nerf2gs_plugin.data.normalize import load_dataparser_transform
 from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.enhancer.warp import clear_mask, warp_into, warped_reference
@@ -69,18 +70,12 @@ def metres_per_unit(run_dir: Path) -> float:
     return float(tf.metres_per_unit / tf.scale) if tf.scale > 0 else 1.0
 
 
-def _pitch(angle: float) -> Tensor:
-    """Rotation about the camera's x axis (OpenGL camera: positive looks up)."""
-    c, s = math.cos(angle), math.sin(angle)
-    return torch.tensor([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
 def perturb_pose(c2w: Tensor, up: Tensor, gen: torch.Generator, metres: float) -> Tensor:
     """``[3, 4]`` camera raised by RAISE_M along ``up``, shifted sideways by up to SIDE_M and pitched down by PITCH_DEG."""
     u = lambda lo, hi: lo + (hi - lo) * float(torch.rand((), generator=gen))  # noqa: E731
-    out = c2w.clone().float()
-    out[:, :3] = c2w[:, :3].float() @ _pitch(-math.radians(u(*PITCH_DEG))).to(c2w.device)
-    out[:, 3] = out[:, 3] + up.to(out) * (u(*RAISE_M) / metres) + out[:, 0] * (u(-SIDE_M, SIDE_M) / metres)
+    pitch = u(*PITCH_DEG)  # drawn first, as before: the pairs of a seed stay the pairs of that seed
+    out = raise_and_pitch(c2w[None].float(), up.to(c2w.device).float(), u(*RAISE_M) / metres, pitch)[0]
+    out[:, 3] = out[:, 3] + out[:, 0] * (u(-SIDE_M, SIDE_M) / metres)
     return out
 
 

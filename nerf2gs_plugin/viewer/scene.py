@@ -110,8 +110,9 @@ def find_extra_views(config, train_data, train_cameras: Cameras, thumb_side: int
     """The additional views a run was trained with (``None`` for a run without ``--augment-from``).
 
     Read from the reference run's augment cache (:func:`find_cached_extra_views`, the one manifest
-    reader) whose dataset and geometry match the run's config, with the rendered views as
-    thumbnails; when the cache is gone, recomputed from the config exactly as the augmentation does.
+    reader): the poses the manifest saved, with the rendered views as thumbnails. When the cache is
+    gone (it lives under the reference run, which may be moved or cleaned), the views are made again
+    from the run's config by the one geometry the augmentation uses.
     """
     from nerf2gs_plugin.augment.cache import load_png
     from nerf2gs_plugin.augment.datamanager import find_cached_extra_views

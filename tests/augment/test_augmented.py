@@ -6,7 +6,8 @@ from pathlib import Path
 import pytest
 import torch
 
-from nerf2gs_plugin.augment.datamanager import AugmentConfig, AugmentedDataManager, Reference, bev_cameras, composite
+from nerf2gs_plugin.augment.datamanager import AugmentConfig, AugmentedDataManager, Reference, composite
+from nerf2gs_plugin.augment.geometry import ViewGeometry
 from nerf2gs_plugin.datamanagers.full_image import FullImageDataManagerConfig
 from nerf2gs_plugin.engine.trainer import Trainer
 from nerf2gs_plugin.errors import CheckpointError
@@ -42,7 +43,7 @@ def test_bev_poses_are_delta_h_metres_up_and_pitched(tiny_scene):
     dm = _dm(tiny_scene)
     td = dm.train_data
     assert abs(td.dataparser_scale - 1.0) > 0.1  # the normalisation is not the identity
-    cams = bev_cameras(dm.train_images.cameras, td.up, td.metres_to_world(10.0), 30.0)
+    cams = ViewGeometry(10.0, 30.0, pitch_mode="relative").cameras(dm.train_images.cameras, td)
     rise = cams.centers - dm.train_images.cameras.centers
     # back in the original (metric) frame: exactly 10 m along the data's up (+z)
     R = td.dataparser_transform[:, :3]
@@ -55,7 +56,7 @@ def test_bev_poses_are_delta_h_metres_up_and_pitched(tiny_scene):
     pitch_in = torch.rad2deg(torch.asin((f_in @ up).clamp(-1, 1)))
     pitch_out = torch.rad2deg(torch.asin((f_out @ up).clamp(-1, 1)))
     assert torch.allclose(pitch_in - pitch_out, torch.full_like(pitch_in, 30.0), atol=1e-3)
-    assert len(bev_cameras(dm.train_images.cameras, up, 1.0, 30.0, every_n=3)) == 3
+    assert len(ViewGeometry(1.0, 30.0, every_n=3).cameras(dm.train_images.cameras, td)) == 3
 
 
 def test_composite_changes_only_masked_pixels():
@@ -268,7 +269,7 @@ def test_a_reference_with_refined_poses_renders_the_input_views_from_them(tiny_s
     assert comp and all(was_rendered(cams.centers[i] + shift) and not was_rendered(cams.centers[i]) for i in comp)
     if confidence != "none":  # every input view's depth, from its refined pose
         assert all(was_rendered(cams.centers[i] + shift) for i in range(len(cams)))
-    bev = bev_cameras(cams, dm.train_data.up, dm.train_data.metres_to_world(3.0), aug.theta_pitch, 2, aug.pitch_mode)
+    bev = ViewGeometry(3.0, aug.theta_pitch, 2, aug.pitch_mode).cameras(cams, dm.train_data)
     assert views.extra is not None
     assert all(was_rendered(c) for c in views.extra.cameras.centers)
     torch.testing.assert_close(views.extra.cameras.camera_to_worlds, bev[torch.tensor(views.manifest.extra_indices)].camera_to_worlds)

@@ -2,6 +2,7 @@
 trained on (outside the scene box, mostly empty renders) dropped with one warning."""
 
 import math
+from types import SimpleNamespace
 
 import pytest
 import torch
@@ -62,31 +63,32 @@ def test_empty_and_outside_views_are_dropped(tiny_scene, tmp_path):
 def test_spread_gives_each_view_its_own_height_and_pitch_and_none_keeps_the_old_views():
     from nerf2gs_plugin.cameras import Cameras
     from nerf2gs_plugin.augment.cache import cache_key
-    from nerf2gs_plugin.augment.datamanager import bev_cameras
+    from nerf2gs_plugin.augment.geometry import ViewGeometry
     from nerf2gs_plugin.errors import ConfigError
 
     up = torch.tensor([0.0, 0.0, 1.0])
+    metric = SimpleNamespace(up=up, metres_to_world=lambda m: m)  # poses in metres
     eye = torch.stack([torch.arange(8.0), torch.zeros(8), torch.full((8,), 1.5)], 1)
     c2w = look_at(eye, eye + torch.tensor([1.0, 0.0, 0.0]), up)
     cams = Cameras(camera_to_worlds=c2w, fx=torch.full((8,), 50.0), fy=torch.full((8,), 50.0), cx=torch.full((8,), 32.0),
                    cy=torch.full((8,), 24.0), width=torch.full((8,), 64), height=torch.full((8,), 48))
     for mode in ("absolute", "relative"):
-        plain = bev_cameras(cams, up, 2.0, 30.0, pitch_mode=mode)
+        plain = ViewGeometry(2.0, 30.0, pitch_mode=mode).cameras(cams, metric)
         # no spread: exactly the one-ring views of before (bitwise), and per-view tensors of one value agree with them
-        assert torch.equal(bev_cameras(cams, up, 2.0, 30.0, pitch_mode=mode, delta_h_spread_world=0.0).camera_to_worlds,
+        assert torch.equal(ViewGeometry(2.0, 30.0, pitch_mode=mode, delta_h_spread=0.0).cameras(cams, metric).camera_to_worlds,
                            plain.camera_to_worlds)
         pose = birds_eye_poses_absolute if mode == "absolute" else birds_eye_poses
         same = pose(c2w, up, torch.full((8,), 2.0), torch.full((8,), 30.0))
         assert torch.allclose(same, plain.camera_to_worlds[:, :3, :4], atol=1e-5)
-        spread = bev_cameras(cams, up, 2.0, 30.0, pitch_mode=mode, delta_h_spread_world=1.0, theta_pitch_spread=10.0)
+        spread = ViewGeometry(2.0, 30.0, pitch_mode=mode, delta_h_spread=1.0, theta_pitch_spread=10.0).cameras(cams, metric)
         raise_ = spread.camera_to_worlds[:, 2, 3] - 1.5
         pitch = -_pitch_deg(spread.camera_to_worlds[:, :3, :4], up)
         assert ((raise_ >= 1.0 - 1e-5) & (raise_ <= 3.0 + 1e-5)).all() and raise_.std() > 0.2  # heights 1..3, not all one
         assert ((pitch >= 20.0 - 1e-3) & (pitch <= 40.0 + 1e-3)).all() and pitch.std() > 2.0
-        again = bev_cameras(cams, up, 2.0, 30.0, pitch_mode=mode, delta_h_spread_world=1.0, theta_pitch_spread=10.0)
+        again = ViewGeometry(2.0, 30.0, pitch_mode=mode, delta_h_spread=1.0, theta_pitch_spread=10.0).cameras(cams, metric)
         assert torch.equal(again.camera_to_worlds, spread.camera_to_worlds)  # the same draws every time (the cache keys them)
     with pytest.raises(ConfigError, match="spread"):
-        bev_cameras(cams, up, 2.0, 30.0, delta_h_spread_world=-1.0)
+        ViewGeometry(2.0, 30.0, delta_h_spread=-1.0).cameras(cams, metric)
     # a config without spreads keys the render cache as the configs made before the option did
     cfg = {k: v for k, v in AugmentConfig().__dict__.items()}
     old = {k: v for k, v in cfg.items() if k not in ("delta_h_spread", "theta_pitch_spread")}

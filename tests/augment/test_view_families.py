@@ -126,8 +126,7 @@ def test_cache_and_manifest_round_trip_with_several_families(tiny_scene, tmp_pat
     ref = tmp_path / "ref"
     (ref / "checkpoints").mkdir(parents=True)  # the viewer finds the reference run by its checkpoint
     (ref / "checkpoints" / "step-000000009.ckpt").write_bytes(b"only resolved, never loaded here")
-    views = render_augmented_views(train, td.up, td.metres_to_world(aug.delta_h), _constant_render, "ref:a", data, ref, aug,
-                                   scene_box=None, world=td)
+    views = render_augmented_views(train, td, _constant_render, "ref:a", data, ref, aug)
     made = additional_views(train.cameras, td, aug)
     n_bev, n_lane, n_raise = len(range(0, n, 2)), 2 * n, len(range(0, n, 4))
     assert made.families == ["birds-eye"] * n_bev + ["lane-shift"] * n_lane + ["raise"] * n_raise
@@ -137,8 +136,7 @@ def test_cache_and_manifest_round_trip_with_several_families(tiny_scene, tmp_pat
     assert torch.allclose(manifest.extra_poses(), made.cameras.camera_to_worlds, atol=1e-6)  # the poses are saved
     assert views.extra.names[0] == "bev_00000" and views.extra.names[n_bev] == f"lane-shift_{n_bev:05d}"
     assert len(views.extra) == len(made.cameras)
-    again = render_augmented_views(train, td.up, td.metres_to_world(aug.delta_h), _constant_render, "ref:a", data, ref, aug,
-                                   world=td)
+    again = render_augmented_views(train, td, _constant_render, "ref:a", data, ref, aug)
     assert again.reused and again.cache_dir == views.cache_dir
     assert torch.equal(again.extra.cameras.camera_to_worlds, views.extra.cameras.camera_to_worlds)
     # the viewer reads the poses back from the manifest; another family list is another entry
@@ -146,9 +144,6 @@ def test_cache_and_manifest_round_trip_with_several_families(tiny_scene, tmp_pat
     assert find_cached_extra_views(ref, data, aug, len(made.cameras)).path == manifest.path
     found = find_extra_views(SimpleNamespace(augment_from=ref, augment=aug), td, train.cameras, thumb_side=8)
     assert found.source == str(manifest.path) and len(found.cameras) == len(made.cameras)
-    # the old callers (heights in world units, no world frame) still get the bird's-eye views, and only those
-    with pytest.raises(ConfigError, match="world frame"):
-        render_augmented_views(train, td.up, 0.1, _constant_render, "ref:a", data, ref, aug)
 
 
 def test_tiny_training_run_with_two_families(tiny_scene, tmp_path):

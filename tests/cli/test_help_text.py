@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from nerf2gs_plugin.registry import BUILTIN_METHODS
+from nerf2gs_plugin.registry import ALIASES, BUILTIN_METHODS
 
 _OPTION = re.compile(r"^\s*(-h, )?--[\w.-]+")
 
@@ -37,7 +37,7 @@ def undescribed(text: str) -> list[str]:
     return missing
 
 
-@pytest.mark.parametrize("method", sorted(BUILTIN_METHODS))
+@pytest.mark.parametrize("method", sorted([*BUILTIN_METHODS, *ALIASES]))
 def test_help_is_clean(method):
     text = help_text(method)
     assert "--max-num-iterations" in text

@@ -6,6 +6,7 @@ runtime with its reference input, the augmentation feeding it, and the default p
 import dataclasses
 import json
 import math
+from types import SimpleNamespace
 
 import pytest
 import torch
@@ -215,12 +216,12 @@ def test_augmentation_feeds_each_birds_eye_view_its_reference(tiny_scene, tiny_r
     run = load_run(tiny_run, data=tiny_scene)
     dm = FullImageDataManagerConfig().setup(data=tiny_scene, device="cpu")
     train = dm.train_images
-    up = torch.tensor([0.0, 0.0, 1.0])
+    world = SimpleNamespace(up=torch.tensor([0.0, 0.0, 1.0]), metres_to_world=lambda m: m / 10)  # delta-h 3 m: 0.3 units
     cfg = AugmentConfig(composites=False, delta_h=3.0, min_coverage=0.0, use_cache=False)
     with torch.no_grad():
         default, warped = _Recorder("image"), _Recorder("warped")
-        v1 = render_augmented_views(train, up, 0.3, run.model.render_camera, "ref:a", "d", tmp_path, cfg, default, depth_along="ray")
-        v2 = render_augmented_views(train, up, 0.3, run.model.render_camera, "ref:b", "d", tmp_path, cfg, warped, depth_along="ray")
+        v1 = render_augmented_views(train, world, run.model.render_camera, "ref:a", "d", tmp_path, cfg, default, depth_along="ray")
+        v2 = render_augmented_views(train, world, run.model.render_camera, "ref:b", "d", tmp_path, cfg, warped, depth_along="ray")
         # default: the source training view as it is (unchanged behaviour)
         kept = v1.manifest.extra_indices
         assert len(default.refs) == len(kept) > 0

@@ -6,7 +6,8 @@ from types import SimpleNamespace
 import numpy as np
 import torch
 
-from nerf2gs_plugin.augment.datamanager import AugmentConfig, bev_cameras, render_augmented_views
+from nerf2gs_plugin.augment.datamanager import AugmentConfig, render_augmented_views
+from nerf2gs_plugin.augment.geometry import ViewGeometry
 from nerf2gs_plugin.engine.checkpoints import dataset_fingerprint
 from nerf2gs_plugin.registry import get_method
 from nerf2gs_plugin.viewer.scene import find_extra_views
@@ -24,15 +25,15 @@ def test_extra_views_from_manifest_then_recomputed(tiny_scene, tmp_path):
     (ref / "checkpoints").mkdir(parents=True)
     (ref / "checkpoints" / "step-000000009.ckpt").write_bytes(b"only resolved, never loaded here")
     aug = AugmentConfig(delta_h=3.0, theta_pitch=40.0, every_n=2, composites=False)
-    views = render_augmented_views(dm.train_images, td.up, td.metres_to_world(aug.delta_h), _constant_render, "ref:test",
+    views = render_augmented_views(dm.train_images, td, _constant_render, "ref:test",
                                    dataset_fingerprint(td.image_filenames), ref, aug)
-    expected = bev_cameras(dm.train_images.cameras, td.up, td.metres_to_world(aug.delta_h), aug.theta_pitch, aug.every_n, aug.pitch_mode)
+    expected = ViewGeometry.of(aug).cameras(dm.train_images.cameras, td)
     config = SimpleNamespace(augment_from=ref, augment=aug)
 
     found = find_extra_views(config, td, dm.train_images.cameras, thumb_side=16)
     assert found.source == str(views.cache_dir / "manifest.json")
     assert len(found.cameras) == 4 and torch.allclose(found.cameras.camera_to_worlds, expected.camera_to_worlds, atol=1e-5)
-    # independently of bev_cameras: every 2nd training camera, raised by delta_h along up, same heading,
+    # independently of ViewGeometry: every 2nd training camera, raised by delta_h along up, same heading,
     # pitched 40 deg below the horizon (--augment.pitch-mode absolute, the default)
     train_c2w = dm.train_images.cameras.camera_to_worlds[::2]
     got = found.cameras.camera_to_worlds

@@ -11,7 +11,7 @@ Paper scale (Scaffold-GS defaults, for a GPU)::
       --pipeline.model.update-until 15000 --pipeline.model.max-anchors 0 --pipeline.model.anchor-growth 0 \\
       --optimizers.offsets.max-steps 30000 ... (every scheduled group: max-steps 30000)
 
-(:func:`paper_scale` applies them; ``scaffold_gs_paper_method`` is that config.)
+(:func:`paper_scale` applies them; the ``paper`` preset is that config.)
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from nerf2gs_plugin.engine.optimizers import OptimizerConfig
 from nerf2gs_plugin.engine.pipeline import PipelineConfig
 from nerf2gs_plugin.engine.trainer_config import TrainerConfig
 from nerf2gs_plugin.methods.scaffold_gs.model import ScaffoldGSModelConfig
-from nerf2gs_plugin.registry import MethodSpecification
+from nerf2gs_plugin.registry import MethodSpecification, Preset
 
 DEFAULT_STEPS = 3000
 PAPER_STEPS = 30000
@@ -66,9 +66,6 @@ scaffold_gs_config = TrainerConfig(
 scaffold_gs_method = MethodSpecification(
     config=scaffold_gs_config,
     description="Scaffold-GS: anchor-based neural Gaussians with MLP decoders, CPU-scale defaults.",
-)
-
-scaffold_gs_paper_method = MethodSpecification(
-    config=paper_scale(scaffold_gs_config),
-    description="Scaffold-GS at the paper's scale (30k steps; for a GPU).",
+    presets={"paper": Preset(
+        paper_scale, "Scaffold-GS at the paper's scale (30k steps; for a GPU).")},
 )

@@ -16,7 +16,7 @@ Paper scale (nerfstudio's splatfacto defaults, for a GPU)::
       --pipeline.model.strategy.gaussians-per-sparse-point 0 \\
       --optimizers.means.max-steps 30000 --optimizers.means.lr-final 1.6e-6 --steps-per-save 2000
 
-(:func:`paper_scale` applies the same changes in code; ``splatfacto_paper_method`` is that config.)
+(:func:`paper_scale` applies the same changes in code; the ``paper`` preset is that config.)
 ``MethodSpecification.with_steps`` rescales every step-valued schedule (the fields marked
 ``scheduled`` in their config, and the learning-rate decay) to another step budget, e.g. a quick
 800-step run; overriding ``--max-num-iterations`` alone keeps the 3000-step schedules.
@@ -34,7 +34,7 @@ from nerf2gs_plugin.engine.pipeline import PipelineConfig
 from nerf2gs_plugin.engine.trainer_config import TrainerConfig
 from nerf2gs_plugin.methods.splatfacto.model import SplatfactoModelConfig
 from nerf2gs_plugin.methods.splatfacto.strategy import DefaultStrategyConfig, MCMCStrategyConfig
-from nerf2gs_plugin.registry import MethodSpecification
+from nerf2gs_plugin.registry import MethodSpecification, Preset
 
 DEFAULT_STEPS = 3000
 PAPER_STEPS = 30000
@@ -80,9 +80,6 @@ splatfacto_config = TrainerConfig(
 splatfacto_method = MethodSpecification(
     config=splatfacto_config,
     description="Splatfacto: nerfstudio's 3D Gaussian splatting (densify/prune or MCMC), CPU-scale defaults.",
-)
-
-splatfacto_paper_method = MethodSpecification(
-    config=paper_scale(splatfacto_config),
-    description="Splatfacto at the paper's scale (30k steps, nerfstudio schedules; for a GPU).",
+    presets={"paper": Preset(
+        paper_scale, "Splatfacto at the paper's scale (30k steps, nerfstudio schedules; for a GPU).")},
 )

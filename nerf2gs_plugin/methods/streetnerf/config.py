@@ -6,7 +6,7 @@ see ``DEFAULT_STEPS``, 1024 rays per batch, a 12-level 2^15 hash grid, proposal 
 Without the sparse-point depth loss the upper facades stay half-built. Times and PSNR: docs/results
 (`ns2gs-bench paper-table`); ground regularisation on vs off: `ns2gs-bench ablation`.
 
-Paper scale (``streetnerf_paper_method``, :func:`paper_scale`): Zip-NeRF/nerfacto-like capacity for
+Paper scale (the ``paper`` preset, :func:`paper_scale`): Zip-NeRF/nerfacto-like capacity for
 a GPU: 16 levels x 2^19 entries up to 4096, proposal samples 256 -> 96 -> 48, 4096 rays, 25k steps.
 """
 
@@ -19,7 +19,7 @@ from nerf2gs_plugin.engine.optimizers import OptimizerConfig
 from nerf2gs_plugin.engine.pipeline import PipelineConfig
 from nerf2gs_plugin.engine.trainer_config import TrainerConfig
 from nerf2gs_plugin.methods.streetnerf.model import StreetNeRFModelConfig
-from nerf2gs_plugin.registry import MethodSpecification
+from nerf2gs_plugin.registry import MethodSpecification, Preset
 
 DEFAULT_STEPS = 3000
 PAPER_STEPS = 25000
@@ -65,9 +65,6 @@ streetnerf_config = TrainerConfig(
 streetnerf_method = MethodSpecification(
     config=streetnerf_config,
     description="StreetNeRF: segmentation-guided street NeRF (hash grid, proposals, sky/ground/transient masks, appearance); CPU-scale defaults.",
-)
-
-streetnerf_paper_method = MethodSpecification(
-    config=paper_scale(streetnerf_config),
-    description="StreetNeRF at Zip-NeRF-like capacity (16x2^19 hash grid, 256/96/48 samples, 4096 rays, 25k steps; for a GPU).",
+    presets={"paper": Preset(
+        paper_scale, "StreetNeRF at Zip-NeRF-like capacity (16x2^19 hash grid, 256/96/48 samples, 4096 rays, 25k steps; for a GPU).")},
 )

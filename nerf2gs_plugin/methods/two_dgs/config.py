@@ -5,7 +5,7 @@ Default (CPU scale): 3000 steps, the splatfacto refinement schedule, depth disto
 
 Paper scale (for a GPU): the splatfacto paper flags (see ``methods/splatfacto/config.py``) plus
 ``--pipeline.model.dist-start 3000 --pipeline.model.normal-start 7000``; :func:`paper_scale`
-applies them and ``two_dgs_paper_method`` is that config.
+applies them and the ``paper`` preset is that config.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from nerf2gs_plugin.engine.trainer_config import TrainerConfig
 from nerf2gs_plugin.methods.splatfacto.config import gaussian_optimizers
 from nerf2gs_plugin.methods.splatfacto.config import paper_scale as splatfacto_paper_scale
 from nerf2gs_plugin.methods.two_dgs.model import TwoDGSModelConfig
-from nerf2gs_plugin.registry import MethodSpecification
+from nerf2gs_plugin.registry import MethodSpecification, Preset
 
 DEFAULT_STEPS = 3000
 
@@ -41,9 +41,6 @@ two_dgs_config = TrainerConfig(
 two_dgs_method = MethodSpecification(
     config=two_dgs_config,
     description="2DGS: 2D Gaussian surfels with depth distortion and normal consistency, CPU-scale defaults.",
-)
-
-two_dgs_paper_method = MethodSpecification(
-    config=paper_scale(two_dgs_config),
-    description="2DGS at the paper's scale (30k steps; for a GPU).",
+    presets={"paper": Preset(
+        paper_scale, "2DGS at the paper's scale (30k steps; for a GPU).")},
 )
