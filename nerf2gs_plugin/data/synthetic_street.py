@@ -266,11 +266,11 @@ def _generate(cfg: SynthStreetConfig) -> dict[str, Any]:
                              "bev_1": {"delta_h_m": cfg.bev_1[0], "pitch_deg": cfg.bev_1[1]},
                              "bev_2": {"delta_h_m": cfg.bev_2[0], "pitch_deg": cfg.bev_2[1]},
                              "val_bev": [{"delta_h_m": h, "pitch_deg": p} for h, p in (cfg.val_bev_a, cfg.val_bev_b)],
-                             "cam_height_m": cfg.cam_height,
-                             "lane": {"offsets_m": list(cfg.lane_offsets), "val_offsets_m": list(cfg.val_lane_offsets)}},
+                             "cam_height_m": cfg.cam_height},
         "frames": frames,
         "eval_splits": eval_frames,
     }
+    meta["synthetic_street"]["lane"] = {"offsets_m": list(cfg.lane_offsets), "val_offsets_m": list(cfg.val_lane_offsets)}
     atomic_write_text(out / "transforms.json", json.dumps(meta, indent=1))
     seconds = time.perf_counter() - t_start
     stats: dict[str, Any] = {
