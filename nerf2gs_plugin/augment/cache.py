@@ -8,6 +8,12 @@ view 3 as rendered), ``extra/00003.png`` (after the enhancer) and ``manifest.jso
 ``--augment.confidence`` also ``composites/00007_conf.npy`` and ``extra/00003_conf.npy`` (float16
 ``[H, W]`` per-pixel confidence, :func:`load_confidence`). An entry is
 written under a temporary name and renamed into place, so a present manifest means a whole entry.
+
+Every bird's-eye render is also kept on its own key (:class:`ViewStore`, ``augment_cache/views/``):
+the reference, the view's own camera and the render settings, nothing of the rest of the entry. A
+run that changes what does not change that view (``--augment.composites``, the enhancer, the
+confidence, ``min-coverage``, more or fewer views) reuses it, and a render cut short keeps the views it
+finished. Entries written before the view store are read as such a store too (:meth:`ViewStore.add_entries`).
 """
 
 from __future__ import annotations
@@ -177,3 +183,109 @@ def load_png(path: Path) -> Tensor:
     if arr is None:
         raise FileNotFoundError(path)
     return torch.from_numpy(arr[..., ::-1].copy()).float() / 255.0
+
+
+VIEWS_DIR_NAME = "views"
+VIEW_KEY_VERSION = 1
+
+
+def view_key(ref_key: str, appearance: str, camera: Cameras) -> str:
+    """The key of one render: the reference, how it colours novel views, the camera (pose, intrinsics, size)."""
+    h = hashlib.sha1()
+    h.update(json.dumps({"v": VIEW_KEY_VERSION, "ref": ref_key, "appearance": appearance}, sort_keys=True).encode())
+    h.update(np.round(camera.camera_to_worlds.cpu().numpy(), 5).tobytes())
+    h.update(camera.Ks().cpu().numpy().round(3).tobytes())
+    h.update(np.asarray([int(camera.width[0]), int(camera.height[0])], dtype=np.int64).tobytes())
+    return h.hexdigest()[:20]
+
+
+@dataclass
+class StoredView:
+    """One render as the store gives it back: ``rgb`` (8-bit, as every cached PNG), ``depth`` and
+    ``accumulation`` (float16) when the reference rendered them, and its coverage (share of pixels with
+    accumulation > 0.5; None: the reference renders no accumulation)."""
+
+    out: dict[str, Tensor]
+    coverage: Optional[float]
+    kept_at: Optional[float] = None
+    """A view of an entry written before the store: no accumulation kept, only that it passed this ``min_coverage``."""
+
+    def usable(self, min_coverage: float, needs_accumulation: bool) -> bool:
+        """Whether it stands for a new render under these settings (else render it again)."""
+        if self.kept_at is None:
+            return True
+        return min_coverage <= self.kept_at and not needs_accumulation
+
+    def dropped(self, min_coverage: float) -> bool:
+        """A mostly empty render: too few pixels with accumulation > 0.5."""
+        return self.coverage is not None and self.coverage < min_coverage
+
+
+class ViewStore:
+    """Bird's-eye renders of one reference, one file set per :func:`view_key` under ``augment_cache/views``."""
+
+    def __init__(self, cache_root: Path, ref_key: str, appearance: str, read: bool = True) -> None:
+        self.dir = Path(cache_root) / CACHE_DIR_NAME / VIEWS_DIR_NAME
+        self.ref_key, self.appearance, self.read = ref_key, appearance, read
+        self.legacy: dict[str, tuple[Path, float]] = {}  # key -> (extra_raw PNG of an older entry, its min_coverage)
+
+    def key(self, camera: Cameras) -> str:
+        return view_key(self.ref_key, self.appearance, camera)
+
+    def add_entries(self, dataset: str, cameras: Cameras) -> None:
+        """Make the kept views of older entries (same reference, dataset and appearance) findable: their
+        manifests hold each view's pose; its intrinsics are those of ``cameras`` (same dataset), matched by pose."""
+        poses = np.round(cameras.camera_to_worlds.cpu().numpy(), 5)
+        for m in cache_manifests(self.dir.parent.parent):
+            if m.reference != self.ref_key or m.dataset != dataset or m.config.get("appearance", "mean") != self.appearance:
+                continue
+            for k, pose in enumerate(np.round(m.extra_poses().numpy(), 5)):
+                hit = np.flatnonzero(np.abs(poses - pose).reshape(len(poses), -1).max(-1) < 1e-5)
+                if len(hit):
+                    self.legacy.setdefault(self.key(cameras[int(hit[0])]), (m.extra_png(k, raw=True), float(m.config.get("min_coverage", 0.5))))
+
+    def get(self, camera: Cameras) -> Optional[StoredView]:
+        """The stored render of ``camera``, or None (none stored, or the store is write-only: ``read=False``)."""
+        if not self.read:
+            return None
+        key = self.key(camera)
+        png = self.dir / f"{key}.png"
+        if png.is_file() and (self.dir / f"{key}.json").is_file():
+            try:
+                meta = json.loads((self.dir / f"{key}.json").read_text())
+                out = {"rgb": load_png(png)}
+                for name in ("depth", "accumulation"):
+                    if meta.get(name):
+                        out[name] = torch.from_numpy(np.load(self.dir / f"{key}_{name}.npy").astype(np.float32))
+                return StoredView(out, meta.get("coverage"))
+            except (OSError, ValueError, KeyError):
+                return None
+        if key in self.legacy:
+            raw, kept_at = self.legacy[key]
+            depth = raw.with_name(raw.stem + "_depth.npy")
+            try:
+                out = {"rgb": load_png(raw)}
+                if depth.is_file():
+                    out["depth"] = torch.from_numpy(np.load(depth).astype(np.float32))
+                return StoredView(out, None, kept_at)
+            except (OSError, ValueError):
+                return None
+        return None
+
+    def put(self, camera: Cameras, out: dict[str, Tensor]) -> None:
+        """Keep one render (each file written whole, the ``.json`` last: it marks the view as complete)."""
+        self.dir.mkdir(parents=True, exist_ok=True)
+        key = self.key(camera)
+        meta: dict[str, Any] = {"coverage": None}
+        if "accumulation" in out:
+            meta["coverage"] = float((out["accumulation"] > 0.5).float().mean())
+        for name in ("depth", "accumulation"):
+            if name in out:
+                tmp = self.dir / f".{key}_{name}.tmp.npy"
+                np.save(tmp, out[name].cpu().numpy().astype(np.float16))
+                os.replace(tmp, self.dir / f"{key}_{name}.npy")
+                meta[name] = True
+        save_png(self.dir / f"{key}.png", out["rgb"])
+        tmp = self.dir / f".{key}.json.tmp"
+        tmp.write_text(json.dumps(meta))
+        os.replace(tmp, self.dir / f"{key}.json")

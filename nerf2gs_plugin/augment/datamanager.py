@@ -42,6 +42,8 @@ from nerf2gs_plugin.augment.views import additional_views
 from nerf2gs_plugin.augment.cache import (
     CACHE_DIR_NAME,
     CacheManifest,
+    StoredView,
+    ViewStore,
     cache_key,
     cache_manifests,
     confidence_path,
@@ -56,6 +58,9 @@ from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.warn import warn
 
 RenderFn = Callable[[Cameras], dict[str, Tensor]]
+PixelRenderFn = Callable[[Cameras, Tensor], dict[str, Tensor]]
+"""A camera and a bool ``[H, W]`` -> the render of only those pixels (full-size outputs, the rest 0)."""
+RENDER_KEYS = ("rgb", "depth", "accumulation")
 
 
 class ViewEnhancer(Protocol):
@@ -79,6 +84,9 @@ class Reference:
     train_cameras: Optional[Callable[[Cameras], Optional[Cameras]]] = None
     """The training cameras -> the reference's refined ones (``Model.refined_train_cameras``), or None
     / a None result: the reference renders input views at the dataset's poses."""
+    render_pixels: Optional[PixelRenderFn] = None
+    """Renders only some pixels of a camera (a model whose ``render_camera`` takes ``pixels``); None:
+    a composite renders its whole view."""
 
 
 def inside_box(centres: Tensor, box: Optional[Tensor]) -> Tensor:
@@ -89,16 +97,23 @@ def inside_box(centres: Tensor, box: Optional[Tensor]) -> Tensor:
     return ((centres >= box[0]) & (centres <= box[1])).all(-1)
 
 
-def composite(real: Tensor, render: Tensor, mask: Tensor, dilate_px: int = 0, feather_px: int = 0) -> Tensor:
-    """Real image with the masked pixels taken from ``render``. ``real``/``render`` ``[H,W,3]``,
-    ``mask`` ``[H,W,1]`` bool. Pixels outside the (dilated, feathered) mask are exactly ``real``."""
+def composite_weight(mask: Tensor, dilate_px: int = 0, feather_px: int = 0) -> Tensor:
+    """``[H,W,1]`` share of each pixel that a composite takes from the render: the ``[H,W,1]`` bool
+    mask dilated, its seam feathered."""
     m = mask.float().permute(2, 0, 1)[None]
     if dilate_px > 0:
         m = F.max_pool2d(m, 2 * dilate_px + 1, stride=1, padding=dilate_px)
     if feather_px > 0:
         soft = F.avg_pool2d(F.max_pool2d(m, 2 * feather_px + 1, 1, feather_px), 2 * feather_px + 1, 1, feather_px, count_include_pad=False)
         m = torch.maximum(m, soft)
-    m = m[0].permute(1, 2, 0)
+    return m[0].permute(1, 2, 0)
+
+
+def composite(real: Tensor, render: Tensor, mask: Tensor, dilate_px: int = 0, feather_px: int = 0) -> Tensor:
+    """Real image with the masked pixels taken from ``render``. ``real``/``render`` ``[H,W,3]``,
+    ``mask`` ``[H,W,1]`` bool. Pixels outside the (dilated, feathered) mask are exactly ``real``, so
+    ``render`` is read only where :func:`composite_weight` is > 0."""
+    m = composite_weight(mask, dilate_px, feather_px)
     return torch.where(m > 0, real * (1 - m) + render * m, real)
 
 
@@ -165,13 +180,16 @@ def _warped_source(out: dict[str, Tensor], camera: Cameras, train: ImageSet, ren
 
 def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn: RenderFn, config: AugmentConfig,
                   enhancer: Optional[ViewEnhancer], comp_idx: list[int], scene_box: Optional[Tensor],
-                  depth_along: str = "z", sources: Optional[list[int]] = None) -> dict[str, Any]:
+                  depth_along: str = "z", sources: Optional[list[int]] = None, render_pixels: Optional[PixelRenderFn] = None,
+                  store: Optional[ViewStore] = None) -> dict[str, Any]:
     """Render every image of a cache entry into ``work`` (not yet the entry: it is renamed after).
     Bird's-eye views outside the scene box or with mostly empty renders are left out; returns the
     manifest fields that say which were kept and how long it took. With a confidence, every
     training view is rendered (its depth is the occlusion test) and each render gets a
     ``_conf.npy`` beside its PNG. ``sources``: per additional view, the input view it was made from
-    (an image-conditioned enhancer's reference; None: every ``every_n``-th, the bird's-eye views')."""
+    (an image-conditioned enhancer's reference; None: every ``every_n``-th, the bird's-eye views').
+    Without a confidence, a composite renders only the pixels it takes from the reference
+    (``render_pixels``). Additional views' renders come from and go to ``store`` (one key per view)."""
     import time
 
     from nerf2gs_plugin.augment.confidence import depth_to_z
@@ -184,14 +202,19 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
     comp_set = set(comp_idx)
     n_jobs = len(train_ids) + (len(bev) if bev is not None else 0)
     kept: list[int] = []
-    outside = empty = 0
+    outside = empty = reused = 0
+    partial = render_pixels is not None and not with_conf
     t0 = time.perf_counter()
     with make_progress() as progress:
         task = progress.add_task("render reference views", total=n_jobs, stats="")
         renders: dict[int, dict[str, Tensor]] = {}  # the composited views' renders
         depths_z: list[Tensor] = []  # every input view's, with a confidence (float16: one per view is kept)
         for i in train_ids:
-            out = {k: v.cpu() for k, v in render_fn(train.cameras[i]).items() if k in ("rgb", "depth", "accumulation")}
+            if partial:  # a composite reads the render only where it pastes it
+                where = composite_weight(train.mask("transient", i).cpu(), config.dilate_px, config.feather_px)[..., 0] > 0
+                out = {k: v.cpu() for k, v in render_pixels(train.cameras[i], where).items() if k in RENDER_KEYS}
+            else:
+                out = {k: v.cpu() for k, v in render_fn(train.cameras[i]).items() if k in RENDER_KEYS}
             if with_conf:
                 if "depth" not in out:
                     from nerf2gs_plugin.errors import ConfigError
@@ -217,8 +240,16 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
                 outside += 1
                 progress.update(task, advance=1, stats=f"bird's-eye {j} outside the box")
                 continue
-            out = render_fn(bev[j])
-            if "accumulation" in out and float((out["accumulation"] > 0.5).float().mean()) < config.min_coverage:
+            stored = store.get(bev[j]) if store is not None else None
+            if stored is not None and stored.usable(config.min_coverage, with_conf):
+                out, view = stored.out, stored
+                reused += 1
+            else:
+                out = {k: v.cpu() for k, v in render_fn(bev[j]).items() if k in RENDER_KEYS}
+                if store is not None:
+                    store.put(bev[j], out)
+                view = StoredView(out, float((out["accumulation"] > 0.5).float().mean()) if "accumulation" in out else None)
+            if view.dropped(config.min_coverage):
                 empty += 1
                 progress.update(task, advance=1, stats=f"bird's-eye {j} mostly empty")
                 continue
@@ -232,12 +263,14 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
                 _save_confidence(confidence_path(work / "extra" / f"{k:05d}.png"), vis.confidence(out, bev[j]))
             if enhancer is not None:
                 if getattr(enhancer, "reference_kind", "image") == "warped":
-                    src = _warped_source(out, bev[j], train, render_fn, renders, source_depths, depth_along)
+                    src = _warped_source(out, bev[j], train, render_fn, {} if partial else renders, source_depths, depth_along)
                 else:
                     src = train.image(sources[j] if sources is not None else j * max(config.every_n, 1)).cpu()
                 rgb = enhancer.enhance(rgb, reference=src)
             save_png(work / "extra" / f"{k:05d}.png", rgb)
             progress.update(task, advance=1, stats=f"bird's-eye {j}")
+    if reused:
+        print(f"reference renders: {reused} additional views reused from {store.dir if store is not None else ''}")
     return {"extra_indices": kept, "dropped_outside_box": outside, "dropped_empty": empty,
             "render_seconds": round(time.perf_counter() - t0, 2)}
 
@@ -245,13 +278,15 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
 def render_augmented_views(train: ImageSet, world: WorldFrame, render_fn: RenderFn, ref_key: str,
                            dataset: str, cache_root: Path, config: AugmentConfig,
                            enhancer: Optional[ViewEnhancer] = None, scene_box: Optional[Tensor] = None,
-                           depth_along: str = "z", render_cameras: Optional[Cameras] = None) -> AugmentedViews:
+                           depth_along: str = "z", render_cameras: Optional[Cameras] = None,
+                           render_pixels: Optional[PixelRenderFn] = None) -> AugmentedViews:
     """Render (or reuse from the cache) the composites and the additional views. ``world``: the
     dataset's up vector and metric scale (its ``DataparserOutputs``). ``render_cameras``: the training
     cameras at the poses the reference renders the input views from (its refined poses; the
     ``ref_key``'s checkpoint hash keys them); None: ``train``'s own. The additional cameras (every view
     family of ``config.views``, in that order: augment/views.py) and the returned image sets keep
-    ``train``'s poses; the additional views' poses are those the manifest saved."""
+    ``train``'s poses; the additional views' poses are those the manifest saved. ``render_pixels``:
+    the reference's renderer of some pixels (composites render only those they take)."""
     views = additional_views(train.cameras, world, config)
     bev = views.cameras if views is not None else None
     has_transient = "transient" in train.masks and config.composites
@@ -264,8 +299,11 @@ def render_augmented_views(train: ImageSet, world: WorldFrame, render_fn: Render
         shutil.rmtree(work, ignore_errors=True)
         comp_idx = [i for i in range(len(train)) if has_transient and bool(train.mask("transient", i).any())]
         seen_from = train if render_cameras is None else replace(train, cameras=render_cameras)
+        store = ViewStore(cache_root, ref_key, config.appearance, read=config.use_cache) if bev is not None else None
+        if store is not None and config.use_cache:
+            store.add_entries(dataset, bev)
         done = _render_entry(work, seen_from, bev, render_fn, config, enhancer, comp_idx, scene_box, depth_along,
-                             views.sources if views is not None else None)
+                             views.sources if views is not None else None, render_pixels, store)
         kept = done["extra_indices"]
         CacheManifest(reference=ref_key, dataset=dataset, config=asdict(config), enhancer=enhancer_key,
                       composited_images=comp_idx, num_extra=len(kept),
@@ -345,7 +383,7 @@ class AugmentedDataManager(DataManager):
         refined = reference.train_cameras(inner.train_images.cameras) if reference.train_cameras is not None else None
         self.views: AugmentedViews = render_augmented_views(
             inner.train_images, td, reference.render, reference.key, dataset_fingerprint(td.image_filenames),
-            reference.cache_root, augment, enhancer, td.scene_box, reference.depth_along, refined,
+            reference.cache_root, augment, enhancer, td.scene_box, reference.depth_along, refined, reference.render_pixels,
         )
         print(f"reference renders: {self.views.render_seconds:.1f} s" + (" (reused from the cache)" if self.views.reused else ""))
         if self.views.composites is not None:

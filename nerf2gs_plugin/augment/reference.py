@@ -51,10 +51,12 @@ def load_reference(reference: Path, datamanager, device: torch.device | str, app
     if not hasattr(ref.model, "render_camera") or getattr(type(ref.model).render_camera, "__isabstractmethod__", False):
         raise CheckpointError(f"method '{ref.config.method_name}' cannot render cameras (no render_camera)", ckpt_file)
     render = ref.model.render_camera
-    if "appearance" in inspect.signature(render).parameters:
+    params = inspect.signature(render).parameters
+    if "appearance" in params:
         render = functools.partial(render, appearance=appearance)
+    render_pixels = (lambda camera, pixels: render(camera, pixels=pixels)) if "pixels" in params else None
     return Reference(render, f"{ref.config.method_name}:{ref.checkpoint_hash}", run_dir, ref.model.depth_along,
-                     getattr(ref.model, "refined_train_cameras", None))
+                     getattr(ref.model, "refined_train_cameras", None), render_pixels)
 
 
 def build_enhancer(spec: str):

@@ -57,8 +57,11 @@ class StreetField(_GridPositions):
     def forward(self, x: Tensor, directions: Tensor, radius: Optional[Tensor] = None) -> tuple[Tensor, Tensor]:
         """``x [N,3]``, unit ``directions [N,3]``, ``radius [N]`` -> density ``[N]``, rgb ``[N,3]``."""
         sigma, geo = self.density(x, radius)
-        rgb = torch.sigmoid(self.color_mlp(torch.cat([geo, sh_basis(self.sh_degree, directions)], dim=-1)))
-        return sigma, rgb
+        return sigma, self.color(geo, directions)
+
+    def color(self, geo: Tensor, directions: Tensor) -> Tensor:
+        """Geometry features ``[N, geo_feat_dim]`` (from :meth:`density`) + unit ``directions [N,3]`` -> rgb ``[N,3]``."""
+        return torch.sigmoid(self.color_mlp(torch.cat([geo, sh_basis(self.sh_degree, directions)], dim=-1)))
 
 
 class ProposalField(_GridPositions):

@@ -177,6 +177,10 @@ class StreetNeRFModelConfig(ModelConfig):
     # rendering
     eval_chunk: int = 4096
     """Rays rendered at once when rendering a whole image."""
+    render_min_weight: float = 1e-4
+    """Renders (no gradient: eval, views from above, the augmentation, the masks' reference) run the colour
+    network only for samples whose compositing weight exceeds this; the others add at most this much
+    each to a pixel's colour (0: every sample, the colour of training)."""
     background: tuple[float, float, float] = (0.5, 0.5, 0.5)
     """Learned constant background, used only when sky is off."""
     encoding_backend: str = "auto"
@@ -312,8 +316,15 @@ class StreetNeRFModel(Model):
         t_edges, x, r = positions(s_edges)
         n = s_edges.shape[1] - 1
         dirs = d[:, None, :].expand(R, n, 3).reshape(-1, 3)
-        sigma, rgb = self.field(x, dirs, r)
-        w = render_weights(sigma.reshape(R, n), t_edges)
+        if torch.is_grad_enabled() or c.render_min_weight <= 0:
+            sigma, rgb = self.field(x, dirs, r)
+            w = render_weights(sigma.reshape(R, n), t_edges)
+        else:  # a render: the colour network only where a sample shows (its share of the pixel is > render_min_weight)
+            sigma, geo = self.field.density(x, r)
+            w = render_weights(sigma.reshape(R, n), t_edges)
+            shown = (w > c.render_min_weight).reshape(-1)
+            rgb = torch.zeros(R * n, 3, device=dev, dtype=w.dtype)
+            rgb[shown] = self.field.color(geo[shown], dirs[shown])
         acc = w.sum(-1, keepdim=True)
         color = (w[..., None] * rgb.reshape(R, n, 3)).sum(1)
         if self.sky_model is not None:
@@ -421,16 +432,22 @@ class StreetNeRFModel(Model):
             self.ground_known.fill_(True)
 
     @torch.no_grad()
-    def render_camera(self, camera: Cameras, appearance: Optional[str] = None) -> dict[str, Tensor]:
+    def render_camera(self, camera: Cameras, appearance: Optional[str] = None, pixels: Optional[Tensor] = None) -> dict[str, Tensor]:
         """Whole image for one camera in ``eval_chunk``-ray chunks; deterministic (no jitter).
         ``appearance``: how a camera that is no training photo is coloured ("mean", "identity",
-        "nearest"); None: ``config.eval_appearance``."""
+        "nearest"); None: ``config.eval_appearance``. ``pixels``: bool ``[H, W]``, render only these
+        rays (the others are 0 in every output): a composite needs the reference only under its mask."""
         was_training = self.training
         self.eval()
         try:
             camera = camera.to(self.device)
             h, w = int(camera.height[0]), int(camera.width[0])
             rays = camera.generate_rays(0)
+            if pixels is not None:
+                if tuple(pixels.shape) != (h, w):
+                    raise ValueError(f"pixels is {tuple(pixels.shape)}, the camera is {(h, w)}")
+                where = pixels.to(self.device).reshape(-1).bool()
+                rays = rays[where]
             keys = ("rgb", "depth", "accumulation")
             chunks: dict[str, list[Tensor]] = {k: [] for k in keys}
             mode = appearance or self.config.eval_appearance
@@ -442,7 +459,15 @@ class StreetNeRFModel(Model):
                 out = self._render_rays(chunk, idx, novel)
                 for k in keys:
                     chunks[k].append(out[k])
-            result = {k: torch.cat(v).reshape(h, w, -1) for k, v in chunks.items()}
+            if pixels is None:
+                result = {k: torch.cat(v).reshape(h, w, -1) for k, v in chunks.items()}
+            else:
+                result = {}
+                for k, v in chunks.items():
+                    flat = torch.zeros(h * w, 3 if k == "rgb" else 1, device=self.device)
+                    if v:
+                        flat[where] = torch.cat(v)
+                    result[k] = flat.reshape(h, w, -1)
             result["rgb"] = result["rgb"].clamp(0.0, 1.0)
             return result
         finally:
