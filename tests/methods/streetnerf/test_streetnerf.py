@@ -319,3 +319,38 @@ def test_camera_optimizer_pulls_a_perturbed_camera_back(trained, tiny_scene):
     # centre trade against each other on a scene this shallow, so they are held to less (measured: the
     # reprojection 1.75 -> 0.13 px while the centre went only 0.020 -> 0.011 units)
     assert after[2] < before[2] / 8 and after[0] < before[0] / 3 and after[1] < before[1] / 1.5, (before, after)
+
+
+def test_render_skips_colour_of_unseen_samples_within_its_bound(trained):
+    """render_min_weight: the colour network runs only where a sample's weight shows; each skipped
+    sample moves a pixel by at most its weight, accumulation and depth do not move at all."""
+    tr, _ = trained
+    model = tr.pipeline.model
+    cam = tr.pipeline.datamanager.eval_split("bev_1")[1].cameras[0]
+    base_cfg = model.config
+    try:
+        model.config = dataclasses.replace(base_cfg, render_min_weight=0.0)
+        every = model.render_camera(cam)
+        model.config = dataclasses.replace(base_cfg, render_min_weight=1e-3)
+        skipped = model.render_camera(cam)
+    finally:
+        model.config = base_cfg
+    assert torch.equal(every["accumulation"], skipped["accumulation"]) and torch.equal(every["depth"], skipped["depth"])
+    diff = (every["rgb"] - skipped["rgb"]).abs().max()
+    assert 0 < diff <= base_cfg.num_nerf_samples * 1e-3 * 1.01  # some colour was skipped, never more than the bound
+
+
+def test_render_camera_pixels_renders_only_those(trained):
+    tr, _ = trained
+    model = tr.pipeline.model
+    cam = tr.pipeline.datamanager.train_images.cameras[2]
+    h, w = int(cam.height[0]), int(cam.width[0])
+    pixels = torch.zeros(h, w, dtype=torch.bool)
+    pixels[3:9, 5:17] = True
+    full, part = model.render_camera(cam), model.render_camera(cam, pixels=pixels)
+    for k in full:
+        assert part[k].shape == full[k].shape
+        torch.testing.assert_close(part[k][pixels], full[k][pixels], atol=1e-5, rtol=1e-5)
+        assert not part[k][~pixels].any()
+    with pytest.raises(ValueError, match="pixels"):
+        model.render_camera(cam, pixels=pixels[1:])
