@@ -149,10 +149,20 @@ class HashEncoding(nn.Module):
     def forward(self, x: Tensor, radius: Optional[Tensor] = None) -> Tensor:
         """``x [N,3]`` in [0,1]; ``radius [N]`` sample radius in the same units (anti-aliasing)."""
         res_cpu = self._res if self._res.device.type == "cpu" else None
+        if radius is not None and not torch.is_grad_enabled() and _fused_available(x, self.table, self.backend):
+            # a render: the level weights in the kernel's one pass (the same float operations)
+            out = load_kernel().forward_aa(x.contiguous().float(), self.table.contiguous(), self._res, radius.reshape(-1).contiguous().float())
+            return out.reshape(x.shape[0], -1)
         feats = hash_encode(x, self.table, self.resolutions, self.backend, res_cpu)  # [N,L,F]
         if radius is not None:
             feats = feats * level_weights(radius, self._res.to(x.dtype))[..., None]
         return feats.reshape(x.shape[0], -1)
+
+
+def _fused_available(x: Tensor, table: Tensor, backend: str) -> bool:
+    """The C++ kernel would encode ``x`` (as :func:`hash_encode` decides) and is built."""
+    use_cpu = backend == "cpu" or (backend == "auto" and table.dtype == torch.float32)
+    return use_cpu and x.device.type == "cpu" and table.device.type == "cpu" and load_kernel() is not None
 
 
 def level_weights(radius: Tensor, resolutions: Tensor) -> Tensor:

@@ -87,6 +87,36 @@ void forward_impl(const float* x, const float* table, const int32_t* res, float*
     }
 }
 
+// Forward times the Zip-NeRF level weight erf(1 / sqrt(8 r^2 n_l^2)) of each point's radius r, in the
+// same float operations as hash_encoding.level_weights: one pass for renders (no gradient). Level by
+// level: one level's table stays in the cache while every point reads it (a render's points are many).
+template <int F>
+void forward_aa_impl(const float* x, const float* table, const int32_t* res, const float* radius, float* out, int64_t N, int L,
+                     uint32_t T) {
+    for (int l = 0; l < L; ++l) {
+        const float* tl = table + (int64_t)l * T * F;
+        const float n_l = (float)res[l];
+#pragma omp parallel for schedule(static)
+        for (int64_t n = 0; n < N; ++n) {
+            Corners c;
+            level_corners(x + 3 * n, res[l], T, c);
+            const float r0 = radius[n] < 1e-8f ? 1e-8f : radius[n];
+            const float rr = r0 * n_l;
+            const float arg = 1.f / std::sqrt(8.f * rr * rr);
+            const float a = arg >= 4.f ? 1.f : std::erf(arg);  // erf(4) rounds to 1 in float: skip the call
+            float acc[F];
+            for (int f = 0; f < F; ++f) acc[f] = 0.f;
+            for (int k = 0; k < 8; ++k) {
+                const float* e = tl + (int64_t)c.idx[k] * F;
+                const float w = c.w[k];
+                for (int f = 0; f < F; ++f) acc[f] += w * e[f];
+            }
+            float* o = out + (n * (int64_t)L + l) * F;
+            for (int f = 0; f < F; ++f) o[f] = acc[f] * a;
+        }
+    }
+}
+
 template <int F>
 void backward_impl(const float* x, const float* grad_out, const int32_t* res, float* grad_table, int64_t N, int L, uint32_t T) {
 #pragma omp parallel for schedule(dynamic, 1)
@@ -181,6 +211,34 @@ torch::Tensor hashgrid_forward(torch::Tensor x, torch::Tensor table, torch::Tens
     return out;
 }
 
+torch::Tensor hashgrid_forward_aa(torch::Tensor x, torch::Tensor table, torch::Tensor res, torch::Tensor radius) {
+    check(x, table, res);
+    TORCH_CHECK(radius.device().is_cpu() && radius.dtype() == torch::kFloat32 && radius.numel() == x.size(0),
+                "hashgrid: radius must be float32 [N] on the CPU");
+    x = x.contiguous();
+    table = table.contiguous();
+    res = res.contiguous();
+    radius = radius.contiguous();
+    const int64_t N = x.size(0);
+    const int L = (int)table.size(0);
+    const uint32_t T = (uint32_t)table.size(1);
+    const int F = (int)table.size(2);
+    auto out = torch::empty({N, L, F}, x.options());
+    const float* xp = x.data_ptr<float>();
+    const float* tp = table.data_ptr<float>();
+    const int32_t* rp = res.data_ptr<int32_t>();
+    const float* ap = radius.data_ptr<float>();
+    float* op = out.data_ptr<float>();
+    switch (F) {
+        case 1: forward_aa_impl<1>(xp, tp, rp, ap, op, N, L, T); break;
+        case 2: forward_aa_impl<2>(xp, tp, rp, ap, op, N, L, T); break;
+        case 4: forward_aa_impl<4>(xp, tp, rp, ap, op, N, L, T); break;
+        case 8: forward_aa_impl<8>(xp, tp, rp, ap, op, N, L, T); break;
+        default: TORCH_CHECK(false, "hashgrid: features per level must be 1, 2, 4 or 8");
+    }
+    return out;
+}
+
 torch::Tensor hashgrid_backward(torch::Tensor x, torch::Tensor grad_out, torch::Tensor res, int64_t T) {
     TORCH_CHECK(grad_out.dim() == 3 && grad_out.size(0) == x.size(0), "hashgrid: grad_out must be [N, L, F]");
     x = x.contiguous();
@@ -234,6 +292,7 @@ torch::Tensor hashgrid_backward_x(torch::Tensor x, torch::Tensor table, torch::T
 
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
     m.def("forward", &hashgrid_forward, "hash-grid encoding forward (CPU)");
+    m.def("forward_aa", &hashgrid_forward_aa, "hash-grid encoding forward times the anti-aliasing level weights (CPU, no gradient)");
     m.def("backward", &hashgrid_backward, "hash-grid encoding backward w.r.t. the table (CPU)");
     m.def("backward_x", &hashgrid_backward_x, "hash-grid encoding backward w.r.t. the positions (CPU)");
 }
