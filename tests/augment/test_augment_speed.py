@@ -7,8 +7,8 @@ import shutil
 import pytest
 import torch
 
-from nerf2gs_plugin.datamanagers.augment_cache import VIEWS_DIR_NAME
-from nerf2gs_plugin.datamanagers.augmented import AugmentConfig, AugmentedDataManager, Reference, composite_weight
+from nerf2gs_plugin.augment.cache import VIEWS_DIR_NAME
+from nerf2gs_plugin.augment.datamanager import AugmentConfig, AugmentedDataManager, Reference, composite_weight
 from nerf2gs_plugin.datamanagers.full_image import FullImageDataManagerConfig
 
 
