@@ -26,7 +26,7 @@ torch.set_num_threads(1)
 from nerf2gs_plugin.masks.motion import MotionFrame, MotionOptions, add_motion, motion_masks, ray_directions, static_distance  # noqa: E402
 from nerf2gs_plugin.data.images import load_image, load_mask  # noqa: E402
 from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_street  # noqa: E402
-from nerf2gs_plugin.eval.machine import machine_line  # noqa: E402
+from nerf2gs_bench.machine import machine_line  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
 FOV, CAM_H, FRAMES = 80.0, 3.0, 30
@@ -76,7 +76,7 @@ def run_est() -> dict:
     from nerf2gs_plugin.data import parse_dataset
     from nerf2gs_plugin.masks.auto import AutoOptions, masks_from_renders
     from nerf2gs_plugin.masks.maskless import maskless_view
-    from nerf2gs_plugin.eval import bench_real as br
+    from nerf2gs_bench import real as br
     from nerf2gs_plugin.masks.evaluate import resample_mask
 
     capture = work / "estimated"
@@ -87,6 +87,9 @@ def run_est() -> dict:
     cache = work / "renders.pt"
     times = {}
     if cache.is_file():
+        import nerf2gs_plugin.masks.auto as auto_mod
+
+        sys.modules.setdefault("nerf2gs_plugin.data.masks.auto", auto_mod)  # renders cached before masks/ moved
         r = torch.load(cache, weights_only=False)
     else:
         t0 = time.perf_counter()

@@ -242,9 +242,10 @@ def frames_from_renders(views: Sequence[dict], sky: Sequence[Tensor], up: Tensor
 
 
 def add_motion(renders, result: dict, opts: MotionOptions, log: Callable[[str], None] = print, progress: bool = True) -> None:
-    """Add the moving objects to ``result`` (``masks_from_renders``' masks, in place): every split's
-    frames in one sequence sorted by file name (a video's order), moving regions made transient and
-    taken from the ground."""
+    """Add the moving objects to ``result``'s transient masks (``masks_from_renders``' masks, in
+    place): every split's frames in one sequence sorted by file name (a video's order). The ground
+    and sky masks stay as the residual route made them: with a short reference's depth the motion
+    route also marks static road (docs/masks-motion.md), and the ground mask should not pay for it."""
     from nerf2gs_plugin.progress import make_progress
 
     if not opts.enabled:
@@ -257,8 +258,6 @@ def add_motion(renders, result: dict, opts: MotionOptions, log: Callable[[str], 
         moving = motion_masks(frames, opts, lambda: prog.advance(task))
     share = 0.0
     for (_, s, i), m in zip(order, moving):
-        fm = result[s][i]
-        fm.transient = fm.transient | m
-        fm.ground = fm.ground & ~fm.transient
+        result[s][i].transient = result[s][i].transient | m
         share += float(m.float().mean()) / max(len(order), 1)
     log(f"masks: motion marked {100 * share:.2f}% of the pixels as moving")
