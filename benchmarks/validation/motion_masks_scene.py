@@ -36,7 +36,7 @@ finds most movers (recall 0.68 / 0.77) but also marks the road a mover uncovers,
 flow of 30-50 px a frame at this frame spacing, 1.66 m) and some facade edges (precision 0.57 / 0.62).
 Through the estimated pipeline the residual route alone finds 8-10% of the movers; with the motion route
 70-81%, at a precision of 0.17-0.23 (it marks 25-28% of the pixels): the 1000-step reference's depth is
-speckled with floaters, and on seed 0 the fitted ground plane sits about 1.3 m above the road (camera
+speckled with floaters, and on seed 0 the fitted ground plane appears to sit about 1.3 m above the road (estimated camera
 baseline / height 1.0 against the true 0.55), so the bound the plane puts on the road's depth is wrong
 and static road reads as moving. Sky and ground are unchanged by construction (the motion route only
 adds to the transient masks).
