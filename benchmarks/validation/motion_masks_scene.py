@@ -75,7 +75,7 @@ def run_gt() -> dict:
         frames.append(MotionFrame(load_image(street / f["file_path"]), static_distance(dist, c2w, intr, torch.tensor([0.0, 0, 1]), 0.0), c2w, intr))
         gts.append(trans)
     t0 = time.perf_counter()
-    masks = motion_masks(frames, MotionOptions())
+    masks = motion_masks(frames, MotionOptions(enabled=True))
     c = sum(counts(m, g) for m, g in zip(masks, gts))
     return {"transient": stats(c), "seconds": round(time.perf_counter() - t0, 1)}
 
@@ -115,7 +115,7 @@ def run_est() -> dict:
     base = masks_from_renders(r, AutoOptions(), log=lambda s: None)
     t0 = time.perf_counter()
     with_motion = masks_from_renders(r, AutoOptions(), log=lambda s: None)
-    add_motion(r, with_motion, MotionOptions(), log=print, progress=False)
+    add_motion(r, with_motion, MotionOptions(enabled=True), log=print, progress=False)
     times["motion_s"] = round(time.perf_counter() - t0, 1)
     rows = {}
     for label, res in (("without_motion", base), ("with_motion", with_motion)):
@@ -142,7 +142,7 @@ if mode in ("est", "both"):
     row["est"] = run_est()
     print("est", row["est"], flush=True)
 doc["seeds"][str(seed)] = row
-doc["options"] = vars(MotionOptions())
+doc["options"] = vars(MotionOptions(enabled=True))
 doc["machine"] = machine_line()
 atomic_write_text(out.with_suffix(".json"), json.dumps(doc, indent=1))
 

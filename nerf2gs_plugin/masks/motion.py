@@ -43,8 +43,9 @@ Intrinsics = tuple[float, float, float, float]  # fx, fy, cx, cy (pixel centres 
 class MotionOptions:
     """``--segmenter auto``'s motion route (see ``masks/motion.py``)."""
 
-    enabled: bool = True
-    """Add what moves against the static scene's flow to the transient masks."""
+    enabled: bool = False
+    """Add what moves against the static scene's flow to the transient masks. Off by default: on
+    estimated poses and depth it still marks much static road (see docs/masks-motion.md)."""
     neighbours: tuple[int, ...] = (-2, -1, 1, 2)
     """Frames compared with each frame (offsets in the sequence, sorted by file name)."""
     rel: float = 0.15
@@ -56,9 +57,8 @@ class MotionOptions:
     (grey levels of images normalised to a spread of 48, 3x3 means; 0: off): a small mover that DIS
     loses in its coarse levels still fails to line up."""
     vote: float = 1.0
-    """... in at least this fraction of its valid neighbour pairs on each side (1: all of them; 0.5
-    let in more of the road a mover uncovers: transient IoU 0.435 -> 0.524 and 0.412 -> 0.446 on the
-    two measured streets with 1.0, with ``rel`` 0.2 -> 0.15)."""
+    """... in at least this fraction of its valid neighbour pairs on each side (1: all of them; lower
+    values let in more of the road a mover uncovers)."""
     grow: float = 1.0
     """A superpixel joins a moving region where this fraction of its pixels move (1: off; 0.3 and 0.5
     measured no better than closing and hole filling alone on the synthetic street with movers)."""
