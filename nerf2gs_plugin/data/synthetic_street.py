@@ -48,8 +48,8 @@ import tyro
 from nerf2gs_plugin.data.images import write_depth_atomic, write_image_atomic, write_mask_atomic
 from nerf2gs_plugin.data.ply import write_ply_points
 from nerf2gs_plugin.data.synthetic.coverage import ground_coverage
-from nerf2gs_plugin.data.synthetic.layout import SKY, TRANSIENT_MATERIALS, build_layout, empty_boxes
-from nerf2gs_plugin.data.synthetic.layout import ROAD_HALF
+from nerf2gs_plugin.data.synthetic.layout import ROAD_HALF, SKY, TRANSIENT_MATERIALS, Boxes, build_layout, empty_boxes
+from nerf2gs_plugin.data.synthetic.movers import build_movers
 from nerf2gs_plugin.data.synthetic.poses import bev_poses, street_poses, train_poses
 from nerf2gs_plugin.data.synthetic.raycast import Pinhole, ShadowMap, render_view
 from nerf2gs_plugin.errors import ConfigError
@@ -110,6 +110,10 @@ class SynthStreetConfig:
     """Sparse SfM-like points written to sparse_pc.ply."""
     point_noise: float = 0.03
     """Sparse point noise (m), plus 0.4% of the depth, like triangulation error."""
+    movers: bool = False
+    """Also a car and a cyclist riding ahead of the training camera at its speed, pedestrians crossing
+    and parked cars (static) on the sidewalks (``data/synthetic/movers.py``), for the motion masks.
+    Off: the street as before, byte-identical."""
     coverage_angle_deg: float = 15.0
     """A BEV ground point counts as seen when a training view saw it within this angle."""
     overwrite: bool = False
@@ -178,6 +182,9 @@ def _generate(cfg: SynthStreetConfig) -> dict[str, Any]:
     t_start, cpu_start = time.perf_counter(), time.process_time()
     out = _prepare_out(cfg)
     layout = build_layout(cfg.seed, cfg.num_cars)
+    movers = build_movers(layout) if cfg.movers else None
+    if movers is not None:  # parked cars are static: they cast shadows and enter the sparse points
+        layout.static = Boxes.cat([layout.static, movers.parked])
     shadows = ShadowMap(layout)
     gen = torch.Generator().manual_seed(cfg.seed * 7919 + 17)
     intr = Pinhole.from_fov(cfg.width, cfg.height, cfg.fov_deg)
@@ -217,6 +224,8 @@ def _generate(cfg: SynthStreetConfig) -> dict[str, Any]:
         for i in range(cfg.num_train):
             c2w = tr_c2w[i]
             cars = layout.car_boxes(float(tr_times[i]), avoid=(float(c2w[0, 3]), float(c2w[1, 3])))
+            if movers is not None:
+                cars = Boxes.cat([cars, movers.boxes(float(tr_times[i]), c2w)])
             view = render_view(layout, c2w, intr, cars, shadows, cfg.spp)
             gain = exposure[i] * tint[i]
             fr = write(f"train_{i:04d}", view, gain)
@@ -266,7 +275,7 @@ def _generate(cfg: SynthStreetConfig) -> dict[str, Any]:
                              "bev_1": {"delta_h_m": cfg.bev_1[0], "pitch_deg": cfg.bev_1[1]},
                              "bev_2": {"delta_h_m": cfg.bev_2[0], "pitch_deg": cfg.bev_2[1]},
                              "val_bev": [{"delta_h_m": h, "pitch_deg": p} for h, p in (cfg.val_bev_a, cfg.val_bev_b)],
-                             "cam_height_m": cfg.cam_height},
+                             "cam_height_m": cfg.cam_height, **({"movers": True} if cfg.movers else {})},
         "frames": frames,
         "eval_splits": eval_frames,
     }

@@ -97,7 +97,9 @@ def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[
                 if tuple(img.shape[:2]) != (h, w):
                     img = F.interpolate(img.permute(2, 0, 1)[None], size=(h, w), mode="area")[0].permute(1, 2, 0)
                 views[s].append({"rgb": out["rgb"].cpu(), "depth": out["depth"][..., 0].cpu(), "acc": out["accumulation"][..., 0].cpu(),
-                                 "dirs": rays.directions.reshape(h, w, 3).cpu(), "origin": rays.origins[0].cpu(), "image": img})
+                                 "dirs": rays.directions.reshape(h, w, 3).cpu(), "origin": rays.origins[0].cpu(), "image": img,
+                                 "c2w": cam.camera_to_worlds[0].cpu(), "intr": torch.stack([cam.fx[0], cam.fy[0], cam.cx[0], cam.cy[0]]).cpu(),
+                                 "name": d.image_filenames[i].name})
                 prog.advance(task)
     seconds = time.perf_counter() - t0
     log(f"masks: rendered {total} views in {seconds:.1f} s")
@@ -109,6 +111,13 @@ def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[
 
 
 def auto_masks(view: Path, reference: Path, splits: list[str], opts: AutoOptions,
-               log: Callable[[str], None] = print, progress: bool = True) -> dict[str, list[FrameMasks]]:
-    """:func:`render_views` then :func:`~nerf2gs_plugin.masks.auto.masks_from_renders`."""
-    return masks_from_renders(render_views(view, reference, splits, log, progress), opts, log)
+               log: Callable[[str], None] = print, progress: bool = True, motion=None) -> dict[str, list[FrameMasks]]:
+    """:func:`render_views` then :func:`~nerf2gs_plugin.masks.auto.masks_from_renders`, plus what
+    moves against the static scene's flow (``motion``: :class:`~nerf2gs_plugin.masks.motion.MotionOptions`)."""
+    renders = render_views(view, reference, splits, log, progress)
+    result = masks_from_renders(renders, opts, log)
+    if motion is not None:
+        from nerf2gs_plugin.masks.motion import add_motion
+
+        add_motion(renders, result, motion, log, progress)
+    return result

@@ -15,6 +15,7 @@ import torch
 import torch.nn.functional as F
 import tyro
 
+from nerf2gs_plugin.masks.motion import MotionOptions
 from nerf2gs_plugin.data.dataparser_outputs import MASK_KINDS
 from nerf2gs_plugin.masks.auto import AutoOptions
 from nerf2gs_plugin.masks.maskless import maskless_view, strip_mask_keys
@@ -42,6 +43,8 @@ class MasksConfig:
     downscale: float = 1.0
     """auto: image downscale of a new reference (renders are upsampled to the image size)."""
     auto: AutoOptions = field(default_factory=AutoOptions)
+    motion: MotionOptions = field(default_factory=MotionOptions)
+    """auto: moving objects from optical flow against the static scene's (docs/masks-motion.md)."""
     splits: tuple[str, ...] = ()
     """Only these splits (default: every split; "train" is what StreetNeRF's mask terms use)."""
     overwrite: bool = False
@@ -138,13 +141,14 @@ def make_masks(cfg: MasksConfig, log: Callable[[str], None] = print) -> dict:
         summary["reference"] = str(ref)
         summary["reference_seconds"] = round(time.perf_counter() - t_ref, 1)
         t_m = time.perf_counter()
-        result = auto_masks(maskless_view(data), ref, list(groups), cfg.auto, log, cfg.progress)
+        result = auto_masks(maskless_view(data), ref, list(groups), cfg.auto, log, cfg.progress, motion=cfg.motion)
         for split, fs in groups.items():
             for f, m in zip(fs, result[split]):
                 ms = {"sky": m.sky, "ground": m.ground, "transient": m.transient}
                 count(ms)
                 _write(data, f.image, ms, (f.intr.width, f.intr.height))
         summary["auto"] = asdict(cfg.auto)
+        summary["motion"] = asdict(cfg.motion)
         summary["mask_seconds"] = round(time.perf_counter() - t_m, 1)
     else:
         raise ConfigError(f"--segmenter must be 'auto' or 'onnx:PATH', got {cfg.segmenter!r}")

@@ -161,3 +161,28 @@ def test_lane_split_sides_alternate_where_the_road_allows():
     assert int((side > 0).sum()) == 4 and int((side < 0).sum()) == 4
     far = lane_shift_poses(8, 24.0, 3.0, 4.0, torch.Generator().manual_seed(0))
     assert float(far[:, 1, 3].abs().max()) <= ROAD_HALF  # flipped toward the other lane, never off the road
+
+def test_movers_ride_with_the_camera_and_parked_cars_are_static():
+    """``--movers``: the lead car and the cyclist keep their place in the image as the camera drives
+    on (exact transient masks), pedestrians cross, parked cars are drawn but not transient."""
+    from nerf2gs_plugin.data.synthetic.layout import PARKED_CAR, build_layout
+    from nerf2gs_plugin.data.synthetic.movers import build_movers
+    from nerf2gs_plugin.data.synthetic.poses import heading_pose
+    from nerf2gs_plugin.data.synthetic.raycast import Pinhole, ShadowMap, render_view
+
+    layout = build_layout(0, num_cars=0)
+    movers = build_movers(layout)
+    assert (movers.parked.material == PARKED_CAR).any()
+    layout.static = type(layout.static).cat([layout.static, movers.parked])
+    intr = Pinhole.from_fov(64, 36, 80.0)
+    walkers, movers.pedestrians = movers.pedestrians, []  # the riders alone first
+    views = []
+    for x in (-10.0, -8.5):
+        c2w = heading_pose(torch.tensor([x]), torch.tensor([-1.75]), torch.tensor([3.0]), torch.tensor([0.0]), 0.0)[0]
+        views.append(render_view(layout, c2w, intr, movers.boxes(0.0, c2w), ShadowMap(layout), spp=1))
+    a, b = views[0].transient, views[1].transient
+    assert a.sum() > 20 and float((a & b).sum()) / float((a | b).sum()) > 0.8  # rides along: the same pixels
+    assert not bool(((views[0].material == PARKED_CAR).reshape(a.shape) & a).any())
+    movers.pedestrians = walkers
+    body_y = [float(movers.boxes(t, c2w).lo[-2, 1]) for t in (0.0, 3.0)]  # the last pedestrian's body
+    assert abs(body_y[1] - body_y[0]) > 2.0  # walked across

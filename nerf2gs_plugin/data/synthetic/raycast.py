@@ -21,7 +21,7 @@ from torch import Tensor
 
 from nerf2gs_plugin.data.synthetic import textures as tx
 from nerf2gs_plugin.data.synthetic.layout import (
-    BUILDING, CAR_BODY, CAR_CABIN, CAR_WHEELS, CROSSWALKS, CROWN, GROUND_MATERIALS, POLE, ROAD, ROAD_HALF, SIDEWALK, SKY,
+    BUILDING, CAR_BODY, CAR_CABIN, CAR_WHEELS, CROSSWALKS, CROWN, GROUND_MATERIALS, PARKED_CAR, POLE, ROAD, ROAD_HALF, SIDEWALK, SKY,
     STREET_HALF_LEN, TRANSIENT_MATERIALS, TRUNK, Boxes, Spheres, StreetLayout,
 )
 
@@ -239,7 +239,7 @@ def _shade(p: Tensor, d: Tensor, mat: Tensor, n: Tensor, box: Tensor, layout: St
     fill(mat == CROWN, lambda i: tx.crown_colour(p[i], seed))
     plain = (mat == POLE) | (mat == TRUNK) | (mat == CAR_WHEELS)
     fill(plain, lambda i: boxes.colour[bi[i]] * (0.9 + 0.2 * tx.noise2(p[i, 0] * 5 + p[i, 1] * 5, p[i, 2] * 5, seed + 61))[:, None])
-    fill(mat == CAR_BODY, lambda i: boxes.colour[bi[i]] * torch.where(p[i, 2] < 0.45, 0.55, 1.0)[:, None])
+    fill((mat == CAR_BODY) | (mat == PARKED_CAR), lambda i: boxes.colour[bi[i]] * torch.where(p[i, 2] < 0.45, 0.55, 1.0)[:, None])
     fill(mat == CAR_CABIN, lambda i: torch.where((n[i, 2] > 0.5)[:, None], boxes.colour[bi[i]] * 2.0 - 0.2, boxes.colour[bi[i]]).clamp(0, 1))
 
     sun = layout.sun

@@ -1,0 +1,169 @@
+"""The motion route of ``--segmenter auto`` (``masks/motion.py``) on the synthetic street with
+movers (``synth-street --movers``: a car and a cyclist riding ahead at the drive's speed, pedestrians
+crossing, parked cars that are static), the 30-frame forward drive, at SIZE (default 400x224):
+
+  * ``gt``: the flow logic alone, on the street's true poses and the true depth of the static scene
+    (the movers' pixels set to infinity, as a mask-less reference may render them; the ground plane
+    then bounds them);
+  * ``est``: the real-capture path: the drive as a video -> ``process video`` -> a 1000-step
+    mask-less reference -> its renders -> the masks with and without the motion route; IoU pooled
+    over the training frames against the exact masks (resampled onto the street's pixel grid).
+
+Usage: python benchmarks/validation/motion_masks_scene.py SEED WORK OUT_STEM [gt|est|both] [WIDTH HEIGHT]
+(WORK keeps the street, the capture, the reference and its renders between runs). OUT_STEM.json gets
+this seed's rows (merged with what the file already has); OUT_STEM.md is written from the JSON.
+Produced benchmarks/results/motion_masks.{json,md} with seeds 0 and 3.
+"""
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+torch.set_num_threads(1)
+from nerf2gs_plugin.masks.motion import MotionFrame, MotionOptions, add_motion, motion_masks, ray_directions, static_distance  # noqa: E402
+from nerf2gs_plugin.data.images import load_image, load_mask  # noqa: E402
+from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_street  # noqa: E402
+from nerf2gs_bench.machine import machine_line  # noqa: E402
+from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
+
+FOV, CAM_H, FRAMES = 80.0, 3.0, 30
+NOTES = """
+Notes. The target (moving-object IoU >= 0.7) is not met. On the true poses and depth the flow logic
+finds most movers (recall 0.68 / 0.77) but also marks the road a mover uncovers, the nearest road (rigid
+flow of 30-50 px a frame at this frame spacing, 1.66 m) and some facade edges (precision 0.57 / 0.62).
+Through the estimated pipeline the residual route alone finds 8-10% of the movers; with the motion route
+70-81%, at a precision of 0.17-0.23 (it marks 25-28% of the pixels): the 1000-step reference's depth is
+speckled with floaters, and on seed 0 the fitted ground plane appears to sit about 1.3 m above the road (estimated camera
+baseline / height 1.0 against the true 0.55), so the bound the plane puts on the road's depth is wrong
+and static road reads as moving. Sky and ground are unchanged by construction (the motion route only
+adds to the transient masks).
+"""  # written by hand after the seeds 0 and 3 runs
+seed, work, out = int(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3])
+mode = sys.argv[4] if len(sys.argv) > 4 else "both"
+size = (int(sys.argv[5]), int(sys.argv[6])) if len(sys.argv) > 6 else (400, 224)
+work.mkdir(parents=True, exist_ok=True)
+street = work / "street"
+if not (street / "transforms.json").is_file():
+    generate_street(SynthStreetConfig(out=street, seed=seed, movers=True, width=size[0], height=size[1], num_street=1, num_bev=1,
+                                      num_val_street=0, num_val_bev=0, progress=False, overwrite=True))
+meta = json.loads((street / "transforms.json").read_text())
+gt_frames = meta["frames"][:FRAMES]
+
+
+def counts(pred: torch.Tensor, gt: torch.Tensor) -> np.ndarray:
+    return np.array([int((pred & gt).sum()), int((pred | gt).sum()), int(pred.sum()), int(gt.sum())])
+
+
+def stats(c: np.ndarray) -> dict:
+    i, u, p, t = (int(x) for x in c)
+    return {"iou": round(i / max(u, 1), 4), "precision": round(i / max(p, 1), 4), "recall": round(i / max(t, 1), 4)}
+
+
+def run_gt() -> dict:
+    """The flow logic on the true poses and the static scene's true depth."""
+    intr = (meta["fl_x"], meta["fl_y"], meta["cx"], meta["cy"])
+    frames, gts = [], []
+    for f in gt_frames:
+        c2w = torch.tensor(f["transform_matrix"])[:3]
+        z = torch.from_numpy(np.load(street / f["depth_file_path"])).float()
+        cos = (ray_directions(c2w, intr, *z.shape) @ -c2w[:, 2].double()).float()
+        trans = load_mask(street / f["transient_mask_path"])
+        dist = torch.where((z > 0) & ~trans, z / cos, torch.full_like(z, float("inf")))
+        frames.append(MotionFrame(load_image(street / f["file_path"]), static_distance(dist, c2w, intr, torch.tensor([0.0, 0, 1]), 0.0), c2w, intr))
+        gts.append(trans)
+    t0 = time.perf_counter()
+    masks = motion_masks(frames, MotionOptions(enabled=True))
+    c = sum(counts(m, g) for m, g in zip(masks, gts))
+    return {"transient": stats(c), "seconds": round(time.perf_counter() - t0, 1)}
+
+
+def run_est() -> dict:
+    """process video -> reference -> renders -> masks, with and without the motion route."""
+    from nerf2gs_plugin.masks.auto_masks import ground_plane, render_views
+    from nerf2gs_plugin.masks.mask_reference import ensure_reference
+    from nerf2gs_plugin.data import parse_dataset
+    from nerf2gs_plugin.masks.auto import AutoOptions, masks_from_renders
+    from nerf2gs_plugin.masks.maskless import maskless_view
+    from nerf2gs_bench import real as br
+    from nerf2gs_plugin.masks.evaluate import resample_mask
+
+    capture = work / "estimated"
+    if not (capture / "transforms.json").is_file():
+        video = br.write_video(work / "drive.avi", [street / f["file_path"] for f in gt_frames])
+        br.process_capture(video, capture, FRAMES, FOV, CAM_H)
+    view = maskless_view(capture)
+    cache = work / "renders.pt"
+    times = {}
+    if cache.is_file():
+        import nerf2gs_plugin.masks.auto as auto_mod
+
+        sys.modules.setdefault("nerf2gs_plugin.data.masks.auto", auto_mod)  # renders cached before masks/ moved
+        r = torch.load(cache, weights_only=False)
+    else:
+        t0 = time.perf_counter()
+        ensure_reference(capture, work / "reference", 1000, progress=False)
+        times["reference_s"] = round(time.perf_counter() - t0, 1)
+        r = render_views(view, work / "reference", ["train"], progress=False)
+        torch.save(r, cache)
+    train = parse_dataset(view, "train")
+    r.up, r.height = ground_plane(train, [])
+    em = {Path(f["file_path"]).name: f for f in json.loads((capture / "transforms.json").read_text())["frames"]}
+    names = [q.name for q in train.image_filenames]
+    base = masks_from_renders(r, AutoOptions(), log=lambda s: None)
+    t0 = time.perf_counter()
+    with_motion = masks_from_renders(r, AutoOptions(), log=lambda s: None)
+    add_motion(r, with_motion, MotionOptions(enabled=True), log=print, progress=False)
+    times["motion_s"] = round(time.perf_counter() - t0, 1)
+    rows = {}
+    for label, res in (("without_motion", base), ("with_motion", with_motion)):
+        rows[label] = {}
+        for kind in ("sky", "ground", "transient"):
+            c = np.zeros(4, dtype=np.int64)
+            for name, m in zip(names, res["train"]):
+                f, tf = em[name], meta["frames"][br.frame_index(Path(name))]
+                gt = load_mask(street / tf[f"{kind}_mask_path"])
+                pred = resample_mask(getattr(m, kind), (f["fl_x"], f["fl_y"], f["cx"], f["cy"]),
+                                     (meta["fl_x"], meta["fl_y"], meta["cx"], meta["cy"]), tuple(gt.shape))
+                c += counts(pred, gt)
+            rows[label][kind] = stats(c)
+    return {"registered": len(em), "train_views": len(names), **rows, **times}
+
+
+doc = json.loads(out.with_suffix(".json").read_text()) if out.with_suffix(".json").is_file() else {"seeds": {}}
+row = doc["seeds"].get(str(seed), {})
+row["scene"] = {"seed": seed, "size": list(size), "frames": FRAMES, "fov_deg": FOV, "cam_height": CAM_H, "movers": True}
+if mode in ("gt", "both"):
+    row["gt"] = run_gt()
+    print("gt", row["gt"], flush=True)
+if mode in ("est", "both"):
+    row["est"] = run_est()
+    print("est", row["est"], flush=True)
+doc["seeds"][str(seed)] = row
+doc["options"] = vars(MotionOptions(enabled=True))
+doc["machine"] = machine_line()
+atomic_write_text(out.with_suffix(".json"), json.dumps(doc, indent=1))
+
+md = ["# Motion masks on the synthetic street with movers", "",
+      f"Machine: {doc['machine']}. Produced by `benchmarks/validation/motion_masks_scene.py`: the street with "
+      "`--movers` (a car and a cyclist riding ahead at the drive's speed, pedestrians crossing, parked cars), its "
+      "30-frame forward drive. `gt`: the flow logic on the true poses and the true depth of the static scene (the "
+      "movers' pixels at infinity, bounded by the ground plane). `est`: the drive as a video -> `process video` -> "
+      "1000-step mask-less reference -> masks without / with the motion route (default `MotionOptions`). IoU pooled "
+      "over the training frames against the exact masks.", "",
+      "| seed | size | route | sky IoU | ground IoU | transient IoU | transient precision | transient recall |", "|---|---|---|---|---|---|---|---|"]
+for s, rw in sorted(doc["seeds"].items()):
+    sz = "x".join(str(v) for v in rw["scene"]["size"])
+    if "gt" in rw:
+        t = rw["gt"]["transient"]
+        md.append(f"| {s} | {sz} | gt poses + depth, motion only | | | {t['iou']:.3f} | {t['precision']:.3f} | {t['recall']:.3f} |")
+    for label in ("without_motion", "with_motion"):
+        if "est" in rw:
+            e = rw["est"][label]
+            md.append(f"| {s} | {sz} | estimated, {label.replace('_', ' ')} | {e['sky']['iou']:.3f} | {e['ground']['iou']:.3f} | "
+                      f"{e['transient']['iou']:.3f} | {e['transient']['precision']:.3f} | {e['transient']['recall']:.3f} |")
+md.append(NOTES)
+atomic_write_text(out.with_suffix(".md"), "\n".join(md) + "\n")
+print("\n".join(md))

@@ -1,0 +1,263 @@
+"""Moving objects from motion, no weights: where the image moves otherwise than the static scene would.
+
+A camera moving through a static street sees every static pixel move by the *rigid flow*: the pixel's
+surface point (its distance along the ray from a depth: the first reference's render) projected into
+a neighbouring frame with the SfM poses. Dense optical flow (OpenCV's DIS) measures how the image
+actually moved. A pixel whose observed flow disagrees with its rigid flow (endpoint error above
+``rel`` times the rigid flow's length, and above ``floor_px``) moves:
+
+  * an object riding ahead at the camera's speed stays put in the image (observed flow ~ 0), while
+    the road beneath it flows: a static surface seen by a ray pointing down is never farther than the
+    ground plane along that ray, so the rigid flow is computed with the depth clamped to the plane's
+    (:func:`static_distance`), and a mask-less reference that rendered the object far away (where
+    zero parallax puts it) cannot hide it;
+  * a pedestrian crossing or an oncoming car moves across or faster than its background's flow;
+  * a parked car is where its depth says: its flow is the rigid flow, it stays unmasked.
+
+Each frame is compared with several neighbours before and after it (``neighbours``); a pair counts only
+where the flow is forward-backward consistent (an occluded or textureless pixel tells nothing) and a
+pixel moves when at least ``vote`` of its valid pairs say so, on both sides (what a mover uncovers
+was hidden only in the frames before it). The votes are grown to object outlines:
+superpixels (SLIC on the image) join where ``grow`` of their pixels move, then the regions are closed,
+their holes filled and small ones dropped (``masks/from_renders.clean_regions``).
+
+Memory: one frame's flows at a time, plus the sequence's grey images.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Optional, Sequence
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from nerf2gs_plugin.masks import from_renders as fr
+
+Intrinsics = tuple[float, float, float, float]  # fx, fy, cx, cy (pixel centres at +0.5)
+
+
+@dataclass
+class MotionOptions:
+    """``--segmenter auto``'s motion route (see ``masks/motion.py``)."""
+
+    enabled: bool = False
+    """Add what moves against the static scene's flow to the transient masks. Off by default: on
+    estimated poses and depth it still marks much static road (see docs/masks-motion.md)."""
+    neighbours: tuple[int, ...] = (-2, -1, 1, 2)
+    """Frames compared with each frame (offsets in the sequence, sorted by file name)."""
+    rel: float = 0.15
+    """A pixel moves where the flow's endpoint error exceeds this fraction of the rigid flow's length ..."""
+    floor_px: float = 2.0
+    """... and this many pixels (at the reference's resolution)."""
+    photo_grey: float = 45.0
+    """... or where frame ``j`` warped by the rigid flow differs from frame ``i`` by more than this
+    (grey levels of images normalised to a spread of 48, 3x3 means; 0: off): a small mover that DIS
+    loses in its coarse levels still fails to line up."""
+    vote: float = 1.0
+    """... in at least this fraction of its valid neighbour pairs on each side (1: all of them; lower
+    values let in more of the road a mover uncovers)."""
+    grow: float = 1.0
+    """A superpixel joins a moving region where this fraction of its pixels move (1: off; 0.3 and 0.5
+    measured no better than closing and hole filling alone on the synthetic street with movers)."""
+    superpixel_frac: float = 0.06
+    """Superpixel size, as a fraction of the image's shorter side."""
+    ground_clamp: bool = True
+    """Clamp the reference's depth to the ground plane along downward rays (what finds a mover that
+    the reference rendered far away; it needs the plane right)."""
+    min_region_frac: float = 0.002
+    """Moving regions smaller than this fraction of the image are dropped."""
+
+
+@dataclass
+class MotionFrame:
+    """One frame of the sequence: ``image [H, W, 3]`` in [0, 1], ``dist [H, W]`` the static scene's
+    distance along each unit ray (inf: sky), camera-to-world ``c2w [3, 4]`` (OpenGL) and intrinsics."""
+
+    image: Tensor
+    dist: Tensor
+    c2w: Tensor
+    intr: Intrinsics
+
+
+def ray_directions(c2w: Tensor, intr: Intrinsics, h: int, w: int) -> Tensor:
+    """``[H, W, 3]`` unit world directions through the pixel centres of an OpenGL camera."""
+    fx, fy, cx, cy = intr
+    v, u = torch.meshgrid(torch.arange(h, dtype=torch.float64) + 0.5, torch.arange(w, dtype=torch.float64) + 0.5, indexing="ij")
+    d = torch.stack([(u - cx) / fx, -(v - cy) / fy, -torch.ones_like(u)], dim=-1)
+    return torch.nn.functional.normalize(d @ c2w[:, :3].double().T, dim=-1)
+
+
+def static_distance(dist: Tensor, c2w: Tensor, intr: Intrinsics, up: Tensor, height: float) -> Tensor:
+    """``dist`` clamped to where each downward ray meets the ground plane ``{x . up = height}``:
+    nothing static stands beyond the road a ray points down at."""
+    h, w = dist.shape
+    d = ray_directions(c2w, intr, h, w)
+    dn = d @ up.double()
+    o = c2w[:, 3].double() @ up.double()
+    t = torch.where(dn < -1e-6, (height - o) / dn.clamp(max=-1e-6), torch.full_like(dn, math.inf))
+    return torch.minimum(dist.double(), t.clamp(min=0)).to(dist.dtype)
+
+
+def rigid_flow(c2w_i: Tensor, intr_i: Intrinsics, dist_i: Tensor, c2w_j: Tensor, intr_j: Intrinsics) -> tuple[Tensor, Tensor]:
+    """The flow ``[H, W, 2]`` (pixels, x then y) that frame ``i``'s static scene (distance ``dist_i``
+    along its rays; inf: a direction only) makes into frame ``j``, and where it is defined (in front
+    of camera ``j``)."""
+    h, w = dist_i.shape
+    d = ray_directions(c2w_i, intr_i, h, w)
+    dist = dist_i.double()
+    finite = torch.isfinite(dist)
+    p = c2w_i[:, 3].double() + d * torch.where(finite, dist, torch.zeros_like(dist))[..., None]
+    rel = torch.where(finite[..., None], p - c2w_j[:, 3].double(), d)  # at infinity only the rotation counts
+    cam = rel @ c2w_j[:, :3].double()
+    z = -cam[..., 2]
+    ok = z > 1e-6
+    zs = torch.where(ok, z, torch.ones_like(z))
+    fx, fy, cx, cy = intr_j
+    v, u = torch.meshgrid(torch.arange(h, dtype=torch.float64) + 0.5, torch.arange(w, dtype=torch.float64) + 0.5, indexing="ij")
+    flow = torch.stack([fx * cam[..., 0] / zs + cx - u, cy - fy * cam[..., 1] / zs - v], dim=-1)
+    return flow.float(), ok
+
+
+def grey(image: Tensor) -> np.ndarray:
+    """``[H, W, 3]`` -> uint8 grey, normalised to a fixed mean and spread (exposure changes between
+    frames would read as flow)."""
+    g = (image.float() @ torch.tensor([0.299, 0.587, 0.114])).numpy()
+    g = (g - g.mean()) / max(float(g.std()), 1e-3) * 48.0 + 128.0
+    return np.clip(g, 0, 255).astype(np.uint8)
+
+
+def optical_flow(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Dense flow ``[H, W, 2]`` from grey ``a`` to ``b`` (DIS, medium preset)."""
+    import cv2
+
+    return cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM).calc(a, b, None)
+
+
+def warp(image: np.ndarray, flow: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``image`` (of frame ``j``) sampled at ``pixel + flow``: frame ``j`` seen from frame ``i``'s
+    pixels; and where the sample falls inside the image."""
+    import cv2
+
+    h, w = flow.shape[:2]
+    xs, ys = np.meshgrid(np.arange(w, dtype=np.float32), np.arange(h, dtype=np.float32))
+    mx, my = xs + flow[..., 0].astype(np.float32), ys + flow[..., 1].astype(np.float32)
+    inside = (mx >= 0) & (mx <= w - 1) & (my >= 0) & (my <= h - 1)
+    return cv2.remap(image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE), inside
+
+
+def pair_moving(grey_i: np.ndarray, grey_j: np.ndarray, rig: Tensor, ok: Tensor, opts: "MotionOptions") -> tuple[Tensor, Tensor]:
+    """Frame ``j`` warped onto frame ``i`` by the rigid flow ``rig``: what is static now lines up, so
+    the optical flow left between the two (small: where DIS is reliable) is what moved. A pixel moves
+    where that residual flow exceeds ``rel`` times the rigid flow (depth errors scale with it) and
+    ``floor_px``. Returns (moving, valid)."""
+    wj, inside = warp(grey_j, rig.numpy())
+    wj = np.where(inside, wj, grey_i)  # outside frame j: nothing to compare, no flow to invent there
+    resid = torch.from_numpy(optical_flow(grey_i, wj)).norm(dim=-1)
+    limit = torch.clamp(opts.rel * rig.norm(dim=-1), min=opts.floor_px)
+    moving = resid > limit
+    if opts.photo_grey > 0:  # a small mover DIS loses in its coarse levels still fails to line up
+        import cv2
+
+        diff = np.abs(cv2.blur(grey_i.astype(np.float32), (3, 3)) - cv2.blur(wj.astype(np.float32), (3, 3)))
+        moving |= torch.from_numpy(diff > opts.photo_grey)
+    return moving, ok & torch.from_numpy(inside)
+
+
+def moving_fraction(frames: Sequence[MotionFrame], i: int, opts: MotionOptions, greys: Optional[Sequence[np.ndarray]] = None) -> Tensor:
+    """``[H, W]``: the share of frame ``i``'s valid neighbour pairs in which a pixel moves, the
+    smaller of the shares before and after it (where both have a valid pair): what a mover hid in
+    the frames before (the road it uncovers) is seen moving only on one side, the mover on both.
+    0 where no pair is valid, and where the static scene is at infinity (sky: no parallax to test)."""
+    greys = greys if greys is not None else [grey(f.image) for f in frames]
+    f = frames[i]
+    shares = []
+    for side in (-1, 1):
+        votes = torch.zeros(f.dist.shape)
+        valid_n = torch.zeros(f.dist.shape)
+        for off in opts.neighbours:
+            j = i + off
+            if off * side <= 0 or j < 0 or j >= len(frames):
+                continue
+            rig, ok = rigid_flow(f.c2w, f.intr, f.dist, frames[j].c2w, frames[j].intr)
+            moving, valid = pair_moving(greys[i], greys[j], rig, ok, opts)
+            votes += (moving & valid).float()
+            valid_n += valid.float()
+        shares.append((votes / valid_n.clamp(min=1), valid_n > 0))
+    (back, has_b), (fwd, has_f) = shares
+    share = torch.where(has_b & has_f, torch.minimum(back, fwd), torch.where(has_b, back, fwd))
+    return torch.where(torch.isfinite(f.dist), share, torch.zeros_like(share))
+
+
+def superpixels(image: Tensor, size_px: int) -> np.ndarray:
+    """``[H, W]`` int labels of SLIC superpixels (OpenCV's ximgproc, SLICO) of about ``size_px``."""
+    import cv2
+
+    rgb = (image.clamp(0, 1).numpy() * 255).astype(np.uint8)
+    lab = cv2.cvtColor(rgb, cv2.COLOR_RGB2LAB)
+    slic = cv2.ximgproc.createSuperpixelSLIC(lab, algorithm=cv2.ximgproc.SLICO, region_size=max(4, size_px))
+    slic.iterate(10)
+    return slic.getLabels()
+
+
+def grow_regions(seeds: Tensor, image: Tensor, opts: MotionOptions) -> Tensor:
+    """Seeds -> object outlines: superpixels holding ``grow`` of seed pixels, closed, holes filled,
+    small regions dropped."""
+    h, w = seeds.shape
+    m = seeds
+    if opts.grow < 1.0:
+        labels = superpixels(image, int(round(opts.superpixel_frac * min(h, w))))
+        n = int(labels.max()) + 1
+        share = np.bincount(labels.ravel(), weights=seeds.numpy().ravel().astype(np.float64), minlength=n) / np.maximum(
+            np.bincount(labels.ravel(), minlength=n), 1)
+        m = torch.from_numpy(share[labels] >= opts.grow)
+    return fr.clean_regions(m, max(4, int(opts.min_region_frac * h * w)), close_px=max(1, round(0.01 * min(h, w))))
+
+
+def motion_masks(frames: Sequence[MotionFrame], opts: MotionOptions, progress: Optional[Callable[[], None]] = None) -> list[Tensor]:
+    """Bool ``[H, W]`` moving-object masks of a sequence (frames in capture order)."""
+    greys = [grey(f.image) for f in frames]
+    out = []
+    for i in range(len(frames)):
+        frac = moving_fraction(frames, i, opts, greys)
+        seeds = fr.opening(frac >= opts.vote, 1) if opts.vote > 0 else frac > 0
+        out.append(grow_regions(seeds, frames[i].image, opts))
+        if progress is not None:
+            progress()
+    return out
+
+
+def frames_from_renders(views: Sequence[dict], sky: Sequence[Tensor], up: Tensor, height: float, clamp: bool = True) -> list[MotionFrame]:
+    """The reference's renders (``render_views``: image, depth, c2w, intr) as a motion sequence:
+    the rendered depth, the sky at infinity, clamped to the ground plane."""
+    out = []
+    for v, s in zip(views, sky):
+        intr = tuple(float(x) for x in v["intr"])
+        dist = torch.where(s, torch.full_like(v["depth"], math.inf), v["depth"].float())
+        dist = static_distance(dist, v["c2w"], intr, up, height) if clamp else dist
+        out.append(MotionFrame(v["image"], dist, v["c2w"], intr))  # type: ignore[arg-type]
+    return out
+
+
+def add_motion(renders, result: dict, opts: MotionOptions, log: Callable[[str], None] = print, progress: bool = True) -> None:
+    """Add the moving objects to ``result``'s transient masks (``masks_from_renders``' masks, in
+    place): every split's frames in one sequence sorted by file name (a video's order). The ground
+    and sky masks stay as the residual route made them: with a short reference's depth the motion
+    route also marks static road (docs/masks-motion.md), and the ground mask should not pay for it."""
+    from nerf2gs_plugin.progress import make_progress
+
+    if not opts.enabled:
+        return
+    order = sorted(((v["name"], s, i) for s, vs in renders.views.items() for i, v in enumerate(vs)))
+    frames = frames_from_renders([renders.views[s][i] for _, s, i in order], [result[s][i].sky for _, s, i in order],
+                                 renders.up, renders.height, opts.ground_clamp)
+    with make_progress(progress) as prog:
+        task = prog.add_task("masks: motion", total=len(frames), stats="")
+        moving = motion_masks(frames, opts, lambda: prog.advance(task))
+    share = 0.0
+    for (_, s, i), m in zip(order, moving):
+        result[s][i].transient = result[s][i].transient | m
+        share += float(m.float().mean()) / max(len(order), 1)
+    log(f"masks: motion marked {100 * share:.2f}% of the pixels as moving")
