@@ -35,7 +35,7 @@ class OutputOptions:
 
 def load_runs(paths: Sequence[Path], device: torch.device | str = "cpu") -> list:
     """Each run's model (a run folder or ``.ckpt``); a missing one is a clear error naming it."""
-    from nerf2gs_plugin.engine.run_model import load_run_model
+    from nerf2gs_plugin.runs.model import load_run_model
 
     for p in paths:
         if not Path(p).exists():

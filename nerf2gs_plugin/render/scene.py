@@ -28,36 +28,53 @@ class PathContext:
         return m * self.units_per_metre
 
 
+@dataclass
+class _World:
+    """The world frame the augmentation's view families read (``up``, metres to world units)."""
+
+    up: Tensor
+    units_per_metre: float
+
+    def metres_to_world(self, metres: float) -> float:
+        return metres * self.units_per_metre
+
+
 def trained_birds_eye(config: Any, dataset: Optional[str], train: Cameras, up: Tensor,
                       units_per_metre: float) -> tuple[Optional[Cameras], str]:
     """The bird's-eye views a run trained on: read back from its reference's augment cache manifest
-    (the one whose dataset and geometry match the run's config), else recomputed from the config the
-    way the augmentation makes them; ``(None, "")`` for a run without ``--augment-from``."""
-    from nerf2gs_plugin.datamanagers.augmented import bev_cameras, find_cached_extra_views
+    (the poses it saved), else made again from the run's config as the augmentation makes them; only
+    the ``birds-eye`` family's views (``(None, "")`` for a run without them)."""
+    from nerf2gs_plugin.augment.datamanager import find_cached_extra_views
+    from nerf2gs_plugin.augment.views import additional_views
     from nerf2gs_plugin.engine.checkpoints import resolve_checkpoint
     from nerf2gs_plugin.errors import UserError
 
     aug = getattr(config, "augment", None)
     if config is None or getattr(config, "augment_from", None) is None or aug is None or not aug.extra_views:
         return None, ""
-    every_n = max(int(aug.every_n), 1)
-    sub = train[torch.arange(0, len(train), every_n)]
+    made = additional_views(train, _World(up, units_per_metre), aug)
+    if made is None:
+        return None, ""
     try:
         ref_dir, _ = resolve_checkpoint(Path(config.augment_from))
     except UserError:
         ref_dir = None
-    manifest = (find_cached_extra_views(ref_dir, dataset, aug, len(sub))
+    manifest = (find_cached_extra_views(ref_dir, dataset, aug, len(made.cameras))
                 if ref_dir is not None and dataset is not None else None)
     if manifest is not None and manifest.num_extra:
-        kept = sub[torch.tensor(manifest.extra_indices, dtype=torch.long)]
-        return kept.with_poses(manifest.extra_poses().to(kept.device)), str(manifest.path)
-    cams = bev_cameras(train, up, aug.delta_h * units_per_metre, aug.theta_pitch, every_n, aug.pitch_mode,
-                       aug.delta_h_spread * units_per_metre, aug.theta_pitch_spread)
-    return cams, "recomputed from the run's --augment config (no cache manifest found)"
+        kept = made.cameras[torch.tensor(manifest.extra_indices, dtype=torch.long)]
+        cams, source = kept.with_poses(manifest.extra_poses().to(kept.device)), str(manifest.path)
+        families = manifest.extra_families or [made.families[i] for i in manifest.extra_indices]
+    else:
+        cams, source, families = made.cameras, "recomputed from the run's --augment config (no cache manifest found)", made.families
+    birds = [i for i, f in enumerate(families) if f == "birds-eye"]
+    if not birds:
+        return None, ""
+    return cams[torch.tensor(birds, dtype=torch.long)], source
 
 
 def context_from_run_model(run: Any) -> PathContext:
-    """The path context of a :class:`~nerf2gs_plugin.engine.run_model.RunModel`."""
+    """The path context of a :class:`~nerf2gs_plugin.runs.model.RunModel`."""
     up = run.up if run.up is not None else torch.tensor([0.0, 0.0, 1.0])
     up = torch.nn.functional.normalize(up.float(), dim=0)
     views, source = trained_birds_eye(run.config, run.dataset, run.train_cameras, up, run.units_per_metre)
@@ -65,7 +82,7 @@ def context_from_run_model(run: Any) -> PathContext:
 
 
 def context_from_loaded_run(run: Any) -> PathContext:
-    """The path context of a :class:`~nerf2gs_plugin.engine.reference.LoadedRun` (what eval loads)."""
+    """The path context of a :class:`~nerf2gs_plugin.runs.load.LoadedRun` (what eval loads)."""
     from nerf2gs_plugin.engine.checkpoints import dataset_fingerprint
 
     td = run.pipeline.datamanager.train_data

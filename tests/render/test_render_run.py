@@ -110,3 +110,28 @@ def test_hole_and_floater_measures_on_synthetic_maps():
     r = m.result()
     assert r["bev_hole_fraction"] == pytest.approx(20 / 400) and r["floater_fraction"] == pytest.approx((4 + 20) / 400)
     assert r["frames"] == 2 and r["worst_frame_hole_fraction"] == pytest.approx(0.1)
+
+
+def test_birds_eye_of_an_augmented_run_reads_its_manifest(tiny_scene, tiny_run, tmp_path):
+    """A target trained with --augment-from: its birds-eye path is the views in its reference's cache
+    manifest, and ns2gs-eval's measure from above uses them (``source`` names the manifest)."""
+    from nerf2gs_plugin.augment.cache import cache_manifests
+    from nerf2gs_plugin.runs.load import load_run
+    from nerf2gs_plugin.runs.model import load_run_model
+    from nerf2gs_plugin.engine.trainer import Trainer
+    from nerf2gs_plugin.eval.evaluate import measure_from_above
+    from nerf2gs_plugin.registry import get_method
+    from nerf2gs_plugin.render.scene import context_from_run_model
+
+    cfg = dataclasses.replace(get_method("voxel-grid").config, data=tiny_scene, output_dir=tmp_path, max_num_iterations=2,
+                              steps_per_eval_image=0, progress=False, timestamp="aug", augment_from=tiny_run)
+    cfg = dataclasses.replace(cfg, augment=dataclasses.replace(cfg.augment, delta_h=2.0, min_coverage=0.0, every_n=2))
+    t = Trainer(cfg)
+    t.setup()
+    run = t.train()
+    manifest = cache_manifests(tiny_run)[0]
+    ctx = context_from_run_model(load_run_model(run))
+    assert ctx.augment_source == str(manifest.path) and len(ctx.augment_views) == manifest.num_extra == 4
+    assert torch.allclose(ctx.augment_views.camera_to_worlds, manifest.extra_poses())
+    above = measure_from_above(load_run(run), views=3)
+    assert above["source"] == str(manifest.path) and above["frames"] == 3
