@@ -45,11 +45,14 @@ def load_runs(paths: Sequence[Path], device: torch.device | str = "cpu") -> list
 
 def check_same_dataset(runs: Sequence, paths: Sequence[Path]) -> None:
     """Runs compared on one path must have been trained on one dataset (their checkpoints' image fingerprints)."""
-    first = runs[0].dataset
+    first, cams = runs[0].dataset, runs[0].train_cameras
     for run, p in zip(runs[1:], paths[1:]):
-        if run.dataset != first or len(run.train_cameras) != len(runs[0].train_cameras):
+        if run.dataset != first or len(run.train_cameras) != len(cams):
             raise ConfigError(f"was trained on another dataset than {paths[0]} (training images differ): "
                               "runs compared side by side must share a dataset", p)
+        if not torch.allclose(run.train_cameras.camera_to_worlds.cpu(), cams.camera_to_worlds.cpu(), atol=1e-4):
+            raise ConfigError(f"has the same images as {paths[0]} but other normalised poses (other dataparser "
+                              "options): the same cameras would show different places", p)
 
 
 def path_context(runs: Sequence) -> PathContext:

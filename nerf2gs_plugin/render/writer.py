@@ -57,9 +57,13 @@ class FrameWriter:
         if self._video is not None:
             self._video.release()
             self._video = None
-        if self.format == "images" and self.path.is_dir():
-            shutil.rmtree(self.path)
+        old = None
+        if self.format == "images" and self.path.is_dir():  # a folder cannot be renamed over: move the old one aside first
+            old = self.path.with_name(f".{self.path.name}.old-{os.getpid()}")
+            os.replace(self.path, old)
         os.replace(self.tmp, self.path)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
         return self.path
 
     def discard(self) -> None:

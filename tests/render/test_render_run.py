@@ -93,6 +93,11 @@ def test_compare_refuses_runs_of_different_datasets(tiny_run, tmp_path):
     runs[1] = dataclasses.replace(runs[1], dataset="another")
     with pytest.raises(ConfigError, match="trained on another dataset .* must share a dataset"):
         check_same_dataset(runs, [tiny_run, tmp_path / "other"])
+    check_same_dataset(runs[:1] * 2, [tiny_run, tiny_run])  # one dataset: fine
+    cams = runs[0].train_cameras
+    runs[1] = dataclasses.replace(runs[0], train_cameras=cams.with_poses(cams.camera_to_worlds * 1.1))
+    with pytest.raises(ConfigError, match="other normalised poses"):
+        check_same_dataset(runs, [tiny_run, tmp_path / "other"])
 
 
 def test_hole_and_floater_measures_on_synthetic_maps():
@@ -135,3 +140,23 @@ def test_birds_eye_of_an_augmented_run_reads_its_manifest(tiny_scene, tiny_run, 
     assert torch.allclose(ctx.augment_views.camera_to_worlds, manifest.extra_poses())
     above = measure_from_above(load_run(run), views=3)
     assert above["source"] == str(manifest.path) and above["frames"] == 3
+
+
+def test_writer_replaces_only_when_done(tmp_path):
+    from nerf2gs_plugin.render.writer import FrameWriter
+
+    frame = np.full((8, 10, 3), 100, np.uint8)
+    for n in (3, 2):
+        with FrameWriter(tmp_path / "frames", "images") as w:
+            for _ in range(n):
+                w.write(frame)
+    assert len(list((tmp_path / "frames").glob("*.png"))) == 2  # the second render replaced the first
+    with pytest.raises(RuntimeError):
+        with FrameWriter(tmp_path / "frames", "images") as w:
+            w.write(frame)
+            raise RuntimeError("interrupted")
+    assert len(list((tmp_path / "frames").glob("*.png"))) == 2 and sorted(p.name for p in tmp_path.iterdir()) == ["frames"]
+    with FrameWriter(tmp_path / "v.mp4", "video", fps=5) as w:
+        for _ in range(4):
+            w.write(frame)
+    assert int(cv2.VideoCapture(str(tmp_path / "v.mp4")).get(cv2.CAP_PROP_FRAME_COUNT)) == 4
