@@ -19,7 +19,8 @@ PATH_HELP = "birds-eye, interpolate, orbit, lane-shift, or camera-path (with --c
 
 @dataclass
 class RenderArgs:
-    """Render a trained run (any method) along a camera path into an MP4 or PNG frames."""
+    """Render a trained run (any method) along a camera path into an MP4 or PNG frames
+    (``ns2gs-render compare RUN RUN ...``: several runs side by side; docs/render.md)."""
 
     run: tyro.conf.Positional[Path]
     """Run directory or .ckpt file."""

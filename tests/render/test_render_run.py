@@ -33,10 +33,10 @@ def _cli(*args):
 
 def test_video_and_png_frames_of_a_run(tiny_run, tmp_path):
     from nerf2gs_plugin.cli.render import RenderArgs, render
+    from nerf2gs_plugin.render.paths import PathOptions
     from nerf2gs_plugin.render.render_path import OutputOptions
 
-    mp4 = render(RenderArgs(tiny_run, path="orbit", output=tmp_path / "orbit.mp4", device="cpu",
-                            path_options=dataclasses.replace(RenderArgs.__dataclass_fields__["path_options"].default_factory(), frames=6)),
+    mp4 = render(RenderArgs(tiny_run, path="orbit", output=tmp_path / "orbit.mp4", device="cpu", path_options=PathOptions(frames=6)),
                  compare=False)
     cap = cv2.VideoCapture(str(mp4))
     n, ok, frame = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)), *cap.read()
