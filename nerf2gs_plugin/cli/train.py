@@ -66,11 +66,11 @@ def train(config: TrainerConfig, baseline: Optional[Path] = None) -> None:
     elif baseline is not None:
         print(f"{BASELINE_FLAG} is only used with --augment-from (ignored)", file=sys.stderr)
     trainer = Trainer(config)
-    trainer.setup()
-    if report is not None:
-        from nerf2gs_plugin.eval.reference_check import write_reference_report
+    if report is not None:  # written by the trainer once it has chosen the run folder
+        from nerf2gs_plugin.eval.reference_check import CHECK_FILE, report_text
 
-        write_reference_report(trainer.run_dir, report)
+        trainer.run_files[CHECK_FILE] = report_text(report)
+    trainer.setup()
     if config.viewer and rank() == 0:
         from nerf2gs_plugin.viewer.server import attach_training_viewer
 

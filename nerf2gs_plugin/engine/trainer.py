@@ -70,6 +70,9 @@ class Trainer:
         self.history = StepHistory()
         self.train_seconds = 0.0
         self.step_hooks: list = []  # called after every step (the live viewer attaches here)
+        # files written into the run folder once it is chosen (name -> text): what is known before
+        # training (the reference check) must not create the folder and push the run to ``<stamp>-1``
+        self.run_files: dict[str, str] = {}
         # data parallel: this rank's index, and its sampling streams (rank x K + k, each seeded seed + stream)
         self.rank, self.world_size = collectives.rank(), collectives.world_size()
         self.batches = max(1, config.machine.batches_per_rank)
@@ -173,6 +176,8 @@ class Trainer:
         from nerf2gs_plugin.engine.run_cameras import save_train_cameras
 
         save_train_cameras(self.run_dir, self.pipeline.datamanager.train_data.cameras)  # export without the dataset
+        for name, text in self.run_files.items():
+            atomic_write_text(self.run_dir / name, text)
 
     def check_finite_state(self, step: int) -> None:
         """Parameters, optimizer state and one rendered view must be finite before a save."""

@@ -44,15 +44,35 @@ def measure_fps(model, camera, repeats: int = 5, warmup: int = 1) -> float:
 
 
 @torch.no_grad()
+def measure_from_above(run: LoadedRun, views: int = 16) -> dict:
+    """Holes and near-camera floaters on the run's bird's-eye path (:mod:`nerf2gs_plugin.render.measures`):
+    the views its augmentation trained on, else the fly-over at the augmentation's default height and
+    pitch; at most ``views`` of them, evenly spaced along the path."""
+    from nerf2gs_plugin.render.measures import measure_path
+    from nerf2gs_plugin.render.paths import PathOptions, make_path
+    from nerf2gs_plugin.render.scene import context_from_loaded_run
+
+    ctx = context_from_loaded_run(run)
+    opts = PathOptions()
+    cams = make_path("birds-eye", ctx, opts)
+    if len(cams) > views:
+        cams = cams[torch.linspace(0, len(cams) - 1, views).round().long()]
+    source = ctx.augment_source if ctx.augment_views is not None else f"fly-over {opts.height:g} m above the capture, {opts.pitch:g} deg down"
+    return {**measure_path(run.model, cams, ctx.train, ctx.up, ctx.units_per_metre), "source": source}
+
+
+@torch.no_grad()
 def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images: Optional[int] = None,
-                 fps_repeats: int = 5, render_dir: Optional[Path] = None, lpips_model=None) -> dict:
+                 fps_repeats: int = 5, render_dir: Optional[Path] = None, lpips_model=None, from_above_views: int = 0) -> dict:
     """nerfstudio ``ns-eval``-style results for every requested split (all the data has by default).
 
     Per split: PSNR/SSIM/LPIPS mean and std (LPIPS ``None`` when its weights are missing), PSNR over
     the ground-mask pixels (``psnr_ground``, ``None`` without ground masks) and the
     median render FPS of its images (the run's first render excluded as warm-up); top level: the
     median FPS of repeated renders of one camera, model size (primitives, parameters, MB of state
-    and of the checkpoint file) and the training time recorded in the checkpoint."""
+    and of the checkpoint file) and the training time recorded in the checkpoint. With
+    ``from_above_views``: ``bev_hole_fraction`` and ``floater_fraction`` on that many bird's-eye views
+    (:func:`measure_from_above`; no ground truth needed), details under ``from_above``."""
     dm = run.pipeline.datamanager
     model = run.model
     model.eval()
@@ -104,6 +124,7 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
             save_eval_grid(Path(render_dir) / f"{name}.png", shown, title=f"{run.config.method_name} / {name}: {which}",
                            row_labels=[f"view {i + 1}/{n_img}" for i in range(len(shown))])
             entry["grid"] = {"path": str(Path(render_dir) / f"{name}.png"), "views": list(range(len(shown)))}
+    above = measure_from_above(run, from_above_views) if from_above_views > 0 else None
     return {
         "experiment_name": run.config.experiment_name or Path(run.config.data).name,
         "method_name": run.config.method_name,
@@ -117,4 +138,6 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
         "train_seconds": run.train_seconds,
         "lpips_available": lpips_model is not None,
         "device": str(model.device),
+        **({"bev_hole_fraction": above["bev_hole_fraction"], "floater_fraction": above["floater_fraction"], "from_above": above}
+           if above is not None else {}),
     }

@@ -126,8 +126,13 @@ def reference_report(reference: Path, baseline: Optional[Path]) -> tuple[str, di
     return line, {"reference": str(_run_dir(reference)), "baseline": str(_run_dir(baseline)) if baseline else None, "line": line}
 
 
+def report_text(doc: dict) -> str:
+    """The JSON text of ``reference_check.json``."""
+    return json.dumps(doc, indent=1)
+
+
 def write_reference_report(run_dir: Path, doc: dict) -> Path:
     """``run_dir/reference_check.json`` (atomic)."""
     path = Path(run_dir) / CHECK_FILE
-    atomic_write_text(path, json.dumps(doc, indent=1))
+    atomic_write_text(path, report_text(doc))
     return path

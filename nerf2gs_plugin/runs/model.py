@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import Any, Optional
 
 import torch
 
@@ -25,6 +25,10 @@ class RunModel:
     model: torch.nn.Module
     step: int
     train_cameras: Cameras
+    config: Optional[Any] = None  # the run's TrainerConfig
+    dataset: Optional[str] = None  # the training images' fingerprint recorded in the checkpoint
+    units_per_metre: float = 1.0  # normalised world units per metre (the dataparser's metric scale)
+    up: Optional[torch.Tensor] = None  # [3] the ground's up in the normalised frame
 
 
 def load_run_model(path: Path, device: torch.device | str = "cpu", data: Optional[Path] = None) -> RunModel:
@@ -41,8 +45,10 @@ def load_run_model(path: Path, device: torch.device | str = "cpu", data: Optiona
         from nerf2gs_plugin.runs.load import load_run
 
         run = load_run(path, device=device, data=data)
-        cams = run.pipeline.datamanager.train_data.cameras
-        return RunModel(run.run_dir, run.checkpoint, run.config.method_name, run.model, run.step, cams)
+        td = run.pipeline.datamanager.train_data
+        ckpt = load_checkpoint(run.checkpoint, expected_method=run.config.method_name, map_location="cpu")
+        return RunModel(run.run_dir, run.checkpoint, run.config.method_name, run.model, run.step, td.cameras, run.config,
+                        ckpt.get("dataset"), td.metres_to_world(1.0), td.up)
     doc = read_config_doc(run_dir / "config.yml")
     spec = get_method(doc["method_name"])
     config = load_config(run_dir / "config.yml", spec.config)
@@ -66,4 +72,5 @@ def load_run_model(path: Path, device: torch.device | str = "cpu", data: Optiona
     if not isinstance(model, torch.nn.Module):
         raise ConfigError(f"method '{doc['method_name']}' did not build a model", run_dir / "config.yml")
     model.eval()
-    return RunModel(run_dir, ckpt_file, doc["method_name"], model, int(ckpt["step"]), cameras)
+    return RunModel(run_dir, ckpt_file, doc["method_name"], model, int(ckpt["step"]), cameras, config, ckpt.get("dataset"),
+                    tf.scale / tf.metres_per_unit, tf.up)

@@ -103,6 +103,10 @@ def test_cli_writes_json_and_reports_missing_lpips(tiny_run, tmp_path, monkeypat
     assert (tmp_path / "r" / "bev_1.png").is_file() and not (tmp_path / "r" / "street.png").exists()
     text = capsys.readouterr().out
     assert "n/a" in text and "LPIPS n/a" in text
+    # measured from above with no ground truth there: the fly-over over the 8 training cameras (at most 16 views)
+    assert 0 <= res["bev_hole_fraction"] <= 1 and 0 <= res["floater_fraction"] <= 1
+    assert res["from_above"]["frames"] == 8 and res["from_above"]["source"].startswith("fly-over 10 m")
+    assert "from above (8 views" in text
 
 
 def test_cli_bad_split_is_one_line(tiny_run):

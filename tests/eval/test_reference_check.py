@@ -64,7 +64,8 @@ def _voxel(data, out, steps):
 def test_train_cli_logs_and_writes_the_check_on_a_tiny_scene(tiny_scene, tmp_path, capsys):
     """Reference (2 steps: weak) and baseline (12 steps) evaluated by ns2gs-eval's code on the tiny
     scene's held-out street views; ``ns2gs-train --augment-from REF --baseline BASE`` logs the
-    difference of the two measured PSNRs before training and writes it into the new run folder."""
+    difference of the two measured PSNRs before training and writes it into the new run folder (the one
+    the run takes: the check must not create ``<stamp>`` and push the run into ``<stamp>-1``)."""
     from nerf2gs_plugin.cli.train import pop_baseline, train
     from nerf2gs_plugin.runs.load import load_run
     from nerf2gs_plugin.eval.evaluate import evaluate_run
@@ -79,7 +80,7 @@ def test_train_cli_logs_and_writes_the_check_on_a_tiny_scene(tiny_scene, tmp_pat
     argv, baseline = pop_baseline(["voxel-grid", "--baseline", str(runs["base"][0]), "--data", str(tiny_scene)])
     assert argv == ["voxel-grid", "--data", str(tiny_scene)] and baseline == runs["base"][0]
     cfg = dataclasses.replace(get_method("voxel-grid").config, data=tiny_scene, output_dir=tmp_path / "tgt", max_num_iterations=2,
-                              steps_per_eval_image=0, progress=False, timestamp="run", augment_from=runs["ref"][0])
+                              steps_per_eval_image=0, progress=False, augment_from=runs["ref"][0])  # default stamp
     cfg = dataclasses.replace(cfg, augment=dataclasses.replace(cfg.augment, delta_h=2.0, min_coverage=0.0))
     capsys.readouterr()
     train(cfg, baseline)
@@ -87,7 +88,10 @@ def test_train_cli_logs_and_writes_the_check_on_a_tiny_scene(tiny_scene, tmp_pat
     delta = runs["ref"][1] - runs["base"][1]
     assert f"{abs(delta):.2f} dB {'BELOW' if delta < 0 else 'above'} the baseline on 2 held-out views" in out
     assert out.index("held-out views") < out.index("run saved to")  # said before training, not after
-    doc = json.loads(next((tmp_path / "tgt").rglob(CHECK_FILE)).read_text())
+    check = next((tmp_path / "tgt").rglob(CHECK_FILE))
+    doc = json.loads(check.read_text())
+    # the check lands in the run's own folder, and no empty folder is left beside it (<stamp> vs <stamp>-1)
+    assert (check.parent / "config.yml").is_file() and [p.name for p in check.parent.parent.iterdir()] == [check.parent.name]
     assert doc["delta_db"] == pytest.approx(delta) and doc["views"] == 2 and doc["split"] == "street"
 
 
