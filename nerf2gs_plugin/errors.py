@@ -37,3 +37,8 @@ class TrainingDiverged(UserError):
 class Terminated(KeyboardInterrupt):
     """SIGTERM (a scheduler's preemption, ``kill``): cleaned up like Ctrl-C, but the command exits
     143 (128 + SIGTERM), not SIGINT's 130 (see :func:`nerf2gs_plugin.cli.common.exit_on_sigterm`)."""
+
+
+class ModelOutputError(UserError):
+    """An external model (segmenter, enhancer, reference render) gave output that cannot be used:
+    NaN/inf, the wrong shape, values outside its declared range. Nothing is written from it."""

@@ -55,6 +55,7 @@ from nerf2gs_plugin.augment.cache import (
 from nerf2gs_plugin.datamanagers.base import DataManager
 from nerf2gs_plugin.datamanagers.image_set import ImageSet
 from nerf2gs_plugin.errors import ConfigError
+from nerf2gs_plugin.utils.model_output import check_range
 from nerf2gs_plugin.warn import warn
 
 RenderFn = Callable[[Cameras], dict[str, Tensor]]
@@ -215,6 +216,7 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
                 out = {k: v.cpu() for k, v in render_pixels(train.cameras[i], where).items() if k in RENDER_KEYS}
             else:
                 out = {k: v.cpu() for k, v in render_fn(train.cameras[i]).items() if k in RENDER_KEYS}
+            check_range(out["rgb"], 0.0, 1.0, "reference run", f"render of input view {i}")
             if with_conf:
                 if "depth" not in out:
                     from nerf2gs_plugin.errors import ConfigError
@@ -246,6 +248,7 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
                 reused += 1
             else:
                 out = {k: v.cpu() for k, v in render_fn(bev[j]).items() if k in RENDER_KEYS}
+                check_range(out["rgb"], 0.0, 1.0, "reference run", f"render of bird's-eye view {j}")  # before it is stored
                 if store is not None:
                     store.put(bev[j], out)
                 view = StoredView(out, float((out["accumulation"] > 0.5).float().mean()) if "accumulation" in out else None)
@@ -266,7 +269,8 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
                     src = _warped_source(out, bev[j], train, render_fn, {} if partial else renders, source_depths, depth_along)
                 else:
                     src = train.image(sources[j] if sources is not None else j * max(config.every_n, 1)).cpu()
-                rgb = enhancer.enhance(rgb, reference=src)
+                rgb = check_range(enhancer.enhance(rgb, reference=src), 0.0, 1.0, getattr(enhancer, "path", "enhancer"),
+                                  f"enhanced bird's-eye view {j}")
             save_png(work / "extra" / f"{k:05d}.png", rgb)
             progress.update(task, advance=1, stats=f"bird's-eye {j}")
     if reused:
@@ -302,8 +306,12 @@ def render_augmented_views(train: ImageSet, world: WorldFrame, render_fn: Render
         store = ViewStore(cache_root, ref_key, config.appearance, read=config.use_cache) if bev is not None else None
         if store is not None and config.use_cache:
             store.add_entries(dataset, bev)
-        done = _render_entry(work, seen_from, bev, render_fn, config, enhancer, comp_idx, scene_box, depth_along,
-                             views.sources if views is not None else None, render_pixels, store)
+        try:
+            done = _render_entry(work, seen_from, bev, render_fn, config, enhancer, comp_idx, scene_box, depth_along,
+                                 views.sources if views is not None else None, render_pixels, store)
+        except BaseException:  # a bad model or an interrupt: no half-made entry left behind
+            shutil.rmtree(work, ignore_errors=True)
+            raise
         kept = done["extra_indices"]
         CacheManifest(reference=ref_key, dataset=dataset, config=asdict(config), enhancer=enhancer_key,
                       composited_images=comp_idx, num_extra=len(kept),

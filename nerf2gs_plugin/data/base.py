@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional
@@ -63,8 +65,8 @@ def build_outputs(
     points_rgb: Optional[np.ndarray] = None,
 ) -> DataparserOutputs:
     """Normalise (from the train frames), undistort/downscale through the cache, and package."""
-    if downscale <= 0:
-        raise DataError(f"downscale must be positive, got {downscale}", root)
+    if not (math.isfinite(downscale) and downscale > 0):  # nan compares false with everything
+        raise DataError(f"downscale must be a positive finite number, got {downscale}", root)
     pts = torch.from_numpy(np.asarray(points_xyz, dtype=np.float32)) if points_xyz is not None else None
     tf = compute_transform(torch.stack([f.c2w for f in train_frames]), options, declared_up, metres_per_unit, pts)
     needs_cache = downscale != 1.0 or any(f.intr.distorted for f in frames) or any(

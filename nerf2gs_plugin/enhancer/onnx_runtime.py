@@ -50,6 +50,7 @@ from torch import Tensor
 
 from nerf2gs_plugin.enhancer.warp import REFERENCE_KINDS, WARPED_CHANNELS
 from nerf2gs_plugin.errors import ConfigError
+from nerf2gs_plugin.utils.model_output import check_range
 from nerf2gs_plugin.utils.onnx_model import open_session, read_convention
 
 KEYS = ("layout", "range", "input", "reference_input", "reference_kind", "output", "tile_size", "multiple", "overlap")
@@ -234,6 +235,7 @@ class OnnxEnhancer:
             y = y.permute(0, 3, 1, 2)
         if tuple(y.shape) != tuple(img.shape):
             raise ConfigError(f"output shape {tuple(y.shape)} does not match input {tuple(img.shape)} (as NCHW)", self.path)
+        check_range(y, -1.0 if self.symmetric else 0.0, 1.0, self.path, f"enhancer output '{self.output_name}'")
         return (y + 1) / 2 if self.symmetric else y
 
     def _tiled(self, img: Tensor, ref: Optional[Tensor]) -> Tensor:

@@ -40,10 +40,13 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from nerf2gs_plugin.masks import class_maps
-from nerf2gs_plugin.errors import ConfigError
+from nerf2gs_plugin.errors import ConfigError, ModelOutputError
+from nerf2gs_plugin.utils.model_output import check_finite, check_shape
 from nerf2gs_plugin.utils.onnx_model import open_session, read_convention
 
 KEYS = ("layout", "range", "mean", "std", "input", "output", "output_layout", "size", "tile_size", "overlap", "multiple", "classes")
+# an id output with no 'classes' declared: ADE20K (150) is the largest shipped map
+MAX_UNDECLARED_CLASSES = 256
 _SCALE = {"0,1": (1.0, 0.0), "0,255": (255.0, 0.0), "-1,1": (2.0, -1.0)}
 
 
@@ -172,18 +175,33 @@ class OnnxSegmenter:
             raise ConfigError(f"model failed on a {img.shape[1]}x{img.shape[0]} image ({msg})", self.path) from None
         o = torch.from_numpy(np.asarray(out))
         if not o.is_floating_point():  # class ids
-            ids = o.reshape(o.shape[-2], o.shape[-1]).long()
-            n = int(ids.max()) + 1 if ids.numel() else 1
-            o = F.one_hot(ids.clamp_min(0), max(n, 1)).permute(2, 0, 1).float()
+            o = self._one_hot(o)
         else:
             if o.dim() != 4 or o.shape[0] != 1:
                 raise ConfigError(f"output '{self.output_name}' has shape {tuple(o.shape)}; expected [1, C, h, w] logits ({self.out_layout})", self.path)
+            check_finite(o, self.path, f"segmenter output '{self.output_name}'")
             o = (o[0] if self.out_layout == "NCHW" else o[0].permute(2, 0, 1)).float()
         # logits at a lower resolution (SegFormer: 1/4) are resized to the fed size, then the padding is cut
         fed = (img.shape[0], img.shape[1])
         if tuple(o.shape[1:]) != fed:
             o = F.interpolate(o[None], size=fed, mode="bilinear", align_corners=False)[0]
         return o[:, :h, :w]
+
+    def _one_hot(self, o: Tensor) -> Tensor:
+        """Class ids ``[1, h, w]`` / ``[1, 1, h, w]`` -> one-hot ``[C, h, w]``; the layout and every id
+        are checked first (an id of 1e9 would make one_hot allocate terabytes)."""
+        what = f"segmenter output '{self.output_name}' (class ids)"
+        check_shape(o, [(None, None), (1, None, None), (1, 1, None, None)], self.path, what)
+        ids = o.reshape(o.shape[-2], o.shape[-1]).long()
+        declared = len(self.model_classes) if self.model_classes is not None else None
+        limit = declared if declared is not None else MAX_UNDECLARED_CLASSES
+        lo, hi = (int(ids.min()), int(ids.max())) if ids.numel() else (0, 0)
+        if lo < 0 or hi >= limit:
+            bad = lo if lo < 0 else hi
+            declared_txt = f"the model declares {declared} classes" if declared is not None else \
+                f"without declared classes ids must be below {MAX_UNDECLARED_CLASSES} (set 'classes' in the sidecar)"
+            raise ModelOutputError(f"{what} holds class id {bad}: {declared_txt}", self.path)
+        return F.one_hot(ids, declared if declared is not None else max(hi + 1, 1)).permute(2, 0, 1).float()
 
     def logits(self, image: Tensor) -> Tensor:
         """``[H, W, 3]`` RGB in 0..1 -> ``[C, H, W]`` logits at the image size."""
@@ -225,7 +243,9 @@ class OnnxSegmenter:
         return {k: torch.isin(lab, torch.tensor(ids.get(k, []), dtype=torch.long)) for k in MASK_KINDS}
 
     def num_classes(self, logits: Tensor) -> int:
-        out_shape = self.session.get_outputs()[0].shape if self.output_name == self.session.get_outputs()[0].name else None
+        first = self.session.get_outputs()[0]
+        ids = "float" not in first.type  # a class-id output's channel axis is 1, not the number of classes
+        out_shape = first.shape if self.output_name == first.name and not ids else None
         c_dim = 1 if self.out_layout == "NCHW" else 3
         if out_shape is not None and len(out_shape) == 4 and isinstance(out_shape[c_dim], int):
             return int(out_shape[c_dim])
