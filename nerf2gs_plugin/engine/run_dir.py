@@ -4,6 +4,8 @@ With the default timestamp a clash (two runs started in the same second) gets a 
 folder (``<stamp>-1``, ``-2``, ...). With an explicit ``--timestamp`` (or ``--run-dir``) the folder is locked
 (``fcntl.flock`` on ``.lock``, released by the kernel even on kill -9): a second training there
 is an error, as is one that would overwrite another run's checkpoints without resuming them.
+A folder is only taken when it is empty or carries the marker a training leaves (``.ns2gs_run``):
+the user's own files are never overwritten.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from typing import Optional
 from nerf2gs_plugin.errors import ConfigError
 
 LOCK_NAME = ".lock"
+MARKER_NAME = ".ns2gs_run"  # written when a training takes the folder: only such folders are taken again
 
 
 def unique_run_dir(path: Path) -> Path:
@@ -57,6 +60,15 @@ class RunDirLock:
             self.release()
             raise ConfigError("run directory already holds another run's checkpoints; choose another --timestamp "
                               "or --run-dir, or resume it with --load-checkpoint", self.run_dir)
+        marker = self.run_dir / MARKER_NAME
+        if not marker.is_file():
+            foreign = sorted(p.name for p in self.run_dir.iterdir() if p.name not in (LOCK_NAME, MARKER_NAME))
+            if foreign and not own:  # the user's own files (a config.yml, a log): never overwritten
+                self.release()
+                more = f" and {len(foreign) - 3} more" if len(foreign) > 3 else ""
+                raise ConfigError(f"folder is not empty and not a run folder of ours (it holds {', '.join(foreign[:3])}{more}); "
+                                  "choose an empty or new --run-dir", self.run_dir)
+            marker.write_text("a run folder of ns2gs-train: it may write here\n")
 
     def release(self) -> None:
         if self.fd is not None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import statistics
 import time
 from pathlib import Path
@@ -10,7 +11,7 @@ from typing import Optional
 import torch
 
 from nerf2gs_plugin.runs.load import LoadedRun
-from nerf2gs_plugin.errors import DataError
+from nerf2gs_plugin.errors import ConfigError, DataError
 from nerf2gs_plugin.eval.extrapolated import extrapolated_summary
 from nerf2gs_plugin.eval.figures import save_eval_grid
 from nerf2gs_plugin.eval.metrics import IMAGE_METRICS, LPIPS
@@ -43,6 +44,20 @@ def measure_fps(model, camera, repeats: int = 5, warmup: int = 1) -> float:
     return 1.0 / statistics.median(times)
 
 
+def check_result(result: dict) -> None:
+    """A result worth writing: every split evaluated at least one image and its figures are finite
+    (a DataError otherwise, so a good eval.json on disk is never replaced by nulls)."""
+    for name, r in result["results"].items():
+        if not r.get("num_images"):
+            raise DataError(f"split '{name}' has no image to evaluate; nothing written")
+        for metric in ("psnr", "ssim"):
+            v = r.get(metric)
+            if v is None or not math.isfinite(v):
+                raise DataError(f"split '{name}': {metric} is {v} (non-finite render or image); nothing written")
+    if not result["results"]:
+        raise DataError("no split evaluated; nothing written")
+
+
 @torch.no_grad()
 def measure_from_above(run: LoadedRun, views: int = 16) -> dict:
     """Holes and near-camera floaters on the run's bird's-eye path (:mod:`nerf2gs_plugin.render.measures`):
@@ -73,6 +88,8 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
     and of the checkpoint file) and the training time recorded in the checkpoint. With
     ``from_above_views``: ``bev_hole_fraction`` and ``floater_fraction`` on that many bird's-eye views
     (:func:`measure_from_above`; no ground truth needed), details under ``from_above``."""
+    if max_images is not None and max_images < 1:
+        raise ConfigError(f"must be at least 1, got {max_images}", "--max-images")
     dm = run.pipeline.datamanager
     model = run.model
     model.eval()

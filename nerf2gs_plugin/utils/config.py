@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
-from typing import Any, TypeVar, get_args, get_type_hints
+from types import UnionType
+from typing import Any, Literal, TypeVar, Union, get_args, get_origin, get_type_hints
 
 from nerf2gs_plugin.errors import ConfigError
 
@@ -84,10 +85,38 @@ def apply_plain(default: T, values: dict, where: str = "config") -> T:
     return dataclasses.replace(default, **changes)
 
 
+_SIMPLE = (str, int, float, bool)
+
+
+def _check_hint(value: Any, hint: Any, where: str) -> None:
+    """A value for a field whose default is None: its type must be one the field's hint allows
+    (``Optional[str]`` takes a string, not ``[a, list]``); hints other than plain types pass."""
+    origin = get_origin(hint)
+    if origin is Literal:
+        if value not in get_args(hint):
+            raise ConfigError(f"{where}: expected one of {', '.join(map(repr, get_args(hint)))}, got {value!r}")
+        return
+    options = [a for a in get_args(hint) if a is not type(None)] if origin in (Union, UnionType) else [hint]
+    if not options or not all(o in _SIMPLE for o in options):
+        return
+    for o in options:
+        if o is bool and isinstance(value, bool):
+            return
+        if o in (int, float) and isinstance(value, (int, float)) and not isinstance(value, bool) and (o is float or isinstance(value, int)):
+            return
+        if o is str and isinstance(value, str):
+            return
+    raise ConfigError(f"{where}: expected {' or '.join(o.__name__ for o in options)}, got {value!r}"[:300])
+
+
 def _coerce(value: Any, current: Any, hint: Any, where: str) -> Any:
     if value is None:
         return None
+    if current is None and hint is not None:
+        _check_hint(value, hint, where)
     if isinstance(current, Path) or hint in (Path, "Path") or Path in get_args(hint):  # Optional[Path] too
+        if not isinstance(value, (str, Path)):
+            raise ConfigError(f"{where}: expected a path, got {value!r}"[:300])
         return Path(value)
     if isinstance(current, bool):
         if not isinstance(value, bool):
