@@ -284,6 +284,8 @@ class Faults:
     seed: int = 0
     out: Path = RESULTS
     work: Path = RUNS / "faults"
+    capture: bool = True
+    """Also the capture path (process, masks, enhance apply, eval through their commands; ~80 cases, minutes)."""
 
     def main(self) -> None:
         import shutil
@@ -292,10 +294,18 @@ class Faults:
 
         shutil.rmtree(self.work, ignore_errors=True)
         doc = run_suite(self.work, n_files=self.cases, n_kills=self.kills, seed=self.seed)
+        if self.capture:
+            from nerf2gs_plugin.eval.bench_faults_capture import run_capture_suite
+
+            doc["capture"] = run_capture_suite(self.work / "capture", self.seed, log=print)
         js, md = write_results(doc, self.out)
         s = doc["summary"]
         print(f"{s['cases']} cases: {s['clean_errors']} clean errors, {s['finite_ok']} finite, {s['tracebacks']} tracebacks, "
               f"{s['hangs']} hangs, {s['wrong_results']} wrong results -> {js}, {md}")
+        if self.capture:
+            c = doc["capture"]["summary"]
+            print(f"capture path: {c['cases']} cases: {c['ok']} ok, {c['clean_error']} clean errors, {c['traceback']} tracebacks, "
+                  f"{c['abort']} native aborts, {c['hang']} hangs, {c['wrong_result']} wrong results")
 
 
 @dataclass

@@ -370,7 +370,9 @@ def write_results(doc: dict[str, Any], out_dir: Path) -> tuple[Path, Path]:
     s = doc["summary"]
     out_dir = Path(out_dir)
     js = out_dir / "faults.json"
-    atomic_write_text(js, json.dumps({**s, "machine": machine_info(), "case_list": doc["cases"]}, indent=1))
+    cap = doc.get("capture")
+    extra = {"capture": {**cap["summary"], "case_list": cap["cases"]}} if cap else {}
+    atomic_write_text(js, json.dumps({**s, "machine": machine_info(), "case_list": doc["cases"], **extra}, indent=1))
     rows = ["| target | cases | finite output | clean errors | tracebacks | hangs | wrong results |", "|---|---|---|---|---|---|---|"]
     for t, c in s["by_target"].items():
         rows.append(f"| {t} | {c['cases']} | {c['finite_ok']} | {c['clean_errors']} | {c['tracebacks']} | {c['hangs']} | {c['wrong_results']} |")
@@ -386,7 +388,23 @@ def write_results(doc: dict[str, Any], out_dir: Path) -> tuple[Path, Path]:
         *rows, "",
         f"Peak memory of the file cases: {s['peak_rss_mb_file_cases']} MB (address space capped at +2 GB); slowest case "
         f"{s['max_case_seconds']} s; {s['seconds_file_cases']} s for the file cases, {s['seconds_kill_cases']} s for the kills.", "",
+        *(_capture_md(cap["summary"]) if cap else []),
         f"Machine: {machine_line()}", ""])
     md_path = out_dir / "faults.md"
     atomic_write_text(md_path, md)
     return js, md_path
+
+
+def _capture_md(c: dict[str, Any]) -> list[str]:
+    """The capture path's table (``bench_faults_capture``): per entry point."""
+    rows = ["| entry point | cases | ok | clean errors | tracebacks | native aborts | hangs | wrong results |",
+            "|---|---|---|---|---|---|---|---|"]
+    for e, k in [*c["by_entry"].items(), ("**all**", c)]:
+        rows.append(f"| {e} | {k['cases']} | {k['ok']} | {k['clean_error']} | {k['traceback']} | {k['abort']} | {k['hang']} | {k['wrong_result']} |")
+    return ["## Capture path", "",
+            "The commands a user runs on a capture (`ns2gs-data process images|video`, `ns2gs-data masks` with an ONNX "
+            "segmenter and auto, `ns2gs-enhance apply`, `ns2gs-eval`), each in a subprocess: byte flips, truncations and "
+            "junk in their inputs (photos, video, models, checkpoint, config, dataset), NaN / inf / out-of-range / odd-layout "
+            "ONNX models, kill -9 mid-run then the same command again, two runs at once, bad flags. A case passes with exit 0 "
+            "and a result that checks out, or with one `error:` line (exit 2) that left every earlier result as it was and "
+            "wrote none from the bad input.", "", *rows, "", f"Slowest case {c['max_case_seconds']} s.", ""]
