@@ -71,6 +71,7 @@ def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[
     from nerf2gs_plugin.data.images import load_image
     from nerf2gs_plugin.runs.load import load_run
     from nerf2gs_plugin.progress import make_progress
+    from nerf2gs_plugin.utils.model_output import check_finite
 
     with warnings.catch_warnings():  # a reference without masks: its "no sky masks" warnings are intended
         warnings.filterwarnings("ignore", message="StreetNeRF: the dataset has no .* masks")
@@ -91,6 +92,8 @@ def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[
             for i in range(len(d)):
                 cam = d.cameras[i : i + 1]
                 out = model.render_camera(cam)
+                for key in ("rgb", "accumulation"):  # masks are never made from a NaN render
+                    check_finite(out[key], run.checkpoint, f"reference render '{key}' of {s} view {i}")
                 rays = cam.generate_rays(0)
                 h, w = int(cam.height[0]), int(cam.width[0])
                 img = load_image(d.image_filenames[i])
