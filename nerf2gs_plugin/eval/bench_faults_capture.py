@@ -572,10 +572,11 @@ def ci_cases(seed: int = 0) -> list[CaptureCase]:
     return out
 
 
-def run_capture_case(case: CaptureCase, fx: Fixtures, scratch: Path, seed: int) -> CaptureResult:
+def run_capture_case(case: CaptureCase, fx: Fixtures, scratch: Path, seed: int, index: int = 0) -> CaptureResult:
+    """``index``: the case's place in the suite (cases alike in all but it break other bytes)."""
     shutil.rmtree(scratch, ignore_errors=True)
     scratch.mkdir(parents=True)
-    rng = random.Random(f"{seed}-{case.entry}-{case.fault}-{case.what}-{json.dumps(case.params, sort_keys=True)}")
+    rng = random.Random(f"{seed}-{index}-{case.entry}-{case.fault}-{case.what}-{json.dumps(case.params, sort_keys=True)}")
     t0 = time.perf_counter()
     try:
         outcome, detail = RUNNERS[case.entry](case, fx, scratch, rng)
@@ -592,7 +593,7 @@ def run_capture_suite(work: Path, seed: int = 0, cases: Optional[list[CaptureCas
     cases = make_capture_cases(seed) if cases is None else cases
     results = []
     for i, c in enumerate(cases):
-        r = run_capture_case(c, fx, work / "scratch", seed)
+        r = run_capture_case(c, fx, work / "scratch", seed, i)
         results.append(r)
         if log:
             log(f"[{i + 1}/{len(cases)}] {c.entry} / {c.fault} / {c.what}: {r.outcome} ({r.seconds:.1f} s) {r.detail[:160]}")
