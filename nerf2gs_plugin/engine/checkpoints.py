@@ -102,8 +102,11 @@ def load_checkpoint(path: Path, expected_method: Optional[str] = None, map_locat
         raise CheckpointError(f"checkpoint has no valid step (got {ckpt.get('step')!r})", path)
     from nerf2gs_plugin.engine.divergence import describe, nonfinite_counts
 
-    # the optimizer and training state too: a NaN there diverges on the first step after resuming
-    bad = nonfinite_counts({k: ckpt[k] for k in ("model", "optimizers", "training_state") if k in ckpt})
+    bad = nonfinite_counts(ckpt["model"])
     if bad:
         raise CheckpointError(f"checkpoint holds non-finite parameters: {describe(bad)}", path)
+    # the optimizer and training state too: a NaN there diverges on the first step after resuming
+    bad = nonfinite_counts({k: ckpt[k] for k in ("optimizers", "training_state") if k in ckpt})
+    if bad:
+        raise CheckpointError(f"checkpoint holds non-finite optimizer or training state: {describe(bad)}", path)
     return ckpt
