@@ -6,6 +6,8 @@ transient terms and the augmentation's composites work on real captures unchange
 from __future__ import annotations
 
 import json
+import os
+import shutil
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -113,6 +115,34 @@ def make_masks(cfg: MasksConfig, log: Callable[[str], None] = print) -> dict:
             coverage[k][0] += int(m.sum())
             coverage[k][1] += m.numel()
 
+    # every mask goes to a staging folder first and into masks/ only once all of them are made: a
+    # bad image or model halfway leaves no partial set (that a re-run would call "already has masks")
+    staging = data / f".masks-{os.getpid()}.tmp"
+    shutil.rmtree(staging, ignore_errors=True)
+    try:
+        _segment(cfg, data, frames, groups, staging, summary, count, log)
+        _install(staging / "masks", data / "masks")
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    summary["coverage"] = {k: round(a / b, 4) if b else 0.0 for k, (a, b) in coverage.items()}
+    summary["seconds"] = round(time.perf_counter() - t0, 1)
+    atomic_write_text(data / "masks" / "masks.json", json.dumps(summary, indent=1, default=str))
+    log(f"wrote masks for {len(frames)} images to {data / 'masks'} in {summary['seconds']:.1f} s; "
+        + ", ".join(f"{k} {100 * v:.1f}%" for k, v in summary["coverage"].items()) + " of the pixels")
+    return summary
+
+
+def _install(src: Path, dst: Path) -> None:
+    """Move every staged ``<kind>/<stem>.png`` into ``dst`` (each file replaced atomically)."""
+    for kind_dir in sorted(p for p in src.iterdir() if p.is_dir()) if src.is_dir() else []:
+        (dst / kind_dir.name).mkdir(parents=True, exist_ok=True)
+        for f in kind_dir.iterdir():
+            os.replace(f, dst / kind_dir.name / f.name)
+
+
+def _segment(cfg: MasksConfig, data: Path, frames: list, groups: dict, out: Path, summary: dict,
+             count: Callable[[dict[str, torch.Tensor]], None], log: Callable[[str], None]) -> None:
+    """Masks of every frame into ``out/masks/<kind>/<stem>.png`` (onnx or auto)."""
     if cfg.segmenter.startswith("onnx:"):
         from nerf2gs_plugin.data.images import load_image
         from nerf2gs_plugin.masks.onnx_segmenter import OnnxSegmenter
@@ -125,7 +155,7 @@ def make_masks(cfg: MasksConfig, log: Callable[[str], None] = print) -> dict:
                 img = load_image(f.image)
                 ms = seg.masks(img)
                 count(ms)
-                _write(data, f.image, ms, (img.shape[1], img.shape[0]))
+                _write(out, f.image, ms, (img.shape[1], img.shape[0]))
                 prog.advance(task)
         summary["class_ids"] = seg._ids
     elif cfg.segmenter == "auto":
@@ -146,15 +176,9 @@ def make_masks(cfg: MasksConfig, log: Callable[[str], None] = print) -> dict:
             for f, m in zip(fs, result[split]):
                 ms = {"sky": m.sky, "ground": m.ground, "transient": m.transient}
                 count(ms)
-                _write(data, f.image, ms, (f.intr.width, f.intr.height))
+                _write(out, f.image, ms, (f.intr.width, f.intr.height))
         summary["auto"] = asdict(cfg.auto)
         summary["motion"] = asdict(cfg.motion)
         summary["mask_seconds"] = round(time.perf_counter() - t_m, 1)
     else:
         raise ConfigError(f"--segmenter must be 'auto' or 'onnx:PATH', got {cfg.segmenter!r}")
-    summary["coverage"] = {k: round(a / b, 4) if b else 0.0 for k, (a, b) in coverage.items()}
-    summary["seconds"] = round(time.perf_counter() - t0, 1)
-    atomic_write_text(data / "masks" / "masks.json", json.dumps(summary, indent=1, default=str))
-    log(f"wrote masks for {len(frames)} images to {data / 'masks'} in {summary['seconds']:.1f} s; "
-        + ", ".join(f"{k} {100 * v:.1f}%" for k, v in summary["coverage"].items()) + " of the pixels")
-    return summary

@@ -124,3 +124,27 @@ def test_masks_cli_with_a_nan_segmenter_writes_no_masks(tmp_path, monkeypatch, c
     err = capsys.readouterr().err.strip()
     assert int(e.value.code) == 2 and str(model) in err.splitlines()[-1] and "non-finite" in err
     assert not (data / "masks").exists() or not any((data / "masks").rglob("*.png"))
+
+
+def test_masks_stop_on_a_broken_image_without_a_partial_set(tmp_path):
+    """The second image cannot be read: the first one's masks are not left behind either."""
+    from nerf2gs_plugin.capture.make_masks import MasksConfig, make_masks
+    from nerf2gs_plugin.errors import DataError
+
+    data = tmp_path / "d"
+    frames = []
+    for i in range(3):
+        write_image_atomic(data / "images" / f"f{i}.png", _image())
+        frames.append({"file_path": f"images/f{i}.png", "transform_matrix": np.eye(4).tolist()})
+    (data / "transforms.json").write_text(json.dumps({"fl_x": 20, "w": 24, "h": 16, "frames": frames}))
+    (data / "images" / "f1.png").write_bytes((data / "images" / "f1.png").read_bytes()[:40])
+    model = conv_model(tmp_path / "road.onnx", out_channels=19, weight=0.0)
+    with pytest.raises(DataError, match="f1.png"):
+        make_masks(MasksConfig(data=data, segmenter=f"onnx:{model}", progress=False), log=lambda s: None)
+    assert not (data / "masks").exists() or not any((data / "masks").rglob("*.png"))
+    assert not list(data.glob(".masks-*"))
+    (data / "images" / "f1.png").unlink()
+    frames.pop(1)
+    (data / "transforms.json").write_text(json.dumps({"fl_x": 20, "w": 24, "h": 16, "frames": frames}))
+    make_masks(MasksConfig(data=data, segmenter=f"onnx:{model}", progress=False), log=lambda s: None)
+    assert sorted(p.name for p in (data / "masks" / "ground").iterdir()) == ["f0.png", "f2.png"]
