@@ -126,10 +126,12 @@ def test_masks_cli_with_a_nan_segmenter_writes_no_masks(tmp_path, monkeypatch, c
     assert not (data / "masks").exists() or not any((data / "masks").rglob("*.png"))
 
 
-def test_masks_stop_on_a_broken_image_without_a_partial_set(tmp_path):
-    """The second image cannot be read: the first one's masks are not left behind either."""
-    from nerf2gs_plugin.capture.make_masks import MasksConfig, make_masks
-    from nerf2gs_plugin.errors import DataError
+
+
+def test_masks_stop_on_a_model_failing_halfway_without_a_partial_set(tmp_path, monkeypatch):
+    """The segmenter fails on the second image only: the first one's masks are not left behind."""
+    from nerf2gs_plugin.masks.make_masks import MasksConfig, make_masks
+    from nerf2gs_plugin.masks.onnx_segmenter import OnnxSegmenter
 
     data = tmp_path / "d"
     frames = []
@@ -137,15 +139,19 @@ def test_masks_stop_on_a_broken_image_without_a_partial_set(tmp_path):
         write_image_atomic(data / "images" / f"f{i}.png", _image())
         frames.append({"file_path": f"images/f{i}.png", "transform_matrix": np.eye(4).tolist()})
     (data / "transforms.json").write_text(json.dumps({"fl_x": 20, "w": 24, "h": 16, "frames": frames}))
-    whole = (data / "images" / "f1.png").read_bytes()
-    (data / "images" / "f1.png").write_bytes(whole[: len(whole) // 2])  # its header reads, its pixels do not
     model = conv_model(tmp_path / "road.onnx", out_channels=19, weight=0.0)
-    with pytest.raises(DataError, match="f1.png"):
+    calls = []
+    real = OnnxSegmenter.masks
+
+    def masks(self, image):
+        calls.append(1)
+        if len(calls) == 2:
+            raise ModelOutputError("segmenter output holds NaN", model)
+        return real(self, image)
+
+    monkeypatch.setattr(OnnxSegmenter, "masks", masks)
+    with pytest.raises(ModelOutputError, match="NaN"):
         make_masks(MasksConfig(data=data, segmenter=f"onnx:{model}", progress=False), log=lambda s: None)
+    assert len(calls) == 2
     assert not (data / "masks").exists() or not any((data / "masks").rglob("*.png"))
     assert not list(data.glob(".masks-*"))
-    (data / "images" / "f1.png").unlink()
-    frames.pop(1)
-    (data / "transforms.json").write_text(json.dumps({"fl_x": 20, "w": 24, "h": 16, "frames": frames}))
-    make_masks(MasksConfig(data=data, segmenter=f"onnx:{model}", progress=False), log=lambda s: None)
-    assert sorted(p.name for p in (data / "masks" / "ground").iterdir()) == ["f0.png", "f2.png"]
