@@ -407,8 +407,10 @@ def case_masks(case: CaptureCase, fx: Fixtures, scratch: Path, rng: random.Rando
         bad = [o for o in outs if o[0] not in ("ok", "clean_error")]
         if bad:
             return bad[0]
-        problem = ok() if any(o[0] == "ok" for o in outs) else None
-        return ("wrong_result", problem) if problem else (outs[0][0] if outs[0][0] == "ok" else outs[1][0]), "; ".join(o[1] for o in outs if o[1])
+        if not any(o[0] == "ok" for o in outs):
+            return "clean_error", "; ".join(o[1] for o in outs)
+        problem = ok()
+        return ("wrong_result", problem) if problem else ("ok", "; ".join(o[1] for o in outs if o[1]))
     outcome, detail = _judge(run_cmd("data", args), {}, [], ok, must_fail=case.fault == "bad model", fresh=[data / "masks"])
     return outcome, note + detail
 
