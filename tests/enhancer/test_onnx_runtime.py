@@ -11,7 +11,7 @@ from torch import nn
 
 from nerf2gs_plugin.enhancer import IdentityEnhancer, make_enhancer
 from nerf2gs_plugin.enhancer.onnx_runtime import OnnxEnhancer
-from nerf2gs_plugin.errors import ConfigError
+from nerf2gs_plugin.errors import ConfigError, ModelOutputError
 
 
 def export(module: nn.Module, path: Path, inputs: tuple, names: list[str], dynamic: bool = True, meta: dict | None = None) -> Path:
@@ -76,7 +76,8 @@ class _NHWCMean(nn.Module):
 def test_sidecar_range_and_nhwc_fixed_size_with_reference(tmp_path):
     path = export(_Invert(), tmp_path / "inv.onnx", (torch.rand(1, 3, 8, 8),), ["x"])
     img = torch.rand(20, 30, 3)
-    assert (make_enhancer(f"onnx:{path}").enhance(img)).max() == 0  # 0..1 range: -v clamps to 0
+    with pytest.raises(ModelOutputError, match="inv.onnx.*outside the declared range 0..1"):  # -v is no 0..1 image: refused
+        make_enhancer(f"onnx:{path}").enhance(img)
     (tmp_path / "inv.onnx.json").write_text(json.dumps({"range": "-1,1"}))
     assert (make_enhancer(f"onnx:{path}").enhance(img) - (1 - img)).abs().max() < 1e-6
 
