@@ -295,7 +295,7 @@ class Faults:
         shutil.rmtree(self.work, ignore_errors=True)
         doc = run_suite(self.work, n_files=self.cases, n_kills=self.kills, seed=self.seed)
         if self.capture:
-            from nerf2gs_plugin.eval.bench_faults_capture import run_capture_suite
+            from nerf2gs_bench.faults_capture import run_capture_suite
 
             doc["capture"] = run_capture_suite(self.work / "capture", self.seed, log=print)
         js, md = write_results(doc, self.out)

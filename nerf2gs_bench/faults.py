@@ -396,7 +396,7 @@ def write_results(doc: dict[str, Any], out_dir: Path) -> tuple[Path, Path]:
 
 
 def _capture_md(c: dict[str, Any]) -> list[str]:
-    """The capture path's table (``bench_faults_capture``): per entry point."""
+    """The capture path's table (``faults_capture``): per entry point."""
     rows = ["| entry point | cases | ok | clean errors | tracebacks | native aborts | hangs | wrong results |",
             "|---|---|---|---|---|---|---|---|"]
     for e, k in [*c["by_entry"].items(), ("**all**", c)]:

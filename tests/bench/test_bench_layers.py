@@ -11,10 +11,10 @@ BENCH = "nerf2gs_bench"
 ROOT = Path(__file__).resolve().parents[2] / BENCH
 
 LAYERS: list[tuple[str, ...]] = [
-    ("", "machine", "code_version", "perturb", "breaking_point", "stability_levels"),
+    ("", "machine", "code_version", "perturb", "breaking_point", "stability_levels", "fault_models"),
     ("runs",),  # run specs, keys and reuse of trained runs
     ("runner",),  # training, evaluating and writing a bench's results
-    ("paper", "speed_quality", "size", "stability", "raster", "field", "faults", "real", "real_photos", "scale",
+    ("paper", "speed_quality", "size", "stability", "raster", "field", "faults", "faults_capture", "real", "real_photos", "scale",
      "blocks", "enhancer", "demo", "plans"),  # plans: the validation studies' runner
     ("cli",),
 ]

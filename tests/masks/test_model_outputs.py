@@ -15,7 +15,7 @@ import torch
 
 from nerf2gs_plugin.data.images import write_image_atomic
 from nerf2gs_plugin.errors import ModelOutputError
-from nerf2gs_plugin.eval.fault_models import ENHANCERS, SEGMENTERS, conv_model
+from nerf2gs_bench.fault_models import ENHANCERS, SEGMENTERS, conv_model
 
 
 def _image(h: int = 16, w: int = 24) -> torch.Tensor:
@@ -70,8 +70,17 @@ def test_augment_cache_is_not_filled_by_a_nan_enhancer(tmp_path):
 
     cfg = AugmentConfig(composites=False, extra_views=True, min_coverage=0.0)
     with pytest.raises(ModelOutputError, match="nan.onnx"):
-        render_augmented_views(train, torch.tensor([0.0, 0.0, 1.0]), 1.0, render, "ref", "data", tmp_path / "cache", cfg, enhancer=enh)
+        render_augmented_views(train, _World(), render, "ref", "data", tmp_path / "cache", cfg, enhancer=enh)
     assert not any(p.is_file() for p in (tmp_path / "cache").rglob("*.png"))
+
+
+class _World:
+    """Up +z, one world unit a metre."""
+
+    up = torch.tensor([0.0, 0.0, 1.0])
+
+    def metres_to_world(self, metres: float) -> float:
+        return metres
 
 
 def _segmenter(tmp_path: Path, name: str, classes: str | None = None):

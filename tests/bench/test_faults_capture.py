@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pytest
 
-from nerf2gs_plugin.eval.bench_faults_capture import ci_cases, make_capture_cases, run_capture_suite
+from nerf2gs_bench.faults_capture import ci_cases, make_capture_cases, run_capture_suite
 
 pytestmark = pytest.mark.faults
 

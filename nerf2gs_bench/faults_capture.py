@@ -14,7 +14,7 @@ stderr and what it left on disk:
   a native crash, SIGABRT), ``hang`` (over the case's time limit), ``wrong_result`` (exit 0 with a
   result that does not check out, or an error that still wrote or replaced a result).
 
-Shared by ``tests/engine/test_faults_capture.py`` (a subset) and ``ns2gs-bench faults`` (all).
+Shared by ``tests/bench/test_faults_capture.py`` (a subset) and ``ns2gs-bench faults`` (all).
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ from typing import Any, Callable, Optional
 OUTCOMES = ("ok", "clean_error", "traceback", "abort", "hang", "wrong_result")
 NUM_PHOTOS = 16
 CASE_TIMEOUT_S = 120.0  # one command longer than this is a hang (process runs SfM: ~10 s here)
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @dataclass
@@ -208,8 +208,8 @@ def make_fixtures(work: Path) -> Fixtures:
     """Made once under ``work`` (a few seconds): the inputs every case copies before breaking them."""
     import cv2
 
-    from nerf2gs_plugin.eval.bench_faults import fault_roots
-    from nerf2gs_plugin.eval.fault_models import ENHANCERS, SEGMENTERS, conv_model
+    from nerf2gs_bench.faults import fault_roots
+    from nerf2gs_bench.fault_models import ENHANCERS, SEGMENTERS, conv_model
 
     work = Path(work)
     roots, masked = fault_roots(work / "train_fixtures")
@@ -509,7 +509,7 @@ ALIAS_BOMB = "format_version: 1\nmethod_name: voxel-grid\nconfig: {}\n" + 'a: &a
 
 def make_capture_cases(seed: int = 0) -> list[CaptureCase]:
     """Every case of the suite, in a fixed order (the same for a seed)."""
-    from nerf2gs_plugin.eval.fault_models import ENHANCERS, SEGMENTERS
+    from nerf2gs_bench.fault_models import ENHANCERS, SEGMENTERS
 
     rng = random.Random(seed)
     C = CaptureCase
