@@ -116,7 +116,8 @@ def _street(work: Path, settings: dict, progress: bool) -> Path:
     done = out / "settings.json"
     if done.is_file() and json.loads(done.read_text()) == json.loads(json.dumps(settings)):
         return out
-    generate_street(SynthStreetConfig(out=out, overwrite=True, progress=progress, **settings))
+    # the prior learns views from above: the street's lane-shift test views are not its pairs
+    generate_street(SynthStreetConfig(out=out, overwrite=True, progress=progress, num_lane=0, num_val_lane=0, **settings))
     atomic_write_text(done, json.dumps(settings))
     return out
 

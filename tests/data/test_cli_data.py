@@ -25,7 +25,8 @@ def test_synth_street_cli(tmp_path, monkeypatch, capsys):
          "--num-points", "100", "--no-progress")
     text = capsys.readouterr().out
     assert "wrote" in text and "bev_1" in text and "within 15 deg" in text
-    assert list_splits(out) == ["train", "street", "bev_1", "bev_2", "val_street", "val_bev"]
+    assert list_splits(out) == ["train", "street", "bev_1", "bev_2", "val_street", "val_bev", "lane_1", "lane_2", "lane_4",
+                               "val_lane"]
     meta = json.loads((out / "transforms.json").read_text())
     assert meta["w"] == 40 and meta["h"] == 24 and meta["synthetic_street"]["seed"] == 3
     assert cv2.imread(str(out / meta["frames"][0]["file_path"])).shape == (24, 40, 3)
