@@ -361,6 +361,30 @@ class RealPhotos(RealPhotosOptions):
 
 
 @dataclass
+class RealCaptures:
+    """Public real captures (KITTI, Lund, nuScenes CAM_FRONT; fetched beforehand into --data-root) through
+    process -> masks (auto) -> StreetNeRF -> Splatfacto +- NeRF views: held-out PSNR, holes from above,
+    stage times (``real_captures.*``)."""
+
+    captures: tuple[str, ...] = ("kitti", "lund")
+    """Names from nerf2gs_bench.real_captures.CAPTURES."""
+    scale: Literal["quick", "full"] = "quick"
+    """quick: 40 frames at ~400 px, a few hundred steps per method; full: every frame, the real-photos steps."""
+    data_root: Optional[Path] = None
+    """Where the fetched frames are (default $NERF2GS_REAL_DATA or ~/.cache/nerf2gs/real)."""
+    out: Path = RESULTS
+    runs: Path = RUNS
+    rerun: bool = False
+
+    def main(self) -> None:
+        from nerf2gs_bench.real_captures import default_data_root, results_md, run
+
+        doc = run(self.captures, self.data_root or default_data_root(), self.runs, self.out, self.scale, rerun=self.rerun)
+        print(results_md(doc))
+        print(f"results: {self.out}/real_captures.md")
+
+
+@dataclass
 class Scale:
     """How cost grows: time per step, peak memory and model size against images and resolution for
     StreetNeRF and Splatfacto, a fitted law and a 1 km projection, one run vs blocks (``scale.*``)."""
@@ -396,7 +420,7 @@ def main() -> None:
     cmd = tyro.extras.subcommand_cli_from_dict(
         {"demo": Demo, "quick": Quick, "paper-table": PaperTable, "ablation": Ablation, "speed-quality": SpeedQuality,
          "stability": Stability, "model-size": ModelSize, "raster": Raster, "field": Field, "faults": Faults,
-         "real": Real, "real-photos": RealPhotos, "scale": Scale, "blocks": Blocks},
+         "real": Real, "real-photos": RealPhotos, "real-captures": RealCaptures, "scale": Scale, "blocks": Blocks},
         description=__doc__,
     )
     cmd.main()

@@ -1,0 +1,351 @@
+"""``ns2gs-bench real-captures``: public real captures through the whole path, measured from above too.
+
+Per capture (a declarative list below: where its frames come from, their licence, the camera's height
+and field of view): ``process images`` -> ``masks`` (auto) -> StreetNeRF -> Splatfacto alone and with
+NeRF views (the same stages as ``real-photos``), then what a real capture allows without ground truth:
+registered fraction, seconds per stage, the masks' coverage, held-out PSNR (every 8th frame; over
+static pixels only where moving-object labels exist), and holes from above: the share of pixels with
+accumulation < 0.5 rendered from the augmentation's own bird's-eye cameras. The bench never
+downloads: it reads frames fetched beforehand under ``--data-root`` and names the missing ones.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Optional, Sequence
+
+from nerf2gs_plugin.utils.io import atomic_write_text
+
+STEM = "real_captures"
+TARGET, AUGMENTED, REFERENCE = "splatfacto", "splatfacto + NeRF views", "StreetNeRF"
+HOLE_ACCUMULATION = 0.5
+DATA_ROOT_ENV = "NERF2GS_REAL_DATA"
+MIN_FRAMES = 3  # fewer cannot make a held-out split and a two-view SfM
+
+
+@dataclass(frozen=True)
+class Capture:
+    """One public capture: where its frames are, what may be shown, how the camera sat."""
+
+    name: str
+    folder: str
+    """Frames' folder under the data root."""
+    fetch: str
+    """Where the frames come from (repository and path): the bench never fetches them itself."""
+    licence: str
+    provenance: str
+    camera_height: float
+    """Metres above the ground (sets the metric scale)."""
+    fov_deg: Optional[float] = None
+    """Horizontal field of view when the frames carry no EXIF focal."""
+    first: int = 0
+    last: Optional[int] = None
+    """Frames ``[first, last)`` in name order (one shot: scene cuts excluded)."""
+    crop_bottom: float = 0.0
+    """Share of the frame's height cut at the bottom (a car's bonnet)."""
+    mount: str = "car"
+    show_renders: bool = False
+    """Whether the licence lets the bench's picture show renders of it."""
+    labels: Optional[str] = None
+    """Folder of hand-labelled moving-object masks (same names as the frames), when any exist."""
+
+
+CAPTURES: tuple[Capture, ...] = (
+    Capture("kitti", "kitti", "github:rahulagrawal048/kitti-odometry, kitti/0001-0133.png (commit 403ebe5)",
+            "CC BY-NC-SA 3.0 (KITTI)", "KITTI raw excerpt (Geiger et al.), 133 frames 800x240 from a car-mounted camera",
+            camera_height=1.65, fov_deg=81.0),
+    Capture("lund", "lund/images", "github:mapillary/OpenSfM, data/lund/images (commit 238744c)",
+            "BSD-2-Clause (OpenSfM)", "29 hand-held photos of a street in Lund, 1024x768, EXIF focal and GPS",
+            camera_height=1.6, mount="walk", show_renders=True),
+    Capture("nuscenes", "nuscenes/image_2", "github:youngibby/nuscene, image_2/ (nuScenes CAM_FRONT)",
+            "CC BY-NC-SA 4.0 (nuScenes)", "nuScenes CAM_FRONT 1600x900, first shot (frames 0-52), bonnet cropped",
+            camera_height=1.5, fov_deg=64.0, last=53, crop_bottom=0.1),
+)
+
+
+@dataclass(frozen=True)
+class BenchScale:
+    """Frames, training width and steps of one bench scale."""
+
+    frames: Optional[int]
+    width: Optional[int]
+    """Training width in pixels (the nearest downscale of the processed frames); None: full size."""
+    reference_steps: int
+    streetnerf_steps: int
+    splatfacto_steps: int
+    above_views: int = 12
+    """Bird's-eye views rendered per run for the hole measure (evenly over the augmentation's views)."""
+
+
+SCALES = {
+    "quick": BenchScale(frames=40, width=400, reference_steps=300, streetnerf_steps=500, splatfacto_steps=700, above_views=8),
+    "full": BenchScale(frames=None, width=None, reference_steps=500, streetnerf_steps=1000, splatfacto_steps=1500),
+}
+
+
+def default_data_root() -> Path:
+    import os
+
+    return Path(os.environ.get(DATA_ROOT_ENV) or Path.home() / ".cache" / "nerf2gs" / "real")
+
+
+def capture_frames(cap: Capture, data_root: Path) -> list[Path]:
+    """The capture's frames in name order, ``[first, last)``; one clear line if they are not there."""
+    from nerf2gs_plugin.data.process.frames import IMAGE_EXTS
+    from nerf2gs_plugin.errors import DataError
+
+    folder = Path(data_root) / cap.folder
+    names = sorted(p for p in folder.glob("*") if p.suffix.lower() in IMAGE_EXTS) if folder.is_dir() else []
+    names = names[cap.first:cap.last]
+    if len(names) < MIN_FRAMES:
+        raise DataError(f"capture '{cap.name}': frames missing ({len(names)} found); fetch {cap.fetch} into this folder (the bench does not download)",
+                        folder)
+    return names
+
+
+def stage_frames(cap: Capture, frames: Sequence[Path], out: Path, count: Optional[int]) -> list[Path]:
+    """The first ``count`` frames (consecutive: neighbours keep their overlap) copied into ``out``;
+    cropped ones rewritten, the rest copied byte for byte (their EXIF focal stays)."""
+    import cv2
+
+    out.mkdir(parents=True, exist_ok=True)
+    picked = list(frames)[:count] if count else list(frames)
+    staged = []
+    for src in picked:
+        dst = out / src.name
+        if not dst.is_file():
+            if cap.crop_bottom > 0:
+                img = cv2.imread(str(src))
+                keep = int(round(img.shape[0] * (1.0 - cap.crop_bottom)))
+                tmp = dst.with_name(f".{dst.stem}.tmp{dst.suffix}")
+                cv2.imwrite(str(tmp), img[:keep])
+                tmp.replace(dst)
+            else:
+                shutil.copyfile(src, dst)
+        staged.append(dst)
+    return staged
+
+
+def downscale_for(width_px: int, scale: BenchScale) -> float:
+    """The integer downscale that brings ``width_px`` nearest the scale's training width (>= 1)."""
+    if scale.width is None:
+        return 1.0
+    return float(max(1, round(width_px / scale.width)))
+
+
+# ----------------------------------------------------------------------------- measures from above
+def hole_fraction(accumulations: Sequence) -> float:
+    """Share of all pixels of the renders whose accumulation is below 0.5 (the render sees through the model)."""
+    holes = pixels = 0
+    for acc in accumulations:
+        a = acc.reshape(acc.shape[0], acc.shape[1], -1)[..., 0]
+        holes += int((a < HOLE_ACCUMULATION).sum())
+        pixels += a.numel()
+    return holes / max(pixels, 1)
+
+
+def above_cameras(run, delta_h: float, theta_pitch: float, views: int):
+    """``views`` of the augmentation's own bird's-eye cameras (over the training cameras), evenly spread."""
+    import torch
+
+    from nerf2gs_plugin.augment.config import AugmentConfig
+    from nerf2gs_plugin.augment.datamanager import bev_cameras
+
+    td = run.pipeline.datamanager.train_data
+    cams = bev_cameras(td.cameras, td.up, float(td.metres_to_world(delta_h)), theta_pitch,
+                       pitch_mode=AugmentConfig().pitch_mode)
+    idx = torch.linspace(0, len(cams) - 1, min(views, len(cams))).round().long().unique()
+    return cams[idx]
+
+
+def holes_from_above(run_dir: Path, delta_h: float, theta_pitch: float, views: int) -> tuple[float, list]:
+    """A run's hole fraction on the bird's-eye cameras, and its RGB renders (for the picture)."""
+    import torch
+
+    from nerf2gs_plugin.runs.load import load_run
+
+    run = load_run(run_dir)
+    run.model.eval()
+    cams = above_cameras(run, delta_h, theta_pitch, views)
+    accs, rgbs = [], []
+    with torch.no_grad():
+        for i in range(len(cams)):
+            out = run.model.render_camera(cams[i:i + 1])
+            accs.append(out["accumulation"].cpu())
+            rgbs.append(out["rgb"].clamp(0, 1).cpu())
+    return hole_fraction(accs), rgbs
+
+
+# ----------------------------------------------------------------------------- one capture
+def capture_summary(cap: Capture, doc: dict, holes: dict[str, Optional[float]]) -> dict:
+    """The per-capture record of the bench from ``run_real_photos``' document and the holes from above."""
+    p, res = doc["process"], doc["results"]
+
+    def psnr(label: str) -> Optional[float]:
+        r = res.get(label) or {}
+        return None if r.get("failed") else (r.get("results") or {}).get("test", {}).get("psnr")
+
+    target, augmented = psnr(TARGET), psnr(AUGMENTED)
+    stages = {"process": doc["stage_seconds"].get("process"), "masks": doc["stage_seconds"].get("masks"),
+              **{label: doc["stage_seconds"].get(f"train + eval: {label}") for label in (REFERENCE, TARGET, AUGMENTED)}}
+    return {
+        "capture": cap.name, "mount": cap.mount, "licence": cap.licence, "provenance": cap.provenance, "fetch": cap.fetch,
+        "frames": p["frames"], "registered_fraction": p["registered"] / max(p["frames"], 1),
+        "metres_per_unit": p["metres_per_unit"], "scale_source": p["scale_source"],
+        "stage_seconds": stages, "sfm_stage_seconds": p["stage_seconds"],
+        "masks_coverage": (doc.get("masks") or {}).get("coverage"),
+        "psnr": {REFERENCE: psnr(REFERENCE), TARGET: target, AUGMENTED: augmented},
+        "psnr_delta": None if target is None or augmented is None else augmented - target,
+        # static pixels need moving-object labels of the held-out frames: none of these captures has them
+        "static_psnr": None, "static_psnr_delta": None, "moving_iou": None,
+        "bev_hole_fraction": {"target": holes.get(TARGET), "augmented": holes.get(AUGMENTED), "reference": holes.get(REFERENCE)},
+        "wall_seconds": doc["wall_seconds"],
+    }
+
+
+def run_capture(cap: Capture, data_root: Path, runs_root: Path, scale: BenchScale, rerun: bool = False,
+                log: Callable[[str], None] = print) -> tuple[dict, dict]:
+    """One capture through the whole path; its record and the renders from above per run."""
+    import cv2
+
+    from nerf2gs_bench.real_photos import RealPhotosOptions, run_real_photos
+    from nerf2gs_plugin.augment.config import AugmentConfig
+
+    frames = capture_frames(cap, data_root)
+    root = Path(runs_root) / STEM / cap.name
+    staged = stage_frames(cap, frames, root / "frames", scale.frames)
+    width = cv2.imread(str(staged[0])).shape[1]
+    aug = AugmentConfig()
+    opts = RealPhotosOptions(images=root / "frames", provenance=f"{cap.provenance}; {cap.fetch}; {cap.licence}",
+                             camera_height=cap.camera_height, fov_deg=cap.fov_deg, downscale=downscale_for(min(width, 1600), scale),
+                             reference_steps=scale.reference_steps, streetnerf_steps=scale.streetnerf_steps,
+                             splatfacto_steps=scale.splatfacto_steps, delta_h=aug.delta_h, theta_pitch=aug.theta_pitch)
+    doc = run_real_photos(opts, runs_root / STEM, root / "results", rerun=rerun, log=log, name=cap.name)
+    holes: dict[str, Optional[float]] = {}
+    renders: dict[str, list] = {}
+    t0 = time.perf_counter()
+    for label in (TARGET, AUGMENTED, REFERENCE):
+        r = doc["results"].get(label) or {}
+        if r.get("failed") or not r.get("run_dir"):
+            holes[label] = None
+            continue
+        holes[label], renders[label] = holes_from_above(Path(r["run_dir"]), opts.delta_h, opts.theta_pitch, scale.above_views)
+        log(f"[bench] {cap.name}: {label} holes from above {100 * holes[label]:.1f}%")
+    doc["stage_seconds"]["holes from above"] = round(time.perf_counter() - t0, 1)
+    summary = capture_summary(cap, doc, holes)
+    summary["stage_seconds"]["holes from above"] = doc["stage_seconds"]["holes from above"]
+    summary["options"] = {"frames_used": len(staged), "downscale": opts.downscale, "delta_h": opts.delta_h,
+                          "theta_pitch": opts.theta_pitch, "steps": {"reference": scale.reference_steps,
+                                                                     REFERENCE: scale.streetnerf_steps, TARGET: scale.splatfacto_steps}}
+    return summary, renders
+
+
+# ----------------------------------------------------------------------------- the bench
+def run(names: Sequence[str], data_root: Path, runs_root: Path, out_dir: Path, scale_name: str = "quick",
+        rerun: bool = False, log: Callable[[str], None] = print) -> dict:
+    """Every named capture; writes ``real_captures.{json,md,png}`` into ``out_dir``; returns the document."""
+    from nerf2gs_plugin.errors import ConfigError
+
+    by_name = {c.name: c for c in CAPTURES}
+    unknown = [n for n in names if n not in by_name]
+    if unknown:
+        raise ConfigError(f"--captures: unknown capture '{unknown[0]}' (known: {', '.join(by_name)})")
+    caps = [by_name[n] for n in names]
+    for cap in caps:  # all missing frames named before hours of training
+        capture_frames(cap, data_root)
+    scale = SCALES[scale_name]
+    records, pictures = [], {}
+    for cap in caps:
+        record, renders = run_capture(cap, data_root, runs_root, scale, rerun=rerun, log=log)
+        records.append(record)
+        if cap.show_renders:
+            pictures[cap.name] = renders
+    doc = {"scale": scale_name, "scale_settings": scale.__dict__, "captures": records}
+    write_results(Path(out_dir), doc, pictures)
+    return doc
+
+
+def write_results(out_dir: Path, doc: dict, pictures: dict[str, dict[str, list]]) -> None:
+    from nerf2gs_bench.machine import machine_info
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    doc["machine"] = machine_info()
+    doc["figure"] = figure(doc, pictures, out_dir / f"{STEM}.png")
+    atomic_write_text(out_dir / f"{STEM}.json", json.dumps(doc, indent=1, default=str))
+    atomic_write_text(out_dir / f"{STEM}.md", results_md(doc))
+
+
+def figure(doc: dict, pictures: dict[str, dict[str, list]], path: Path) -> str:
+    """Holes from above per capture (bars), then, for captures whose licence allows it, the target alone
+    and with NeRF views side by side from the same bird's-eye cameras."""
+    from nerf2gs_plugin.utils.plotting import pyplot, save_figure
+
+    plt = pyplot()
+    rows = [(name, r) for name, r in pictures.items() if r.get(TARGET) and r.get(AUGMENTED)]
+    n_views = 2
+    fig = plt.figure(figsize=(3.2 * n_views * 2, 2.6 + 2.0 * len(rows)))
+    grid = fig.add_gridspec(1 + len(rows), n_views * 2, height_ratios=[1.3] + [1.0] * len(rows))
+    ax = fig.add_subplot(grid[0, :])
+    caps = doc["captures"]
+    xs = range(len(caps))
+    for off, key, colour in ((-0.2, "target", "tab:red"), (0.2, "augmented", "tab:blue")):
+        vals = [100 * (c["bev_hole_fraction"][key] or 0.0) for c in caps]
+        ax.bar([x + off for x in xs], vals, width=0.4, color=colour, label=f"{TARGET}" if key == "target" else AUGMENTED)
+    ax.set_xticks(list(xs), [c["capture"] for c in caps])
+    ax.set_ylabel("holes from above (% pixels, acc < 0.5)")
+    ax.legend(fontsize=8)
+    for r, (name, renders) in enumerate(rows, start=1):
+        views = renders[TARGET]
+        pick = sorted({0, len(views) // 2})[:n_views]
+        for k, v in enumerate(pick):
+            for j, label in enumerate((TARGET, AUGMENTED)):
+                a = fig.add_subplot(grid[r, 2 * k + j])
+                a.imshow(renders[label][v].numpy())
+                a.set_xticks([])
+                a.set_yticks([])
+                a.set_title(f"{name}: {label}", fontsize=8)
+    fig.suptitle(f"Real captures from above ({doc['scale']} scale); renders shown only where the licence allows", fontsize=10)
+    fig.tight_layout()
+    save_figure(fig, path)
+    return str(path)
+
+
+def _f(v: Optional[float], fmt: str = "{:.2f}") -> str:
+    return "n/a" if v is None else fmt.format(v)
+
+
+def results_md(doc: dict) -> str:
+    from nerf2gs_bench.machine import machine_line
+
+    s = doc["scale_settings"]
+    lines = [f"# Real captures through the whole path (`ns2gs-bench real-captures --scale {doc['scale']}`)", "",
+             f"Machine: {machine_line(doc.get('machine'))}", ""]
+    if doc["scale"] == "quick":
+        lines += [f"**Quick scale**: the first {s['frames']} frames of each capture at about {s['width']} px wide, reference "
+                  f"{s['reference_steps']} / StreetNeRF {s['streetnerf_steps']} / Splatfacto {s['splatfacto_steps']} steps: "
+                  "a check of the path and of the direction of each measure, not the method's quality at full scale.", ""]
+    lines += ["Every 8th frame is held out of every run. Holes from above: share of pixels with accumulation < 0.5 "
+              "rendered from the augmentation's own bird's-eye cameras (same height and pitch as the training views).", "",
+              "| capture | registered | PSNR StreetNeRF | PSNR splatfacto | PSNR + NeRF views | delta | static delta | "
+              "holes target | holes + NeRF views | holes StreetNeRF | moving IoU |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for c in doc["captures"]:
+        p, h = c["psnr"], c["bev_hole_fraction"]
+        lines.append(f"| {c['capture']} | {100 * c['registered_fraction']:.0f}% | {_f(p[REFERENCE])} | {_f(p[TARGET])} | "
+                     f"{_f(p[AUGMENTED])} | {_f(c['psnr_delta'], '{:+.2f}')} | {_f(c['static_psnr_delta'], '{:+.2f}')} | "
+                     f"{_f(h['target'] and 100 * h['target'], '{:.1f}%')} | {_f(h['augmented'] and 100 * h['augmented'], '{:.1f}%')} | "
+                     f"{_f(h['reference'] and 100 * h['reference'], '{:.1f}%')} | {_f(c['moving_iou'], '{:.2f}')} |")
+    lines += ["", "Static PSNR and moving-object IoU need hand labels of moving objects; none of these captures has "
+              "them yet (n/a).", "", "## Captures, provenance and licence", ""]
+    for c in doc["captures"]:
+        st = ", ".join(f"{k} {_f(v, '{:.0f}')}" for k, v in c["stage_seconds"].items())
+        cov = ", ".join(f"{k} {100 * v:.1f}%" for k, v in (c.get("masks_coverage") or {}).items())
+        lines += [f"- **{c['capture']}** ({c['mount']}-mounted): {c['provenance']}. Source: {c['fetch']}. Licence: {c['licence']}. "
+                  f"{c['options']['frames_used']} frames used, downscale {c['options']['downscale']:g}; "
+                  f"{c['metres_per_unit']:.4g} m per SfM unit ({c['scale_source']}). Seconds: {st}. Masks' coverage: {cov or 'n/a'}."]
+    lines += ["", f"Picture: `{STEM}.png`: holes from above per capture; renders only of captures whose licence allows "
+              "(KITTI and nuScenes are non-commercial, share-alike: no images or renders of them are committed)."]
+    return "\n".join(lines) + "\n"
