@@ -16,6 +16,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("runner",),  # training, evaluating and writing a bench's results
     ("paper", "speed_quality", "size", "stability", "raster", "field", "faults", "faults_capture", "real", "real_photos", "scale",
      "blocks", "enhancer", "demo", "plans"),  # plans: the validation studies' runner
+    ("real_captures",),  # each capture through the real-photos bench
     ("cli",),
 ]
 RANK = {name: i for i, names in enumerate(LAYERS) for name in names}
