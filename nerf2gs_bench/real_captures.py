@@ -12,6 +12,7 @@ downloads: it reads frames fetched beforehand under ``--data-root`` and names th
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import time
 from dataclasses import dataclass, field
@@ -88,8 +89,6 @@ SCALES = {
 
 
 def default_data_root() -> Path:
-    import os
-
     return Path(os.environ.get(DATA_ROOT_ENV) or Path.home() / ".cache" / "nerf2gs" / "real")
 
 
@@ -258,13 +257,15 @@ def run(names: Sequence[str], data_root: Path, runs_root: Path, out_dir: Path, s
     for cap in caps:  # all missing frames named before hours of training
         capture_frames(cap, data_root)
     scale = SCALES[scale_name]
+    load_start = os.getloadavg()[0]  # the seconds mean little on a shared machine without it
     records, pictures = [], {}
     for cap in caps:
         record, renders = run_capture(cap, data_root, runs_root, scale, rerun=rerun, log=log)
         records.append(record)
         if cap.show_renders:
             pictures[cap.name] = renders
-    doc = {"scale": scale_name, "scale_settings": scale.__dict__, "captures": records}
+    doc = {"scale": scale_name, "scale_settings": scale.__dict__, "captures": records,
+           "load_average": {"start": load_start, "end": os.getloadavg()[0]}}
     write_results(Path(out_dir), doc, pictures)
     return doc
 
@@ -318,12 +319,36 @@ def _f(v: Optional[float], fmt: str = "{:.2f}") -> str:
     return "n/a" if v is None else fmt.format(v)
 
 
+def target_lines(captures: Sequence[dict]) -> list[str]:
+    """The street-level and from-above targets per capture, measured (all pixels where no labels exist)."""
+    out = []
+    for c in captures:
+        d = c["static_psnr_delta"] if c["static_psnr_delta"] is not None else c["psnr_delta"]
+        h = c["bev_hole_fraction"]
+        parts = []
+        if d is not None:
+            over = "static pixels" if c["static_psnr_delta"] is not None else "all pixels, no labels"
+            parts.append(f"PSNR with NeRF views {d:+.2f} dB against without ({over}; target >= -0.3: {'met' if d >= -0.3 else 'not met'})")
+        if h["target"] is not None and h["augmented"] is not None:
+            ratio = h["augmented"] / h["target"] if h["target"] > 0 else 0.0
+            parts.append(f"holes from above {ratio:.2f}x the target alone's (target <= 0.2x: {'met' if ratio <= 0.2 else 'not met'})")
+        if parts:
+            out.append(f"- {c['capture']}: " + "; ".join(parts) + ".")
+    return ["Targets (street level keeps its quality; holes from above at most a fifth):", ""] + out if out else []
+
+
+def _load_note(load: Optional[dict]) -> str:
+    if not load:
+        return ""
+    return f" (1-minute load average {load['start']:.1f} at the start, {load['end']:.1f} at the end: the seconds are on a shared machine)"
+
+
 def results_md(doc: dict) -> str:
     from nerf2gs_bench.machine import machine_line
 
     s = doc["scale_settings"]
     lines = [f"# Real captures through the whole path (`ns2gs-bench real-captures --scale {doc['scale']}`)", "",
-             f"Machine: {machine_line(doc.get('machine'))}", ""]
+             f"Machine: {machine_line(doc.get('machine'))}" + _load_note(doc.get("load_average")), ""]
     if doc["scale"] == "quick":
         lines += [f"**Quick scale**: the first {s['frames']} frames of each capture at about {s['width']} px wide, reference "
                   f"{s['reference_steps']} / StreetNeRF {s['streetnerf_steps']} / Splatfacto {s['splatfacto_steps']} steps: "
@@ -338,6 +363,7 @@ def results_md(doc: dict) -> str:
                      f"{_f(p[AUGMENTED])} | {_f(c['psnr_delta'], '{:+.2f}')} | {_f(c['static_psnr_delta'], '{:+.2f}')} | "
                      f"{_f(h['target'] and 100 * h['target'], '{:.1f}%')} | {_f(h['augmented'] and 100 * h['augmented'], '{:.1f}%')} | "
                      f"{_f(h['reference'] and 100 * h['reference'], '{:.1f}%')} | {_f(c['moving_iou'], '{:.2f}')} |")
+    lines += [""] + target_lines(doc["captures"])
     lines += ["", "Static PSNR and moving-object IoU need hand labels of moving objects; none of these captures has "
               "them yet (n/a).", "", "## Captures, provenance and licence", ""]
     for c in doc["captures"]:
