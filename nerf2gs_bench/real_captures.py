@@ -293,12 +293,15 @@ def figure(doc: dict, pictures: dict[str, dict[str, list]], path: Path) -> str:
     ax = fig.add_subplot(grid[0, :])
     caps = doc["captures"]
     xs = range(len(caps))
-    for off, key, colour in ((-0.2, "target", "tab:red"), (0.2, "augmented", "tab:blue")):
+    for off, key, label, colour in ((-0.25, "target", TARGET, "tab:red"), (0.0, "augmented", AUGMENTED, "tab:blue"),
+                                    (0.25, "reference", REFERENCE, "tab:gray")):
         vals = [100 * (c["bev_hole_fraction"][key] or 0.0) for c in caps]
-        ax.bar([x + off for x in xs], vals, width=0.4, color=colour, label=f"{TARGET}" if key == "target" else AUGMENTED)
+        ax.bar([x + off for x in xs], vals, width=0.25, color=colour, label=label)
     ax.set_xticks(list(xs), [c["capture"] for c in caps])
-    ax.set_ylabel("holes from above (% pixels, acc < 0.5)")
-    ax.legend(fontsize=8)
+    ax.set_xlim(-0.6, len(caps) - 0.4 + 1.0)  # room on the right for the legend
+    ax.set_ylabel("holes from above (%)", fontsize=8)
+    ax.legend(fontsize=8, loc="upper right")
+    ax.set_title("share of pixels with accumulation < 0.5 from the augmentation's bird's-eye cameras", fontsize=8)
     for r, (name, renders) in enumerate(rows, start=1):
         views = renders[TARGET]
         pick = sorted({0, len(views) // 2})[:n_views]
