@@ -372,9 +372,10 @@ def results_md(doc: dict) -> str:
     for c in doc["captures"]:
         st = ", ".join(f"{k} {_f(v, '{:.0f}')}" for k, v in c["stage_seconds"].items())
         cov = ", ".join(f"{k} {100 * v:.1f}%" for k, v in (c.get("masks_coverage") or {}).items())
-        lines += [f"- **{c['capture']}** ({c['mount']}-mounted): {c['provenance']}. Source: {c['fetch']}. Licence: {c['licence']}. "
+        lines += [f"- **{c['capture']}** ({c['mount']}): {c['provenance']}. Source: {c['fetch']}. Licence: {c['licence']}. "
                   f"{c['options']['frames_used']} frames used, downscale {c['options']['downscale']:g}; "
                   f"{c['metres_per_unit']:.4g} m per SfM unit ({c['scale_source']}). Seconds: {st}. Masks' coverage: {cov or 'n/a'}."]
+    lines += [f"- {n}" for n in doc.get("notes", [])]
     lines += ["", f"Picture: `{STEM}.png`: holes from above per capture; renders only of captures whose licence allows "
               "(KITTI and nuScenes are non-commercial, share-alike: no images or renders of them are committed)."]
     return "\n".join(lines) + "\n"
