@@ -23,7 +23,6 @@ from nerf2gs_plugin.utils.io import atomic_write_text
 
 STEM = "real_captures"
 TARGET, AUGMENTED, REFERENCE = "splatfacto", "splatfacto + NeRF views", "StreetNeRF"
-HOLE_ACCUMULATION = 0.5
 DATA_ROOT_ENV = "NERF2GS_REAL_DATA"
 MIN_FRAMES = 3  # fewer cannot make a held-out split and a two-view SfM
 
@@ -138,25 +137,29 @@ def downscale_for(width_px: int, scale: BenchScale) -> float:
 
 # ----------------------------------------------------------------------------- measures from above
 def hole_fraction(accumulations: Sequence) -> float:
-    """Share of all pixels of the renders whose accumulation is below 0.5 (the render sees through the model)."""
+    """Share of all pixels of the renders that are holes (``ns2gs-render``'s measure: accumulation below 0.5)."""
+    from nerf2gs_plugin.render.measures import hole_mask
+
     holes = pixels = 0
     for acc in accumulations:
-        a = acc.reshape(acc.shape[0], acc.shape[1], -1)[..., 0]
-        holes += int((a < HOLE_ACCUMULATION).sum())
-        pixels += a.numel()
+        h = hole_mask(acc if acc.dim() == 3 else acc[..., None])
+        holes += int(h.sum())
+        pixels += h.numel()
     return holes / max(pixels, 1)
 
 
 def above_cameras(run, delta_h: float, theta_pitch: float, views: int):
     """``views`` of the augmentation's own bird's-eye cameras (over the training cameras), evenly spread."""
+    import dataclasses
+
     import torch
 
     from nerf2gs_plugin.augment.config import AugmentConfig
-    from nerf2gs_plugin.augment.datamanager import bev_cameras
+    from nerf2gs_plugin.augment.geometry import ViewGeometry
 
     td = run.pipeline.datamanager.train_data
-    cams = bev_cameras(td.cameras, td.up, float(td.metres_to_world(delta_h)), theta_pitch,
-                       pitch_mode=AugmentConfig().pitch_mode)
+    geometry = ViewGeometry.of(dataclasses.replace(AugmentConfig(), delta_h=delta_h, theta_pitch=theta_pitch))
+    cams = geometry.cameras(td.cameras, td)
     idx = torch.linspace(0, len(cams) - 1, min(views, len(cams))).round().long().unique()
     return cams[idx]
 
