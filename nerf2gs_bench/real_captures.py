@@ -209,6 +209,15 @@ def capture_summary(cap: Capture, doc: dict, holes: dict[str, Optional[float]]) 
     }
 
 
+def failed_record(cap: Capture, why: str) -> dict:
+    """The record of a capture whose path stopped (e.g. too few frames registered): every figure null."""
+    return {"capture": cap.name, "mount": cap.mount, "licence": cap.licence, "provenance": cap.provenance, "fetch": cap.fetch,
+            "failed": why, "registered_fraction": None, "stage_seconds": {}, "masks_coverage": None,
+            "psnr": {REFERENCE: None, TARGET: None, AUGMENTED: None}, "psnr_delta": None, "static_psnr": None,
+            "static_psnr_delta": None, "moving_iou": None,
+            "bev_hole_fraction": {"target": None, "augmented": None, "reference": None}}
+
+
 def run_capture(cap: Capture, data_root: Path, runs_root: Path, scale: BenchScale, rerun: bool = False,
                 log: Callable[[str], None] = print) -> tuple[dict, dict]:
     """One capture through the whole path; its record and the renders from above per run."""
@@ -250,7 +259,7 @@ def run_capture(cap: Capture, data_root: Path, runs_root: Path, scale: BenchScal
 def run(names: Sequence[str], data_root: Path, runs_root: Path, out_dir: Path, scale_name: str = "quick",
         rerun: bool = False, log: Callable[[str], None] = print) -> dict:
     """Every named capture; writes ``real_captures.{json,md,png}`` into ``out_dir``; returns the document."""
-    from nerf2gs_plugin.errors import ConfigError
+    from nerf2gs_plugin.errors import ConfigError, UserError
 
     by_name = {c.name: c for c in CAPTURES}
     unknown = [n for n in names if n not in by_name]
@@ -263,7 +272,12 @@ def run(names: Sequence[str], data_root: Path, runs_root: Path, out_dir: Path, s
     load_start = os.getloadavg()[0]  # the seconds mean little on a shared machine without it
     records, pictures = [], {}
     for cap in caps:
-        record, renders = run_capture(cap, data_root, runs_root, scale, rerun=rerun, log=log)
+        try:
+            record, renders = run_capture(cap, data_root, runs_root, scale, rerun=rerun, log=log)
+        except UserError as e:  # a capture SfM cannot register is a result of the bench, not its end
+            log(f"[bench] {cap.name}: failed: {e}")
+            records.append(failed_record(cap, str(e)))
+            continue
         records.append(record)
         if cap.show_renders:
             pictures[cap.name] = renders
@@ -365,6 +379,9 @@ def results_md(doc: dict) -> str:
               "holes target | holes + NeRF views | holes StreetNeRF | moving IoU |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for c in doc["captures"]:
         p, h = c["psnr"], c["bev_hole_fraction"]
+        if c.get("failed"):
+            lines.append(f"| {c['capture']} | failed: {c['failed']} |" + " |" * 9)
+            continue
         lines.append(f"| {c['capture']} | {100 * c['registered_fraction']:.0f}% | {_f(p[REFERENCE])} | {_f(p[TARGET])} | "
                      f"{_f(p[AUGMENTED])} | {_f(c['psnr_delta'], '{:+.2f}')} | {_f(c['static_psnr_delta'], '{:+.2f}')} | "
                      f"{_f(h['target'] and 100 * h['target'], '{:.1f}%')} | {_f(h['augmented'] and 100 * h['augmented'], '{:.1f}%')} | "
@@ -373,6 +390,10 @@ def results_md(doc: dict) -> str:
     lines += ["", "Static PSNR and moving-object IoU need hand labels of moving objects; none of these captures has "
               "them yet (n/a).", "", "## Captures, provenance and licence", ""]
     for c in doc["captures"]:
+        if c.get("failed"):
+            lines += [f"- **{c['capture']}** ({c['mount']}): {c['provenance']}. Source: {c['fetch']}. Licence: {c['licence']}. "
+                      f"Stopped: {c['failed']}"]
+            continue
         st = ", ".join(f"{k} {_f(v, '{:.0f}')}" for k, v in c["stage_seconds"].items())
         cov = ", ".join(f"{k} {100 * v:.1f}%" for k, v in (c.get("masks_coverage") or {}).items())
         lines += [f"- **{c['capture']}** ({c['mount']}): {c['provenance']}. Source: {c['fetch']}. Licence: {c['licence']}. "

@@ -112,3 +112,25 @@ def test_unknown_capture_is_refused_before_any_work(tmp_path):
 
     with pytest.raises(ConfigError, match="unknown capture 'nope'"):
         rc.run(["nope"], tmp_path, tmp_path, tmp_path)
+
+
+def test_a_capture_that_fails_is_recorded_and_the_bench_goes_on(tmp_path, monkeypatch):
+    """SfM that registers too few frames of one capture: that capture's record says why, its figures are
+    null, and the JSON/Markdown are still written."""
+    import dataclasses
+
+    from nerf2gs_plugin.errors import DataError
+
+    def failing_real_photos(opts, runs_root, out_dir, rerun=False, log=print, name=None):
+        raise DataError(f"{opts.images}: registration failed: only 3 of 10 frames registered")
+
+    monkeypatch.setattr("nerf2gs_bench.real_photos.run_real_photos", failing_real_photos)
+    cap = rc.Capture("standin", "standin", "tests", "CC0", "synthetic stand-in", camera_height=1.5, show_renders=True)
+    monkeypatch.setattr(rc, "CAPTURES", (cap,))
+    monkeypatch.setattr(rc, "SCALES", {"quick": dataclasses.replace(rc.SCALES["quick"], above_views=3)})
+    _frames(tmp_path / "data" / "standin")
+    rc.run(["standin"], tmp_path / "data", tmp_path / "runs", tmp_path / "out", "quick", log=lambda s: None)
+    c = json.loads((tmp_path / "out" / "real_captures.json").read_text())["captures"][0]
+    assert "only 3 of 10 frames registered" in c["failed"] and c["psnr_delta"] is None
+    assert c["bev_hole_fraction"] == {"target": None, "augmented": None, "reference": None}
+    assert "failed: " in (tmp_path / "out" / "real_captures.md").read_text()
