@@ -24,6 +24,20 @@ def _mean_std(values: list[float]) -> tuple[Optional[float], Optional[float]]:
     return float(statistics.fmean(values)), float(statistics.pstdev(values)) if len(values) > 1 else 0.0
 
 
+def masked_psnr(pred: torch.Tensor, gt: torch.Tensor, mask: torch.Tensor) -> Optional[float]:
+    """PSNR over the pixels where ``mask`` ([H, W] bool) holds; None when it holds nowhere."""
+    m = mask.to(pred.device)
+    return float(psnr(pred[m], gt.to(pred.device)[m])) if bool(m.any()) else None
+
+
+def transient_labelled(dm, split: str) -> list[bool]:
+    """Per image of ``split``: whether a moving-object mask file exists for it (the image set gives an
+    unlabelled image an all-false mask, which would pass it off as wholly static)."""
+    outputs, _ = dm.eval_split(split)
+    files = outputs.mask_filenames.get("transient")
+    return [f is not None for f in files] if files else [False] * len(outputs)
+
+
 def timed_render(model, camera) -> tuple[dict, float]:
     """``model.render_camera(camera)`` and its wall time (synchronised on CUDA)."""
     cuda = camera.device.type == "cuda"
@@ -82,7 +96,9 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
     """nerfstudio ``ns-eval``-style results for every requested split (all the data has by default).
 
     Per split: PSNR/SSIM/LPIPS mean and std (LPIPS ``None`` when its weights are missing), PSNR over
-    the ground-mask pixels (``psnr_ground``, ``None`` without ground masks) and the
+    the ground-mask pixels (``psnr_ground``, ``None`` without ground masks), PSNR over the static pixels
+    (outside the moving-object mask) of the images that have one (``static_psnr``, over
+    ``static_psnr_images`` images; ``None`` without such masks) and the
     median render FPS of its images (the run's first render excluded as warm-up); top level: the
     median FPS of repeated renders of one camera, model size (primitives, parameters, MB of state
     and of the checkpoint file) and the training time recorded in the checkpoint. With
@@ -101,8 +117,9 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
     fps, fps_resolution = None, None
     warm = False
     for name in names:
-        rows: dict[str, list[float]] = {**{metric: [] for metric in IMAGE_METRICS}, "lpips": [], "psnr_ground": []}
+        rows: dict[str, list[float]] = {**{metric: [] for metric in IMAGE_METRICS}, "lpips": [], "psnr_ground": [], "static_psnr": []}
         shown, times, resolutions = [], [], []
+        labelled = transient_labelled(dm, name)
         for i, (camera, batch) in enumerate(dm.eval_images(name)):
             if max_images is not None and i >= max_images:
                 break
@@ -115,9 +132,11 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
             for metric, fn in IMAGE_METRICS.items():
                 rows[metric].append(float(fn(pred, gt)))
             ground = batch.get("ground_mask")
-            if ground is not None and bool(ground.any()):  # road + sidewalk only: where the paper's holes are
-                m = ground[..., 0].to(pred.device)
-                rows["psnr_ground"].append(float(psnr(pred[m], gt.to(pred.device)[m])))
+            if ground is not None and (v := masked_psnr(pred, gt, ground[..., 0])) is not None:
+                rows["psnr_ground"].append(v)  # road + sidewalk only: where the paper's holes are
+            moving = batch.get("transient_mask")
+            if moving is not None and labelled[i] and (v := masked_psnr(pred, gt, ~moving[..., 0])) is not None:
+                rows["static_psnr"].append(v)  # the scene without what moves: what a static model can get right
             if lpips_model is not None:
                 rows["lpips"].append(float(lpips_model(pred, gt)))
             if len(shown) < 4:
@@ -134,6 +153,7 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
         for metric, values in rows.items():
             mean, std = _mean_std(values)
             entry[metric], entry[f"{metric}_std"] = mean, std
+        entry["static_psnr_images"] = len(rows["static_psnr"])
         entry["psnr_per_image"] = rows["psnr"]  # in the split's order: a mean over few views hides one lost view
         results[name] = entry
         if render_dir is not None and shown:

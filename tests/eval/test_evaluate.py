@@ -100,6 +100,7 @@ def test_cli_writes_json_and_reports_missing_lpips(tiny_run, tmp_path, monkeypat
     eval_cli.main()
     res = json.loads(out.read_text())
     _check_schema(res, ["bev_1"], lpips=False)
+    assert res["results"]["bev_1"]["static_psnr"] == pytest.approx(res["results"]["bev_1"]["psnr"], abs=1e-4)  # every image labelled, nothing moves
     assert (tmp_path / "r" / "bev_1.png").is_file() and not (tmp_path / "r" / "street.png").exists()
     text = capsys.readouterr().out
     assert "n/a" in text and "LPIPS n/a" in text
@@ -112,3 +113,28 @@ def test_cli_writes_json_and_reports_missing_lpips(tiny_run, tmp_path, monkeypat
 def test_cli_bad_split_is_one_line(tiny_run):
     p = subprocess.run([str(BIN / "ns2gs-eval"), str(tiny_run), "--split", "street,nope"], capture_output=True, text=True, timeout=120)
     assert p.returncode == 2 and "no eval split 'nope'" in p.stderr and "street, bev_1" in p.stderr and "Traceback" not in p.stderr
+
+
+def test_static_psnr_over_labelled_images_only(tiny_run, tmp_path):
+    """PSNR outside a known moving-object mask equals a direct computation; an image without a mask
+    file is left out (not taken as wholly static); a split without any is null."""
+    import shutil
+
+    import cv2
+
+    data = Path(shutil.copytree(load_run(tiny_run).config.data, tmp_path / "scene"))
+    moving = np.zeros((24, 32), np.uint8)
+    moving[4:14, 6:20] = 255
+    cv2.imwrite(str(data / "masks/transient/street_000.png"), moving)
+    (data / "masks/transient/street_001.png").unlink()
+    for name in ("bev_1_000", "bev_1_001"):
+        (data / f"masks/transient/{name}.png").unlink()
+    run = load_run(tiny_run, data=data)
+    res = evaluate_run(run, fps_repeats=1)["results"]
+    cam, batch = next(iter(run.pipeline.datamanager.eval_images("street")))
+    static = ~torch.from_numpy(moving > 0)
+    pred = run.model.render_camera(cam)["rgb"].clamp(0, 1).double().numpy()[static.numpy()]
+    direct = 10 * np.log10(1 / np.mean((pred - batch["image"].double().numpy()[static.numpy()]) ** 2))
+    assert res["street"]["static_psnr_images"] == 1 and res["street"]["static_psnr"] == pytest.approx(direct, abs=1e-3)
+    assert res["street"]["static_psnr"] != pytest.approx(res["street"]["psnr_per_image"][0], abs=1e-3)
+    assert res["bev_1"]["static_psnr"] is None and res["bev_1"]["static_psnr_images"] == 0
