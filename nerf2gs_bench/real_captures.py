@@ -187,11 +187,14 @@ def capture_summary(cap: Capture, doc: dict, holes: dict[str, Optional[float]]) 
     """The per-capture record of the bench from ``run_real_photos``' document and the holes from above."""
     p, res = doc["process"], doc["results"]
 
-    def psnr(label: str) -> Optional[float]:
+    def psnr(label: str, key: str = "psnr") -> Optional[float]:
         r = res.get(label) or {}
-        return None if r.get("failed") else (r.get("results") or {}).get("test", {}).get("psnr")
+        return None if r.get("failed") else (r.get("results") or {}).get("test", {}).get(key)
 
     target, augmented = psnr(TARGET), psnr(AUGMENTED)
+    # ns2gs-eval's PSNR outside the moving-object masks: null unless the held-out frames have masks
+    # (the bench's masks stage makes them for the training frames only)
+    static = {label: psnr(label, "static_psnr") for label in (REFERENCE, TARGET, AUGMENTED)}
     stages = {"process": doc["stage_seconds"].get("process"), "masks": doc["stage_seconds"].get("masks"),
               **{label: doc["stage_seconds"].get(f"train + eval: {label}") for label in (REFERENCE, TARGET, AUGMENTED)}}
     return {
@@ -202,8 +205,9 @@ def capture_summary(cap: Capture, doc: dict, holes: dict[str, Optional[float]]) 
         "masks_coverage": (doc.get("masks") or {}).get("coverage"),
         "psnr": {REFERENCE: psnr(REFERENCE), TARGET: target, AUGMENTED: augmented},
         "psnr_delta": None if target is None or augmented is None else augmented - target,
-        # static pixels need moving-object labels of the held-out frames: none of these captures has them
-        "static_psnr": None, "static_psnr_delta": None, "moving_iou": None,
+        "static_psnr": static,
+        "static_psnr_delta": None if static[TARGET] is None or static[AUGMENTED] is None else static[AUGMENTED] - static[TARGET],
+        "moving_iou": None,
         "bev_hole_fraction": {"target": holes.get(TARGET), "augmented": holes.get(AUGMENTED), "reference": holes.get(REFERENCE)},
         "wall_seconds": doc["wall_seconds"],
     }
@@ -213,8 +217,8 @@ def failed_record(cap: Capture, why: str) -> dict:
     """The record of a capture whose path stopped (e.g. too few frames registered): every figure null."""
     return {"capture": cap.name, "mount": cap.mount, "licence": cap.licence, "provenance": cap.provenance, "fetch": cap.fetch,
             "failed": why, "registered_fraction": None, "stage_seconds": {}, "masks_coverage": None,
-            "psnr": {REFERENCE: None, TARGET: None, AUGMENTED: None}, "psnr_delta": None, "static_psnr": None,
-            "static_psnr_delta": None, "moving_iou": None,
+            "psnr": {REFERENCE: None, TARGET: None, AUGMENTED: None}, "psnr_delta": None,
+            "static_psnr": {REFERENCE: None, TARGET: None, AUGMENTED: None}, "static_psnr_delta": None, "moving_iou": None,
             "bev_hole_fraction": {"target": None, "augmented": None, "reference": None}}
 
 
@@ -387,8 +391,9 @@ def results_md(doc: dict) -> str:
                      f"{_f(h['target'] and 100 * h['target'], '{:.1f}%')} | {_f(h['augmented'] and 100 * h['augmented'], '{:.1f}%')} | "
                      f"{_f(h['reference'] and 100 * h['reference'], '{:.1f}%')} | {_f(c['moving_iou'], '{:.2f}')} |")
     lines += [""] + target_lines(doc["captures"])
-    lines += ["", "Static PSNR and moving-object IoU need hand labels of moving objects; none of these captures has "
-              "them yet (n/a).", "", "## Captures, provenance and licence", ""]
+    lines += ["", "Static delta: PSNR outside the moving-object masks of the held-out frames (masks/transient/); the "
+              "masks stage makes them for the training frames only, so it is n/a unless the held-out frames are labelled. "
+              "Moving-object IoU needs hand labels (n/a without).", "", "## Captures, provenance and licence", ""]
     for c in doc["captures"]:
         if c.get("failed"):
             lines += [f"- **{c['capture']}** ({c['mount']}): {c['provenance']}. Source: {c['fetch']}. Licence: {c['licence']}. "

@@ -37,6 +37,25 @@ def _frames(folder, n=10, h=20, w=40):
         cv2.imwrite(str(folder / f"{i:04d}.png"), np.full((h, w, 3), 10 * i, np.uint8))
 
 
+def test_capture_summary_takes_static_psnr_from_the_eval_results():
+    """The static PSNR and its delta come from ns2gs-eval's ``static_psnr`` of the held-out split; a run
+    whose held-out frames have no moving-object masks (no key, or null) gives null, never all-pixel PSNR."""
+    def doc(static):
+        res = {rc.REFERENCE: {"failed": True}}
+        res.update({lab: {"results": {"test": {"psnr": p, **({"static_psnr": s} if s is not None else {})}}}
+                    for lab, p, s in ((rc.TARGET, 20.0, static[0]), (rc.AUGMENTED, 19.5, static[1]))})
+        return {"process": {"frames": 10, "registered": 10, "metres_per_unit": 1.0, "scale_source": "x", "stage_seconds": {}},
+                "results": res, "stage_seconds": {}, "wall_seconds": 1.0}
+
+    cap = rc.CAPTURES[0]
+    c = rc.capture_summary(cap, doc((21.0, 20.75)), {})
+    assert c["static_psnr"] == {rc.REFERENCE: None, rc.TARGET: 21.0, rc.AUGMENTED: 20.75}
+    assert c["static_psnr_delta"] == pytest.approx(-0.25) and c["psnr_delta"] == pytest.approx(-0.5)
+    assert "static pixels" in rc.target_lines([{**c, "bev_hole_fraction": {"target": None, "augmented": None}}])[2]
+    c = rc.capture_summary(cap, doc((21.0, None)), {})
+    assert c["static_psnr"][rc.AUGMENTED] is None and c["static_psnr_delta"] is None
+
+
 def test_stage_frames_crops_the_bonnet_and_keeps_the_order(tmp_path):
     import cv2
 
