@@ -242,3 +242,18 @@ def test_install_images_replaces_only_what_changed(tmp_path):
     write_downscaled(root, ["a.png", "b.png"])
     assert sorted(p.name for p in (root / "images_4").iterdir()) == ["a.png", "b.png"]
     assert cv2.imread(str(root / "images_2" / "b.png"))[0, 0, 0] == 99
+
+
+@pytest.mark.parametrize("cut", ["in the last frame", "in the frame before"])
+def test_truncated_video_drops_the_half_decoded_frame(tmp_path, cut):
+    video = _write_video(tmp_path / "v.avi", _textured(np.random.default_rng(2), 8))
+    data = video.read_bytes()
+    soi = [m for m in range(len(data) - 1) if data[m:m + 2] == b"\xff\xd8"]  # where each JPEG frame starts
+    k = -1 if cut == "in the last frame" else -2
+    video.write_bytes(data[:(soi[k] + (soi[k + 1] if k == -2 else len(data))) // 2])  # mid-frame
+    with pytest.warns(UserWarning, match=r"v\.avi is truncated .*last frame \(index \d\) is half-decoded and dropped"):
+        rep = extract_video_frames(video, tmp_path / "f", fps=None, num_frames=8, blur_ratio=0.0, max_size=0)
+    assert len(rep.names) == (7 if k == -1 else 6)
+    whole = extract_video_frames(_write_video(tmp_path / "w.avi", _textured(np.random.default_rng(2), 8)), tmp_path / "g",
+                                 fps=None, num_frames=8, blur_ratio=0.0, max_size=0)
+    assert len(whole.names) == 8  # an intact video keeps its last frame
