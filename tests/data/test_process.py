@@ -207,7 +207,7 @@ def test_mapping_retries_loosen_the_initialisation_before_moving_the_pair(tmp_pa
 
     def fake_mapping(database, image_dir, out, options=None, **kw):
         runs.append((options.init_image_id1, options.init_image_id2, options.mapper.init_min_tri_angle,
-                     options.mapper.init_max_forward_motion))
+                     options.mapper.init_max_forward_motion, options.init_num_trials))
         return {}
 
     monkeypatch.setattr(pycolmap, "incremental_mapping", fake_mapping)
@@ -218,6 +218,8 @@ def test_mapping_retries_loosen_the_initialisation_before_moving_the_pair(tmp_pa
     assert runs[0][2] == 16.0 and runs[1][2] == runs[2][2] == 8.0 and runs[1][3] == 0.99
     assert runs[1][:2] == default_pair  # COLMAP still chooses the pair
     assert runs[2][:2] != default_pair and runs[3][:2] not in (default_pair, runs[2][:2])  # then pairs at other points
+    # a pair of ours is not retried 200 times (COLMAP's default: a minute on a 14-frame capture)
+    assert runs[0][4] == runs[1][4] == 200 and runs[2][4] == runs[3][4] <= 5
 
 
 def test_install_images_replaces_only_what_changed(tmp_path):
