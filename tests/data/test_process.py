@@ -207,7 +207,7 @@ def test_mapping_retries_loosen_the_initialisation_before_moving_the_pair(tmp_pa
 
     def fake_mapping(database, image_dir, out, options=None, **kw):
         runs.append((options.init_image_id1, options.init_image_id2, options.mapper.init_min_tri_angle,
-                     options.mapper.init_max_forward_motion))
+                     options.mapper.init_max_forward_motion, options.init_num_trials))
         return {}
 
     monkeypatch.setattr(pycolmap, "incremental_mapping", fake_mapping)
@@ -218,6 +218,8 @@ def test_mapping_retries_loosen_the_initialisation_before_moving_the_pair(tmp_pa
     assert runs[0][2] == 16.0 and runs[1][2] == runs[2][2] == 8.0 and runs[1][3] == 0.99
     assert runs[1][:2] == default_pair  # COLMAP still chooses the pair
     assert runs[2][:2] != default_pair and runs[3][:2] not in (default_pair, runs[2][:2])  # then pairs at other points
+    # a pair of ours is not retried 200 times (COLMAP's default: a minute on a 14-frame capture)
+    assert runs[0][4] == runs[1][4] == 200 and runs[2][4] == runs[3][4] <= 5
 
 
 def test_install_images_replaces_only_what_changed(tmp_path):
@@ -242,3 +244,18 @@ def test_install_images_replaces_only_what_changed(tmp_path):
     write_downscaled(root, ["a.png", "b.png"])
     assert sorted(p.name for p in (root / "images_4").iterdir()) == ["a.png", "b.png"]
     assert cv2.imread(str(root / "images_2" / "b.png"))[0, 0, 0] == 99
+
+
+@pytest.mark.parametrize("cut", ["in the last frame", "in the frame before"])
+def test_truncated_video_drops_the_half_decoded_frame(tmp_path, cut):
+    video = _write_video(tmp_path / "v.avi", _textured(np.random.default_rng(2), 8))
+    data = video.read_bytes()
+    soi = [m for m in range(len(data) - 1) if data[m:m + 2] == b"\xff\xd8"]  # where each JPEG frame starts
+    k = -1 if cut == "in the last frame" else -2
+    video.write_bytes(data[:(soi[k] + (soi[k + 1] if k == -2 else len(data))) // 2])  # mid-frame
+    with pytest.warns(UserWarning, match=r"v\.avi is truncated .*last frame \(index \d\) is half-decoded and dropped"):
+        rep = extract_video_frames(video, tmp_path / "f", fps=None, num_frames=8, blur_ratio=0.0, max_size=0)
+    assert len(rep.names) == (7 if k == -1 else 6)
+    whole = extract_video_frames(_write_video(tmp_path / "w.avi", _textured(np.random.default_rng(2), 8)), tmp_path / "g",
+                                 fps=None, num_frames=8, blur_ratio=0.0, max_size=0)
+    assert len(whole.names) == 8  # an intact video keeps its last frame

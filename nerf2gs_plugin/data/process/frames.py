@@ -58,6 +58,24 @@ def _fit(bgr: np.ndarray, max_size: int) -> np.ndarray:
     return bgr
 
 
+def _cut_off(last: np.ndarray, prev: np.ndarray, index: int, declared: int) -> str:
+    """Why the last decoded frame (``index``) of a video looks cut off, or "": the stream stopped before
+    its header's frame count, or its bottom rows are exactly the previous frame's while those above
+    differ (what a decoder leaves where the data ran out; a constant bar, e.g. letterboxing, is not)."""
+    if declared and index + 1 < declared:
+        return f"it ends after {index + 1} of the {declared} frames its header declares"
+    if last.shape != prev.shape:
+        return ""
+    rows = (last == prev).reshape(last.shape[0], -1).all(axis=1)
+    if rows.all():
+        return ""  # a repeated frame
+    same = last.shape[0] - int(np.flatnonzero(~rows)[-1]) - 1  # identical rows at the bottom
+    tail = last[last.shape[0] - same:]
+    if same >= max(8, last.shape[0] // 16) and float(tail.std()) > 2.0:
+        return f"the bottom {same} rows of its last frame are the previous frame's"
+    return ""
+
+
 @dataclass
 class FrameReport:
     names: list[str]
@@ -91,8 +109,22 @@ def extract_video_frames(video: Path, out_dir: Path, fps: Optional[float], num_f
     task = progress.add_task("frames: decode + pick sharpest", total=total if total < (1 << 31) else None, stats="") if progress else None
     picked: list[tuple[int, float]] = []  # (frame index, sharpness)
     best: tuple[float, int, Optional[np.ndarray]] = (-1.0, -1, None)
-    window, i, frame = 0, 0, first
+    known = total < (1 << 31)
+    window, i, frame, prev = 0, 0, first, first
     while frame is not None:
+        # read one ahead: the last frame of a cut-off file is decoded only down to the cut, the rest
+        # left as the previous frame's pixels (a chimera the SfM cannot place: it retried the mapping
+        # for minutes), so it is dropped
+        ok, ahead = cap.read()
+        ahead = ahead if ok else None
+        if ahead is None and i > 0:
+            why = _cut_off(frame, prev, i, total if known else 0)
+            if why:
+                from nerf2gs_plugin.warn import warn
+
+                warn(f"{video} is truncated ({why})", f"its last frame (index {i}) is half-decoded and dropped")
+                break
+        prev = frame
         w = int(i // step)
         if w != window and best[2] is not None:
             picked.append((best[1], best[0]))
@@ -105,9 +137,7 @@ def extract_video_frames(video: Path, out_dir: Path, fps: Optional[float], num_f
         if task is not None:
             progress.update(task, advance=1, stats=f"{len(picked)} frames kept")
         i += 1
-        ok, frame = cap.read()
-        if not ok:
-            frame = None
+        frame = ahead
     cap.release()
     if best[2] is not None:
         picked.append((best[1], best[0]))

@@ -211,6 +211,10 @@ def _match_loop_pairs(db: Path, names: list[str], opt: SfmOptions, m, pairs_file
     return len(pairs)
 
 
+FIXED_PAIR_TRIALS = 3
+"""Mapping runs from a pair of our choice: tries of that pair (only RANSAC's randomness differs)."""
+
+
 @dataclass
 class MapResult:
     model_dir: Path
@@ -268,6 +272,9 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
         if attempt > 1 and len(ids) > 6:  # its own choice stalled again: start from a pair at another point of the capture
             a = ((attempt - 1) * len(ids)) // (max(opt.mapping_attempts - 1, 2) + 1)
             options.init_image_id1, options.init_image_id2 = ids[a], ids[min(a + 2, len(ids) - 1)]
+            # COLMAP retries a given pair up to init_num_trials (200) times when its model stays too
+            # small: the same pair each time, a minute of mapping on a 14-frame capture for nothing
+            options.init_num_trials = FIXED_PAIR_TRIALS
         count[0] = 0
         shutil.rmtree(work, ignore_errors=True)
         work.mkdir(parents=True)
