@@ -73,3 +73,17 @@ def write_tiny_scene(root: Path, n_train: int = 8, w: int = 32, h: int = 24, tra
             "up": [0, 0, 1], "metres_per_unit": 1.0, "ply_file_path": "points.ply", "frames": frames, "eval_splits": eval_splits}
     (root / "transforms.json").write_text(json.dumps(meta))
     return root
+
+
+def train_tiny_run(data: Path, out_dir: Path, steps: int = 5) -> Path:
+    """A few steps of the voxel-grid method on ``data``: a real run folder for tests of what reads runs."""
+    import dataclasses
+
+    from nerf2gs_plugin.engine.trainer import Trainer
+    from nerf2gs_plugin.registry import get_method
+
+    cfg = dataclasses.replace(get_method("voxel-grid").config, data=data, output_dir=out_dir, max_num_iterations=steps,
+                              steps_per_save=1000, steps_per_eval_image=0, progress=False, timestamp="run")
+    trainer = Trainer(cfg)
+    trainer.setup()
+    return trainer.train()

@@ -1,6 +1,5 @@
 """`ns2gs-viewer RUN --screenshot PNG`: the command that makes the viewer image in docs/, and its bad input."""
 
-import dataclasses
 import socket
 import subprocess
 import sys
@@ -17,14 +16,9 @@ BIN = Path(sys.executable).parent
 
 @pytest.fixture(scope="module")
 def tiny_run(tiny_scene, tmp_path_factory):
-    from nerf2gs_plugin.engine.trainer import Trainer
-    from nerf2gs_plugin.registry import get_method
+    from tiny_scene import train_tiny_run
 
-    cfg = dataclasses.replace(get_method("voxel-grid").config, data=tiny_scene, output_dir=tmp_path_factory.mktemp("runs"),
-                              max_num_iterations=5, steps_per_save=1000, steps_per_eval_image=0, progress=False, timestamp="run")
-    trainer = Trainer(cfg)
-    trainer.setup()
-    return trainer.train()
+    return train_tiny_run(tiny_scene, tmp_path_factory.mktemp("runs"))
 
 
 def _viewer(*args):
