@@ -190,24 +190,29 @@ def test_export_intrinsics_of_every_undistorted_model(model, params):
             pinhole_params(cam)
 
 
-def test_mapping_retries_loosen_the_initialisation_before_moving_the_pair(tmp_path, monkeypatch):
+@pytest.mark.parametrize("known_focal", [False, True])
+def test_mapping_retries_loosen_the_initialisation_before_moving_the_pair(tmp_path, monkeypatch, known_focal):
     """A forward drive of closely spaced frames never reaches COLMAP's 16 deg initial triangulation
     angle: the second run keeps COLMAP's own pair choice under looser thresholds, only later runs
-    start from pairs at other points of the capture; when none registers, one clear error."""
+    start from pairs at other points of the capture; when none registers, one clear error. Retries hold
+    a known focal (EXIF / --fov-deg) fixed; a guessed one stays refined."""
     import pycolmap
 
     from nerf2gs_plugin.data.process.sfm import SfmOptions, reconstruct
 
     db = tmp_path / "database.db"
     with pycolmap.Database.open(str(db)) as d:
-        cam = d.write_camera(pycolmap.Camera.create_from_model_name(1, "SIMPLE_PINHOLE", 100.0, 64, 48))
+        camera = pycolmap.Camera.create_from_model_name(1, "SIMPLE_PINHOLE", 100.0, 64, 48)
+        camera.has_prior_focal_length = known_focal
+        cam = d.write_camera(camera)
         for i in range(12):
             d.write_image(pycolmap.Image(name=f"f{i:03d}.png", camera_id=cam))
-    runs = []
+    runs, refined = [], []
 
     def fake_mapping(database, image_dir, out, options=None, **kw):
         runs.append((options.init_image_id1, options.init_image_id2, options.mapper.init_min_tri_angle,
                      options.mapper.init_max_forward_motion, options.init_num_trials))
+        refined.append((options.ba_refine_focal_length, options.mapper.abs_pose_refine_focal_length))
         return {}
 
     monkeypatch.setattr(pycolmap, "incremental_mapping", fake_mapping)
@@ -220,6 +225,7 @@ def test_mapping_retries_loosen_the_initialisation_before_moving_the_pair(tmp_pa
     assert runs[2][:2] != default_pair and runs[3][:2] not in (default_pair, runs[2][:2])  # then pairs at other points
     # a pair of ours is not retried 200 times (COLMAP's default: a minute on a 14-frame capture)
     assert runs[0][4] == runs[1][4] == 200 and runs[2][4] == runs[3][4] <= 5
+    assert refined == [(True, True)] + [(not known_focal, not known_focal)] * 3
 
 
 def test_install_images_replaces_only_what_changed(tmp_path):

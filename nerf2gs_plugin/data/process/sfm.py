@@ -46,7 +46,8 @@ class SfmOptions:
     """SIFT features per image at most."""
     mapping_attempts: int = 4
     """Incremental mapping runs (at most) while < 90% of frames register: COLMAP's defaults, then its own
-    initial pair under looser initialisation thresholds, then initial pairs at other points of the capture."""
+    initial pair under looser initialisation thresholds, then initial pairs at other points of the capture.
+    Runs after the first hold a known focal (EXIF or --fov-deg) fixed, as --no-refine-intrinsics does."""
     camera_model: str = "SIMPLE_RADIAL"
     """COLMAP camera model estimated by the SfM (one camera shared by all frames)."""
     refine_intrinsics: bool = True
@@ -251,6 +252,7 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
 
     with pycolmap.Database.open(str(db)) as d:
         ids = [int(im.image_id) for im in sorted(d.read_all_images(), key=lambda im: im.name)]
+        known_focal = any(c.has_prior_focal_length for c in d.read_all_cameras())
     best = None
     for attempt in range(max(opt.mapping_attempts, 1)):
         # The incremental mapper can start from a poor initial pair on small or repetitive captures
@@ -259,7 +261,10 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
         options.num_threads = opt.num_threads
         options.multiple_models = True
         options.random_seed = attempt
-        if not opt.refine_intrinsics:
+        # Retries hold a known focal (EXIF or --fov-deg): refined on the first two or three images, focal
+        # and distortion can run away (focal x3, k ~ 1e3) and nothing more registers; which run does that
+        # turns on a few matches that differ from run to run (multi-threaded geometric verification).
+        if not opt.refine_intrinsics or (attempt > 0 and known_focal):
             options.ba_refine_focal_length = options.ba_refine_extra_params = False
             options.mapper.abs_pose_refine_focal_length = options.mapper.abs_pose_refine_extra_params = False
         if attempt > 0:
