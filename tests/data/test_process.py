@@ -228,6 +228,21 @@ def test_mapping_retries_loosen_the_initialisation_before_moving_the_pair(tmp_pa
     assert refined == [(True, True)] + [(not known_focal, not known_focal)] * 3
 
 
+def test_focal_that_ran_away_from_the_known_one_is_caught():
+    """A forward drive can register every frame with half the true focal: that model must not end the retries."""
+    from types import SimpleNamespace
+
+    import pycolmap
+
+    from nerf2gs_plugin.data.process.sfm import focal_ran_away
+
+    def rec(f: float):
+        return SimpleNamespace(cameras={1: pycolmap.Camera.create_from_model_name(1, "SIMPLE_RADIAL", f, 800, 240)})
+
+    assert focal_ran_away(rec(203.0), 468.0) and focal_ran_away(rec(1183.0), 468.0)
+    assert not focal_ran_away(rec(468.0), 468.0) and not focal_ran_away(rec(715.0), 996.0)
+
+
 def test_install_images_replaces_only_what_changed(tmp_path):
     """Unchanged images stay (same inode, copies kept); a changed one is replaced and loses its copies; a
     gone one is removed; write_downscaled then remakes the missing copies and drops the stale ones."""

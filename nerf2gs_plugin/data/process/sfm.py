@@ -47,7 +47,8 @@ class SfmOptions:
     mapping_attempts: int = 4
     """Incremental mapping runs (at most) while < 90% of frames register: COLMAP's defaults, then its own
     initial pair under looser initialisation thresholds, then initial pairs at other points of the capture.
-    Runs after the first hold a known focal (EXIF or --fov-deg) fixed, as --no-refine-intrinsics does."""
+    Runs after the first hold a known focal (EXIF or --fov-deg) fixed, as --no-refine-intrinsics does; a run
+    whose refined focal ran away from the known one (over 2x off) counts as failed."""
     camera_model: str = "SIMPLE_RADIAL"
     """COLMAP camera model estimated by the SfM (one camera shared by all frames)."""
     refine_intrinsics: bool = True
@@ -216,6 +217,16 @@ FIXED_PAIR_TRIALS = 3
 """Mapping runs from a pair of our choice: tries of that pair (only RANSAC's randomness differs)."""
 
 
+FOCAL_RATIO_MAX = 2.0
+"""A refined focal more than this factor from the known one (EXIF / --fov-deg) ran away: a forward drive
+constrains the focal weakly, and the mapper can settle on half of it with every frame registered."""
+
+
+def focal_ran_away(rec, known: float) -> bool:
+    """Whether any camera of ``rec`` has a focal more than :data:`FOCAL_RATIO_MAX` from ``known``."""
+    return any(not known / FOCAL_RATIO_MAX <= c.mean_focal_length() <= known * FOCAL_RATIO_MAX for c in rec.cameras.values())
+
+
 @dataclass
 class MapResult:
     model_dir: Path
@@ -252,7 +263,12 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
 
     with pycolmap.Database.open(str(db)) as d:
         ids = [int(im.image_id) for im in sorted(d.read_all_images(), key=lambda im: im.name)]
-        known_focal = any(c.has_prior_focal_length for c in d.read_all_cameras())
+        priors = [c.mean_focal_length() for c in d.read_all_cameras() if c.has_prior_focal_length]
+    known_focal = priors[0] if priors else None
+
+    def rank(r) -> tuple[bool, int]:  # a model whose focal ran away from the known one ranks below any other
+        return (known_focal is None or not focal_ran_away(r, known_focal), r.num_reg_images())
+
     best = None
     for attempt in range(max(opt.mapping_attempts, 1)):
         # The incremental mapper can start from a poor initial pair on small or repetitive captures
@@ -264,7 +280,7 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
         # Retries hold a known focal (EXIF or --fov-deg): refined on the first two or three images, focal
         # and distortion can run away (focal x3, k ~ 1e3) and nothing more registers; which run does that
         # turns on a few matches that differ from run to run (multi-threaded geometric verification).
-        if not opt.refine_intrinsics or (attempt > 0 and known_focal):
+        if not opt.refine_intrinsics or (attempt > 0 and known_focal is not None):
             options.ba_refine_focal_length = options.ba_refine_extra_params = False
             options.mapper.abs_pose_refine_focal_length = options.mapper.abs_pose_refine_extra_params = False
         if attempt > 0:
@@ -285,9 +301,9 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
         work.mkdir(parents=True)
         models = pycolmap.incremental_mapping(db, image_dir, work, options=options, next_image_callback=on_image)
         for r in models.values():
-            if best is None or r.num_reg_images() > best.num_reg_images():
+            if best is None or rank(r) > rank(best):
                 best = r
-        if best is not None and best.num_reg_images() >= 0.9 * total:
+        if best is not None and best.num_reg_images() >= 0.9 * total and rank(best)[0]:
             break
         if task is not None:
             progress.update(task, completed=0, stats=f"retry {attempt + 1}: {best.num_reg_images() if best else 0} registered")
