@@ -279,7 +279,7 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
         options.random_seed = attempt
         # Retries hold a known focal (EXIF or --fov-deg): refined on the first two or three images, focal
         # and distortion can run away (focal x3, k ~ 1e3) and nothing more registers; which run does that
-        # turns on a few matches that differ from run to run (multi-threaded geometric verification).
+        # turns on a few matches that differ from run to run (multi-threaded matching).
         if not opt.refine_intrinsics or (attempt > 0 and known_focal is not None):
             options.ba_refine_focal_length = options.ba_refine_extra_params = False
             options.mapper.abs_pose_refine_focal_length = options.mapper.abs_pose_refine_extra_params = False
