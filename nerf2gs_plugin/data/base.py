@@ -114,8 +114,7 @@ def build_outputs(
         dataparser_scale=tf.scale,
         metres_per_unit=tf.metres_per_unit,
         up=tf.up,
-        split=split,
-        downscale=1.0,  # the files above are already at the requested size
+        split=split,  # the image files above are already at the requested downscale
     )
 
 

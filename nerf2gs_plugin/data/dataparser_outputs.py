@@ -37,8 +37,6 @@ class DataparserOutputs:
     metres_per_unit: float = 1.0  # metres per unit of the ORIGINAL (un-normalised) data frame
     up: Tensor = field(default_factory=lambda: torch.tensor([0.0, 0.0, 1.0]))  # unit, normalised world
     split: str = "train"
-    # pixel-space image decoding is lazy; the datamanager loads images (downscaled) and caches them
-    downscale: float = 1.0
 
     def metres_to_world(self, metres: float) -> float:
         """A length in metres, in normalised world units."""

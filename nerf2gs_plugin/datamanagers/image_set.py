@@ -106,7 +106,7 @@ def load_image_set(outputs: DataparserOutputs) -> ImageSet:
     """Read every image (and mask) of a split into an ImageSet."""
     images, masks = [], {k: [] for k in MASK_KINDS if k in outputs.mask_filenames}
     for i, path in enumerate(outputs.image_filenames):
-        img = load_image(path, outputs.downscale)
+        img = load_image(path)
         h, w = int(outputs.cameras.height[i]), int(outputs.cameras.width[i])
         if tuple(img.shape[:2]) != (h, w):
             raise DataError(f"image is {img.shape[1]}x{img.shape[0]} but its camera says {w}x{h}", path)
