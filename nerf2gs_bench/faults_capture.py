@@ -346,17 +346,25 @@ def case_process(case: CaptureCase, fx: Fixtures, scratch: Path, rng: random.Ran
                     return "wrong_result", f"{fr['file_path']} is still the old photo"
         return outcome, detail
     if case.fault == "concurrent":
-        rans = run_concurrent("data", [args, args], stagger=case.params.get("stagger", 0.0))
-        outs = [classify(r) for r in rans]
-        bad = [o for o in outs if o[0] not in ("ok", "clean_error")]
-        if bad:
-            return bad[0]
-        if any(o[0] == "ok" for o in outs):
-            problem = check_dataset(out)
-            if problem:
-                return "wrong_result", problem
-        return ("ok" if any(o[0] == "ok" for o in outs) else "clean_error"), "; ".join(o[1] for o in outs if o[1])
+        return judge_concurrent("data", args, lambda: check_dataset(out), stagger=case.params.get("stagger", 0.0),
+                                check_after_errors=False)
     raise ValueError(case.fault)
+
+
+def judge_concurrent(module: str, args: list[Any], check: Callable[[], Optional[str]], stagger: float = 0.0,
+                     check_after_errors: bool = True) -> tuple[str, str]:
+    """Two runs of one command on the same output at once: neither may fail other than with a clean error,
+    and what they leave must check out (``check`` returns the problem, or None). ``check_after_errors``:
+    check the output even when both runs were refused (it held a good earlier result)."""
+    outs = [classify(r) for r in run_concurrent(module, [args, args], stagger=stagger)]
+    bad = [o for o in outs if o[0] not in ("ok", "clean_error")]
+    if bad:
+        return bad[0]
+    any_ok = any(o[0] == "ok" for o in outs)
+    problem = check() if any_ok or check_after_errors else None
+    if problem:
+        return "wrong_result", problem
+    return ("ok" if any_ok else "clean_error"), "; ".join(o[1] for o in outs if o[1])
 
 
 def _same_pixels(a: Path, b: Path) -> Optional[bool]:
@@ -402,15 +410,7 @@ def case_masks(case: CaptureCase, fx: Fixtures, scratch: Path, rng: random.Rando
         outcome, detail = _judge(run_cmd("data", args + ["--overwrite"]), {}, [], ok)
         return outcome, f"killed after {case.params['delay']:.1f} s, then run again with --overwrite: {detail}".rstrip(": ")
     if case.fault == "concurrent":
-        rans = run_concurrent("data", [args, args])
-        outs = [classify(r) for r in rans]
-        bad = [o for o in outs if o[0] not in ("ok", "clean_error")]
-        if bad:
-            return bad[0]
-        if not any(o[0] == "ok" for o in outs):
-            return "clean_error", "; ".join(o[1] for o in outs)
-        problem = ok()
-        return ("wrong_result", problem) if problem else ("ok", "; ".join(o[1] for o in outs if o[1]))
+        return judge_concurrent("data", args, ok, check_after_errors=False)
     outcome, detail = _judge(run_cmd("data", args), {}, [], ok, must_fail=case.fault == "bad model", fresh=[data / "masks"])
     return outcome, note + detail
 
@@ -447,13 +447,7 @@ def case_enhance(case: CaptureCase, fx: Fixtures, scratch: Path, rng: random.Ran
         outcome, detail = _judge(run_cmd("enhance", args), {}, [], ok)
         return outcome, f"killed after {case.params['delay']:.1f} s, then run again: {detail}".rstrip(": ")
     if case.fault == "concurrent":
-        rans = run_concurrent("enhance", [args, args])
-        outs = [classify(r) for r in rans]
-        bad = [o for o in outs if o[0] not in ("ok", "clean_error")]
-        if bad:
-            return bad[0]
-        problem = ok()
-        return ("wrong_result", problem) if problem else ("ok", "")
+        return judge_concurrent("enhance", args, ok)
     outcome, detail = _judge(run_cmd("enhance", args), before, [folder] if out == folder else [], ok,
                              must_fail=case.fault == "bad model", fresh=[] if out == folder else [out])
     return outcome, note + detail
@@ -489,13 +483,7 @@ def case_eval(case: CaptureCase, fx: Fixtures, scratch: Path, rng: random.Random
             return "wrong_result", "eval.json after kill -9 does not check out"
         return "ok", f"killed after {case.params['delay']:.1f} s: eval.json {'kept' if 'note' in doc else 'complete'}"
     if case.fault == "concurrent":
-        rans = run_concurrent("eval", [args, args])
-        outs = [classify(r) for r in rans]
-        bad = [o for o in outs if o[0] not in ("ok", "clean_error")]
-        if bad:
-            return bad[0]
-        problem = ok()
-        return ("wrong_result", problem) if problem else ("ok", "")
+        return judge_concurrent("eval", args, ok)
     outcome, detail = _judge(run_cmd("eval", args), before, [result], ok)
     return outcome, note + detail
 
