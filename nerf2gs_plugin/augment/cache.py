@@ -32,6 +32,7 @@ from torch import Tensor
 from nerf2gs_plugin.augment.config import FAMILY_FIELDS
 from nerf2gs_plugin.augment.geometry import ViewGeometry
 from nerf2gs_plugin.cameras import Cameras
+from nerf2gs_plugin.utils.io import atomic_write_text, temp_beside
 
 CACHE_FORMAT_VERSION = 1
 CACHE_DIR_NAME = "augment_cache"
@@ -157,7 +158,7 @@ def save_png(path: Path, img: Tensor) -> None:
     import cv2
 
     arr = (img.clamp(0, 1).cpu().numpy() * 255 + 0.5).astype(np.uint8)
-    tmp = path.with_name(f".{path.name}.tmp.png")
+    tmp = temp_beside(path)
     cv2.imwrite(str(tmp), arr[..., ::-1])
     os.replace(tmp, path)
 
@@ -281,11 +282,9 @@ class ViewStore:
             meta["coverage"] = float((out["accumulation"] > 0.5).float().mean())
         for name in ("depth", "accumulation"):
             if name in out:
-                tmp = self.dir / f".{key}_{name}.tmp.npy"
+                tmp = temp_beside(self.dir / f"{key}_{name}.npy")
                 np.save(tmp, out[name].cpu().numpy().astype(np.float16))
                 os.replace(tmp, self.dir / f"{key}_{name}.npy")
                 meta[name] = True
         save_png(self.dir / f"{key}.png", out["rgb"])
-        tmp = self.dir / f".{key}.json.tmp"
-        tmp.write_text(json.dumps(meta))
-        os.replace(tmp, self.dir / f"{key}.json")
+        atomic_write_text(self.dir / f"{key}.json", json.dumps(meta))

@@ -7,6 +7,12 @@ import tempfile
 from pathlib import Path
 
 
+def temp_beside(path: Path) -> Path:
+    """A temp name beside ``path`` that keeps its suffix (image writers pick the format by it) and is
+    this process's own, so two commands writing the same file at once never share a temp file."""
+    path = Path(path)
+    return path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+
 def atomic_write_bytes(path: Path, data: bytes) -> None:
     """Write to a temp file beside ``path`` then rename: readers never see half a file."""
     path = Path(path)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from nerf2gs_plugin.utils.io import temp_beside
+
 
 def pyplot():
     """``matplotlib.pyplot`` on the Agg backend (no display needed); imported on first use."""
@@ -20,7 +22,7 @@ def save_figure(fig, path: Path) -> None:
     """Write ``fig`` to ``path`` through a temp file and a rename, then close it."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")
+    tmp = temp_beside(path)
     fig.savefig(tmp, dpi=110)
     pyplot().close(fig)
     os.replace(tmp, path)
