@@ -14,6 +14,7 @@ Usage: python benchmarks/validation/augment_variants.py OUT_STEM SCENE:RUN:BASEL
 Produced benchmarks/results/augment_variants.{json,md} and augment_spread.{json,md}: the calls are the plans
 benchmarks/plans/augment_variants.yaml and augment_spread.yaml (``python -m nerf2gs_bench.plans run augment_variants``).
 """
+import argparse
 import dataclasses
 import json
 import re
@@ -71,7 +72,13 @@ def summary(res: dict, splits: list[str]) -> dict:
 
 
 def main() -> None:
-    out_stem, scene_arg, work = Path(sys.argv[1]), sys.argv[2], Path(sys.argv[3])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("out_stem", type=Path)
+    ap.add_argument("scene", help="SCENE:RUN:BASELINE:REFERENCE:SPLITS (splits comma-separated)")
+    ap.add_argument("work", type=Path)
+    ap.add_argument("variants", nargs="*", help="NAME:FIELD=VALUE,... (see parse_variant)")
+    args = ap.parse_args()
+    out_stem, scene_arg, work = args.out_stem, args.scene, args.work
     scene, run, baseline, reference, splits = scene_arg.split(":")
     splits = splits.split(",")
     run, baseline, reference = Path(run), Path(baseline), Path(reference)
@@ -81,7 +88,7 @@ def main() -> None:
             "baseline (no NeRF views)": summary(evaluated(baseline, splits, work / "baseline_eval.json"), splits),
             "NeRF views": summary(evaluated(run, splits, work / "run_eval.json"), splits)}
     variants = {}
-    for text in sys.argv[4:]:
+    for text in args.variants:
         name, changes = parse_variant(text)
         rd = trained(run, work, name, changes)
         label = ", ".join(f"{k.split('.')[-1]}={v}" for k, v in changes.items())

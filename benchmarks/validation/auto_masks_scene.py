@@ -15,8 +15,8 @@ Produced benchmarks/results/auto_masks_seed7.{json,md} with 7 70 2 10, auto_mask
 and auto_masks_seed0 (the bench's street, through this script) with 0 80 3 6; the ``*_video4`` ones with
 VIDEO_SCALE 4.
 """
+import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -35,9 +35,16 @@ from nerf2gs_bench.machine import machine_line  # noqa: E402
 from nerf2gs_plugin.masks.evaluate import resample_mask  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
-seed, fov, cam_h, cars = int(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])
-work, out = Path(sys.argv[5]), Path(sys.argv[6])
-scale = int(sys.argv[7]) if len(sys.argv) > 7 else 1
+ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+ap.add_argument("seed", type=int)
+ap.add_argument("fov_deg", type=float)
+ap.add_argument("cam_height", type=float)
+ap.add_argument("cars", type=int)
+ap.add_argument("work", type=Path)
+ap.add_argument("out_stem", type=Path)
+ap.add_argument("video_scale", type=int, nargs="?", default=1)
+args = ap.parse_args()
+seed, fov, cam_h, cars, work, out, scale = args.seed, args.fov_deg, args.cam_height, args.cars, args.work, args.out_stem, args.video_scale
 work.mkdir(parents=True, exist_ok=True)
 t0 = time.time()
 

@@ -9,8 +9,8 @@ The enhancer exports the state that scores best on held-out *training* views (th
 holds on views no table reports: for every target, `+ NeRF views` against `+ NeRF views + enhancer`
 (same reference, same steps) on val_street and val_bev, with LPIPS when its weights are available.
 """
+import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -27,8 +27,11 @@ from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 SPLITS = ["val_street", "val_bev"]
 AUG, ENH = " + NeRF views", " + NeRF views + enhancer"
 
-results_json = Path(sys.argv[1] if len(sys.argv) > 1 else "benchmarks/results/paper_table.json")
-out_dir = Path(sys.argv[2] if len(sys.argv) > 2 else "benchmarks/results")
+ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+ap.add_argument("results_json", type=Path, nargs="?", default=Path("benchmarks/results/paper_table.json"))
+ap.add_argument("out_dir", type=Path, nargs="?", default=Path("benchmarks/results"))
+args = ap.parse_args()
+results_json, out_dir = args.results_json, args.out_dir
 table = json.loads(results_json.read_text())["results"]
 targets = [label[: -len(ENH)] for label in table if label.endswith(ENH)]
 lpips_model = LPIPS.load_default(device="cpu")

@@ -7,9 +7,9 @@ Usage: python benchmarks/validation/enhancer_condition.py REFERENCE_RUN DATA OUT
 (SCALE: a bench enhancer scale, default quick. Writes OUT_DIR/{none,warped}/enhancer.onnx (+ report)
 and OUT_DIR/enhancer_condition.{json,md}; a model already there with its report is evaluated again, not retrained.)
 """
+import argparse
 import dataclasses
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -23,8 +23,13 @@ from nerf2gs_bench.machine import machine_info, machine_line  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
 SPLITS = ("val_street", "val_bev")
-reference, data, out_dir = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3])
-scale = sys.argv[4] if len(sys.argv) > 4 else "quick"
+ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+ap.add_argument("reference_run", type=Path)
+ap.add_argument("data", type=Path)
+ap.add_argument("out_dir", type=Path)
+ap.add_argument("scale", nargs="?", default="quick")
+args = ap.parse_args()
+reference, data, out_dir, scale = args.reference_run, args.data, args.out_dir, args.scale
 results, t0 = {}, time.time()
 for condition in ("none", "warped"):
     model = out_dir / condition / "enhancer.onnx"

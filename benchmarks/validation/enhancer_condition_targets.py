@@ -8,9 +8,9 @@ name a removed worktree); REFERENCE_COPY: a copy of the table's StreetNeRF run, 
 augmentation cache is written there and not under the table's runs; ENHANCER: the .onnx; WORK: where
 the new runs and WORK/targets.{json,md} go. Runs already trained under WORK are reused.)
 """
+import argparse
 import dataclasses
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -28,10 +28,15 @@ from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
 SPLITS = ["val_street", "val_bev"]
 AUG, ENH = " + NeRF views", " + NeRF views + enhancer"
-results_json, data, ref_copy, enhancer, work = (Path(a) for a in sys.argv[1:6])
+ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+for name in ("results_json", "data", "reference_copy", "enhancer", "work"):
+    ap.add_argument(name, type=Path)
+ap.add_argument("targets", nargs="*", help="row labels (default: every row with an enhancer)")
+args = ap.parse_args()
+results_json, data, ref_copy, enhancer, work = args.results_json, args.data, args.reference_copy, args.enhancer, args.work
 table = json.loads(results_json.read_text())["results"]
 root = results_json.resolve().parents[2]  # run_dir entries are relative to the repository
-targets = sys.argv[6:] or [label[: -len(ENH)] for label in table if label.endswith(ENH)]
+targets = args.targets or [label[: -len(ENH)] for label in table if label.endswith(ENH)]
 lpips_model = LPIPS.load_default(device="cpu")
 
 

@@ -10,9 +10,9 @@ Usage: python benchmarks/validation/enhancer_prior.py REFERENCE_RUN DATA OUT_DIR
 (PRIOR_ONNX's weights are the ``.pt`` beside it. Writes OUT_DIR/{own,finetune}/enhancer.onnx (+ report)
 and OUT_DIR/enhancer_prior.{json,md}; a model already there with its report is evaluated again, not retrained.)
 """
+import argparse
 import dataclasses
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -25,8 +25,12 @@ from nerf2gs_plugin.enhancer.train import report_path, train_enhancer  # noqa: E
 from nerf2gs_bench.runner import write_bench_files  # noqa: E402
 
 SPLITS = ("val_street", "val_bev")
-reference, data, out_dir, prior = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3]), Path(sys.argv[4])
-scale = sys.argv[5] if len(sys.argv) > 5 else "quick"
+ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+for name in ("reference_run", "data", "out_dir", "prior_onnx"):
+    ap.add_argument(name, type=Path)
+ap.add_argument("scale", nargs="?", default="quick")
+args = ap.parse_args()
+reference, data, out_dir, prior, scale = args.reference_run, args.data, args.out_dir, args.prior_onnx, args.scale
 prior_info = json.loads(report_path(prior).read_text())
 results, t0 = {}, time.time()
 for name, init in (("own", None), ("prior", "as is"), ("prior + fine-tune", prior.with_suffix(".pt"))):

@@ -13,8 +13,8 @@ Usage: python benchmarks/validation/eval_appearance.py OUT_STEM RUN:SPLIT[:LABEL
 Produced benchmarks/results/eval_appearance.{json,md} with the real-photos bench's StreetNeRF
 (castle-P30, split test) and the quick paper-table StreetNeRF on the synthetic street (split street).
 """
+import argparse
 import json
-import sys
 import time
 import warnings
 from pathlib import Path
@@ -88,9 +88,13 @@ def markdown(doc: dict) -> str:
 
 
 def main() -> None:
-    out = Path(sys.argv[1])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("out_stem", type=Path)
+    ap.add_argument("runs", nargs="+", help="RUN:SPLIT[:LABEL[:DATA]]")
+    args = ap.parse_args()
+    out = args.out_stem
     doc = {"machine": machine_line(), "runs": {}}
-    for arg in sys.argv[2:]:
+    for arg in args.runs:
         run, split, *rest = arg.split(":")
         label = rest[0] if rest else Path(run).name
         doc["runs"][label] = measure(Path(run), split, Path(rest[1]) if len(rest) > 1 else None)

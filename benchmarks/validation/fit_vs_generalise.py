@@ -15,8 +15,8 @@ Usage: python benchmarks/validation/fit_vs_generalise.py OUT_STEM TABLE.json DAT
 Produced benchmarks/results/fit_vs_generalise.{json,md} from default/paper_table.json (the embedded
 street) and second_scene/paper_table.json (benchmarks/runs/data/street-seed7).
 """
+import argparse
 import json
-import sys
 import warnings
 from pathlib import Path
 
@@ -30,8 +30,14 @@ from nerf2gs_plugin.runs.model import load_run_model  # noqa: E402
 from nerf2gs_bench.runner import write_bench_files  # noqa: E402
 from nerf2gs_plugin.utils.image_metrics import psnr  # noqa: E402
 
-out = Path(sys.argv[1])
-pairs = list(zip(sys.argv[2::2], sys.argv[3::2]))
+ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+ap.add_argument("out_stem", type=Path)
+ap.add_argument("pairs", nargs="+", help="PAPER_TABLE_JSON BENCH_RUNS_DIR, repeated")
+args = ap.parse_args()
+if len(args.pairs) % 2:
+    ap.error("pairs: a paper_table.json and its runs folder each")
+out = args.out_stem
+pairs = list(zip(args.pairs[0::2], args.pairs[1::2]))
 aug = AugmentConfig()
 rows = []
 for table, data in pairs:

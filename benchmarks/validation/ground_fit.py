@@ -14,6 +14,7 @@ Strecha ``.camera`` files (true up: -z) or a dataset whose transforms.json holds
 (frames named ``frame_<index>``; true up: its ``up``). Produced benchmarks/results/ground_fit.{json,md}
 through the plan benchmarks/plans/ground_fit.yaml (castle-P30 and the real-capture bench's drive).
 """
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -83,9 +84,13 @@ def markdown(doc: dict) -> str:
 
 
 def main() -> None:
-    out = Path(sys.argv[1])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("out_stem", type=Path)
+    ap.add_argument("captures", nargs="+", help="NAME:DATA:TRUE:CAMERA_HEIGHT")
+    args = ap.parse_args()
+    out = args.out_stem
     doc = {"machine": machine_line(), "max_tilt_deg": MAX_TILT_DEG, "captures": {}}
-    for arg in sys.argv[2:]:
+    for arg in args.captures:
         name, data, true, height = arg.split(":")
         doc["captures"][name] = measure(Path(data), Path(true), float(height))
     atomic_write_text(out.with_suffix(".json"), json.dumps(doc, indent=1))

@@ -10,10 +10,10 @@ OUT/<LABEL>.md (the same as a table); the run itself goes to a temporary folder.
 Produced benchmarks/results/growth_signals/ (issue 20, point 1: none of the signals levels off while
 the Gaussians grow, README "Model size").
 """
+import argparse
 import dataclasses
 import json
 import shutil
-import sys
 import tempfile
 from pathlib import Path
 
@@ -28,8 +28,14 @@ from nerf2gs_plugin.registry import get_method  # noqa: E402
 from nerf2gs_plugin.utils.config import apply_plain  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
-data, out, label = Path(sys.argv[1]), Path(sys.argv[2]), sys.argv[3]
-extra = model_overrides(sys.argv[4:])
+ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+ap.add_argument("data", type=Path)
+ap.add_argument("out", type=Path)
+ap.add_argument("label")
+ap.add_argument("overrides", nargs="*", help="FIELD=VALUE of the model config")
+args = ap.parse_args()
+data, out, label = args.data, args.out, args.label
+extra = model_overrides(args.overrides)
 cfg = apply_plain(get_method("splatfacto").config, _overrides("quick", "splatfacto", extra), where="growth_signals")
 cfg = dataclasses.replace(cfg, data=data, output_dir=Path(tempfile.mkdtemp()), timestamp=f"{data.name}-{label}", progress=False)
 trainer = Trainer(cfg)

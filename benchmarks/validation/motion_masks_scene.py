@@ -14,6 +14,7 @@ Usage: python benchmarks/validation/motion_masks_scene.py SEED WORK OUT_STEM [gt
 this seed's rows (merged with what the file already has); OUT_STEM.md is written from the JSON.
 Produced benchmarks/results/motion_masks.{json,md} with seeds 0 and 3.
 """
+import argparse
 import json
 import sys
 import time
@@ -41,9 +42,16 @@ baseline / height 1.0 against the true 0.55), so the bound the plane puts on the
 and static road reads as moving. Sky and ground are unchanged by construction (the motion route only
 adds to the transient masks).
 """  # written by hand after the seeds 0 and 3 runs
-seed, work, out = int(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3])
-mode = sys.argv[4] if len(sys.argv) > 4 else "both"
-size = (int(sys.argv[5]), int(sys.argv[6])) if len(sys.argv) > 6 else (400, 224)
+ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+ap.add_argument("seed", type=int)
+ap.add_argument("work", type=Path)
+ap.add_argument("out_stem", type=Path)
+ap.add_argument("mode", nargs="?", default="both", choices=("gt", "est", "both"))
+ap.add_argument("size", type=int, nargs="*", default=[400, 224], help="WIDTH HEIGHT")
+args = ap.parse_args()
+if len(args.size) != 2:
+    ap.error("size: WIDTH HEIGHT")
+seed, work, out, mode, size = args.seed, args.work, args.out_stem, args.mode, tuple(args.size)
 work.mkdir(parents=True, exist_ok=True)
 street = work / "street"
 if not (street / "transforms.json").is_file():

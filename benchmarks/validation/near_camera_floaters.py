@@ -15,8 +15,8 @@ with plain Splatfacto on castle-P30's validation photos (augment_appearance.md; 
 photo 0028; the last three arguments only place the views from above it reports weights in).
 The calls: benchmarks/plans/near_camera_floaters.yaml.
 """
+import argparse
 import json
-import sys
 from pathlib import Path
 
 import torch
@@ -29,8 +29,17 @@ from nerf2gs_bench.machine import machine_line  # noqa: E402
 from nerf2gs_plugin.utils.image_metrics import psnr_from_mse  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
-out, run_dir, split, view = Path(sys.argv[1]), Path(sys.argv[2]), sys.argv[3], int(sys.argv[4])
-delta_h, pitch, every_n = float(sys.argv[5]), float(sys.argv[6]), int(sys.argv[7])
+ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+ap.add_argument("out_stem", type=Path)
+ap.add_argument("run", type=Path)
+ap.add_argument("split")
+ap.add_argument("view", type=int)
+ap.add_argument("delta_h", type=float)
+ap.add_argument("theta_pitch", type=float)
+ap.add_argument("every_n", type=int)
+args = ap.parse_args()
+out, run_dir, split, view = args.out_stem, args.run, args.split, args.view
+delta_h, pitch, every_n = args.delta_h, args.theta_pitch, args.every_n
 run = load_run(run_dir)
 dm, model = run.pipeline.datamanager, run.model
 g = model.gauss

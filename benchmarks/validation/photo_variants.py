@@ -9,6 +9,7 @@ A label starting with 'aug:' trains with NeRF views (the bench's `--augment.delt
 trains 2DGS. Made: benchmarks/results/castle_bev_geometry_val.* and castle_steps_capacity_val.* (through
 run_table.py, rows benchmarks/validation/castle_bev_geometry_rows.json and castle_steps_capacity_rows.json).
 """
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -44,4 +45,9 @@ def main(data: Path, runs: Path, args: list[str]) -> None:
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]), Path(sys.argv[2]), sys.argv[3:])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("data", type=Path)
+    ap.add_argument("runs", type=Path)
+    ap.add_argument("variants", nargs="+", help="LABEL=JSON")
+    args = ap.parse_args()
+    main(args.data, args.runs, args.variants)

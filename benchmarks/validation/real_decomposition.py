@@ -11,9 +11,9 @@ the capture and the masks). Variants, each a dataset built under ``RUNS/real/dec
   column with the capture's sparse points carried into the true frame); its runs are the bench's when they exist.
 Produced benchmarks/results/real_decomposition.{json,md}.
 """
+import argparse
 import json
 import shutil
-import sys
 from pathlib import Path
 
 from nerf2gs_bench import real as br
@@ -82,4 +82,8 @@ def main(runs: Path, out_stem: Path) -> None:
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]), Path(sys.argv[2]))
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("runs", type=Path)
+    ap.add_argument("out_stem", type=Path)
+    args = ap.parse_args()
+    main(args.runs, args.out_stem)

@@ -6,8 +6,8 @@ JSON: {"steps": N, "model": {StreetNeRF model overrides}, "aug": true, "target_s
 PSNR per photo, primitives). Made: benchmarks/results/reference_length_val.* (through run_table.py, rows
 benchmarks/validation/reference_length_rows.json), on castle-P30's validation photos.
 """
+import argparse
 import json
-import sys
 from pathlib import Path
 
 from nerf2gs_bench.runner import BenchRunner, failure_reason
@@ -40,4 +40,9 @@ def main(data: Path, runs: Path, args: list[str]) -> None:
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]), Path(sys.argv[2]), sys.argv[3:])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("data", type=Path)
+    ap.add_argument("runs", type=Path)
+    ap.add_argument("variants", nargs="+", help="LABEL=JSON")
+    args = ap.parse_args()
+    main(args.data, args.runs, args.variants)

@@ -7,8 +7,8 @@ Usage: python benchmarks/validation/rotation_sensitivity.py RUN DATA OUT_STEM [A
 Produced benchmarks/results/real_rotation_check.{json,md} with RUN the bench's ground-truth
 StreetNeRF (benchmarks/runs/gt/streetnerf/<key>), DATA benchmarks/runs/real/gt, angles 0 0.7 1.4.
 """
+import argparse
 import json
-import sys
 import warnings
 from pathlib import Path
 
@@ -23,8 +23,13 @@ from nerf2gs_bench.machine import machine_line  # noqa: E402
 from nerf2gs_bench.perturb import random_rotation  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
-run_dir, data, out = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3])
-angles = [float(a) for a in sys.argv[4:]] or [0.0, 0.7, 1.4]
+ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+ap.add_argument("run", type=Path)
+ap.add_argument("data", type=Path)
+ap.add_argument("out_stem", type=Path)
+ap.add_argument("angles", type=float, nargs="*", default=[0.0, 0.7, 1.4], help="degrees")
+args = ap.parse_args()
+run_dir, data, out, angles = args.run, args.data, args.out_stem, args.angles
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
     model = load_run(run_dir, device="cpu").model

@@ -21,8 +21,8 @@ benchmarks/results/reference_length_val.{json,md} (rows: benchmarks/validation/r
 benchmarks/results/castle_bev_geometry_val.{json,md} (rows: benchmarks/validation/castle_bev_geometry_rows.json),
 benchmarks/results/castle_steps_capacity_val.{json,md} (rows: benchmarks/validation/castle_steps_capacity_rows.json).
 """
+import argparse
 import json
-import sys
 from pathlib import Path
 
 from nerf2gs_bench.runner import EVAL_SPLITS, VAL_SPLITS, eval_cache_name
@@ -64,4 +64,8 @@ def main(out: Path, rows_path: Path) -> None:
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]), Path(sys.argv[2]))
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("out_stem", type=Path)
+    ap.add_argument("rows", type=Path, help="ROWS.json")
+    args = ap.parse_args()
+    main(args.out_stem, args.rows)

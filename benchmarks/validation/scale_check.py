@@ -7,8 +7,8 @@ Usage: python benchmarks/validation/scale_check.py OUT LABEL=DATA[:GT_TRANSFORMS
 poses of the same image names). Writes OUT.json and OUT.md.
 Produced benchmarks/results/scale_check.{json,md}.
 """
+import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -21,9 +21,13 @@ from nerf2gs_bench.machine import machine_info, machine_line
 from nerf2gs_plugin.eval.pose_eval import pose_errors
 from nerf2gs_plugin.utils.io import atomic_write_text
 
-out = Path(sys.argv[1])
+ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+ap.add_argument("out", type=Path)
+ap.add_argument("captures", nargs="+", help="LABEL=DATA[:GT_TRANSFORMS]")
+args = ap.parse_args()
+out = args.out
 rows = []
-for arg in sys.argv[2:]:
+for arg in args.captures:
     label, rest = arg.split("=", 1)
     data, _, gt = rest.partition(":")
     data = Path(data)

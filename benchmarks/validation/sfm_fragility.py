@@ -12,6 +12,7 @@ BENCH_RUNS/real, default benchmarks/runs). VIDEO_SCALE (default 1): both drives 
 the street's 200x112, as ``ns2gs-bench real --video-scale`` makes its video. Produced
 benchmarks/results/sfm_fragility.{json,md} (VIDEO_SCALE 1) and sfm_fragility_video4.{json,md} (4).
 """
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -59,9 +60,13 @@ def score(street: Path, video: Path, out: Path, sfm: dict) -> dict:
 
 
 def main() -> None:
-    out_stem, work = Path(sys.argv[1]), Path(sys.argv[2])
-    scale = int(sys.argv[3]) if len(sys.argv) > 3 else 1
-    bench = Path(sys.argv[4] if len(sys.argv) > 4 else "benchmarks/runs") / "real"
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("out_stem", type=Path)
+    ap.add_argument("work", type=Path)
+    ap.add_argument("video_scale", type=int, nargs="?", default=1)
+    ap.add_argument("bench_runs", type=Path, nargs="?", default=Path("benchmarks/runs"))
+    args = ap.parse_args()
+    out_stem, work, scale, bench = args.out_stem, args.work, args.video_scale, args.bench_runs / "real"
     work.mkdir(parents=True, exist_ok=True)
     tag = "" if scale == 1 else f"_x{scale}"
     drives = {"bench video": (bench / f"street{tag}", bench / f"drive{tag}.avi"), "second render": second_drive(work, scale)}

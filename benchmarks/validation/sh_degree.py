@@ -4,7 +4,8 @@ Usage: python benchmarks/validation/sh_degree.py DEGREE STEPS DATA OUT
 (DATA: an `ns2gs-data synth-street` dataset of generator version >= 2; writes OUT/sh<DEGREE>-<STEPS>.json).
 Produced benchmarks/results/sh_degree_val.{json,md} with DEGREE 0 and 3, STEPS 400.
 """
-import dataclasses, json, sys, time
+import argparse
+import dataclasses, json, time
 from pathlib import Path
 import torch
 torch.set_num_threads(1)
@@ -15,7 +16,13 @@ from nerf2gs_plugin.registry import get_method
 from nerf2gs_plugin.runs.load import load_run
 from nerf2gs_plugin.eval.evaluate import evaluate_run
 
-deg, steps, data, out_dir = int(sys.argv[1]), int(sys.argv[2]), Path(sys.argv[3]), Path(sys.argv[4])
+ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+ap.add_argument("degree", type=int)
+ap.add_argument("steps", type=int)
+ap.add_argument("data", type=Path)
+ap.add_argument("out", type=Path)
+args = ap.parse_args()
+deg, steps, data, out_dir = args.degree, args.steps, args.data, args.out
 ov = _merge(step_overrides("streetnerf", steps), {"pipeline": {"model": {"sh_degree": deg}}})
 cfg = apply_plain(get_method("streetnerf").config, ov, where="sh")
 cfg = dataclasses.replace(cfg, data=data, output_dir=out_dir / "runs", timestamp=f"sh{deg}-{steps}", progress=False)

@@ -6,7 +6,8 @@ Usage: python benchmarks/validation/size_prune.py METHOD LABEL DATA OUT [FIELD=V
 OUT/<data name>-<METHOD>-<LABEL>.json with primitives, MB, FPS and the PSNR per split).
 Produced the numbers of the blending-weight prune (issue 20, part 1) in the size branch's report.
 """
-import dataclasses, json, sys, time
+import argparse
+import dataclasses, json, time
 from pathlib import Path
 import torch
 torch.set_num_threads(1)
@@ -18,8 +19,15 @@ from nerf2gs_plugin.registry import get_method
 from nerf2gs_plugin.runs.load import load_run
 from nerf2gs_plugin.eval.evaluate import evaluate_run
 
-method, label, data, out_dir = sys.argv[1], sys.argv[2], Path(sys.argv[3]), Path(sys.argv[4])
-extra = model_overrides(sys.argv[5:])
+ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+ap.add_argument("method")
+ap.add_argument("label")
+ap.add_argument("data", type=Path)
+ap.add_argument("out", type=Path)
+ap.add_argument("overrides", nargs="*", help="FIELD=VALUE of the model config")
+args = ap.parse_args()
+method, label, data, out_dir = args.method, args.label, args.data, args.out
+extra = model_overrides(args.overrides)
 cfg = apply_plain(get_method(method).config, _overrides("quick", method, extra), where="size_prune")
 name = f"{data.name}-{method}-{label}"
 cfg = dataclasses.replace(cfg, data=data, output_dir=out_dir / "runs", timestamp=name, progress=False)

@@ -5,6 +5,7 @@ Usage: python benchmarks/validation/size_prune_table.py OUT_STEM DIR
 Produced benchmarks/results/size_prune.{json,md} from the size branch's runs (quick scale, 800 steps,
 one thread; the swept configurations are those of ``ns2gs-bench model-size --scale quick``).
 """
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -20,7 +21,11 @@ NOTES = {"w0.05d": "F=0.05 at every refinement during densification (tried, remo
 
 
 def main() -> None:
-    out_stem, folder = Path(sys.argv[1]), Path(sys.argv[2])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("out_stem", type=Path)
+    ap.add_argument("dir", type=Path)
+    args = ap.parse_args()
+    out_stem, folder = args.out_stem, args.dir
     groups: dict[tuple[str, str], dict[str, dict]] = {}
     for f in sorted(folder.glob("*.json")):
         r = json.loads(f.read_text())

@@ -11,14 +11,18 @@ then:  python benchmarks/sfm_speed.py --images WORK/photos --work WORK/sfm --gt-
            --fov-deg 80 --camera-height 3 --variant sequential --variant exhaustive --out benchmarks/results/sfm_speed_120
 Produced the photos of benchmarks/results/sfm_speed_120.{json,md}.
 """
-import sys
+import argparse
 from pathlib import Path
 
 from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_street
 
 N, W, H, FOV, CAM_H = 120, 1200, 900, 80.0, 3.0
-work = Path(sys.argv[1])
-frames = range(0, 2 * N, 2) if "--down-and-back" in sys.argv[2:] else range(N)
+ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+ap.add_argument("work", type=Path)
+ap.add_argument("--down-and-back", action="store_true", help="every second frame of a drive there and back")
+args = ap.parse_args()
+work = args.work
+frames = range(0, 2 * N, 2) if args.down_and_back else range(N)
 street, photos = work / "street", work / "photos"
 if not (street / "transforms.json").is_file():
     generate_street(SynthStreetConfig(out=street, seed=11, width=W, height=H, num_train=2 * N, spp=1, num_street=1, num_bev=1,

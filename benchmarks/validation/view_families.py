@@ -9,6 +9,7 @@ Usage: python benchmarks/validation/view_families.py WORK [SEED]
   WORK holds the street (WORK/street-seedN) and the runs (WORK/runs); runs already trained are reused.
 Writes benchmarks/results/view_families.{json,md} (seed 0) or view_families_seedN.{json,md}.
 """
+import argparse
 import sys
 from pathlib import Path
 
@@ -17,8 +18,11 @@ from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_str
 from nerf2gs_bench.paper import _overrides, ratios_md, run_plan, write_results  # noqa: E402
 from nerf2gs_bench.runs import RunSpec  # noqa: E402
 
-work = Path(sys.argv[1])
-seed = int(sys.argv[2]) if len(sys.argv) > 2 else 0
+ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+ap.add_argument("work", type=Path)
+ap.add_argument("seed", type=int, nargs="?", default=0)
+args = ap.parse_args()
+work, seed = args.work, args.seed
 data = work / f"street-seed{seed}"
 if read_generator_version(data) != 3:
     generate_street(SynthStreetConfig(out=data, seed=seed, overwrite=True))

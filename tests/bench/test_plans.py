@@ -70,3 +70,12 @@ def test_cli_lists_the_plans(capsys, monkeypatch):
     plans.main()
     out = capsys.readouterr().out
     assert all(name in out for name in plans.plan_names())
+
+
+def test_validation_scripts_name_their_arguments():
+    """Each study script parses its arguments (argparse: --help, a usage error naming what is missing)
+    instead of reading sys.argv by position."""
+    scripts = sorted((plans.REPO / "benchmarks" / "validation").glob("*.py"))
+    assert scripts
+    positional = [p.name for p in scripts if "sys.argv" in p.read_text()]
+    assert positional == [], f"read sys.argv by position: {positional}"
