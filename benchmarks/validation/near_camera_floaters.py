@@ -30,13 +30,9 @@ from nerf2gs_plugin.utils.image_metrics import psnr_from_mse  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
 ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-ap.add_argument("out_stem", type=Path)
-ap.add_argument("run", type=Path)
-ap.add_argument("split")
-ap.add_argument("view", type=int)
-ap.add_argument("delta_h", type=float)
-ap.add_argument("theta_pitch", type=float)
-ap.add_argument("every_n", type=int)
+for name, kind in (("out_stem", Path), ("run", Path), ("split", str), ("view", int), ("delta_h", float), ("theta_pitch", float),
+                   ("every_n", int)):
+    ap.add_argument(name, type=kind)
 args = ap.parse_args()
 out, run_dir, split, view = args.out_stem, args.run, args.split, args.view
 delta_h, pitch, every_n = args.delta_h, args.theta_pitch, args.every_n

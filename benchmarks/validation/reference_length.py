@@ -41,8 +41,7 @@ def main(data: Path, runs: Path, args: list[str]) -> None:
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("data", type=Path)
-    ap.add_argument("runs", type=Path)
-    ap.add_argument("variants", nargs="+", help="LABEL=JSON")
-    args = ap.parse_args()
-    main(args.data, args.runs, args.variants)
+    for name in ("data", "runs"):
+        ap.add_argument(name, type=Path)
+    ap.add_argument("args", nargs="+", help="LABEL=JSON", metavar="LABEL=JSON")
+    main(**vars(ap.parse_args()))

@@ -17,10 +17,8 @@ from nerf2gs_plugin.runs.load import load_run
 from nerf2gs_plugin.eval.evaluate import evaluate_run
 
 ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-ap.add_argument("degree", type=int)
-ap.add_argument("steps", type=int)
-ap.add_argument("data", type=Path)
-ap.add_argument("out", type=Path)
+for name, kind in (("degree", int), ("steps", int), ("data", Path), ("out", Path)):
+    ap.add_argument(name, type=kind)
 args = ap.parse_args()
 deg, steps, data, out_dir = args.degree, args.steps, args.data, args.out
 ov = _merge(step_overrides("streetnerf", steps), {"pipeline": {"model": {"sh_degree": deg}}})
