@@ -71,7 +71,7 @@ def run_overrides(opts: RealPhotosOptions, method: str, steps: int) -> dict:
 
     dm = {"downscale": opts.downscale, "holdout_every": opts.holdout_every}
     ov = step_overrides(method, steps)
-    ov.setdefault("pipeline", {}).setdefault("datamanager", {}).update(dm)
+    ov.setdefault("pipeline", {}).setdefault("datamanager", {}).setdefault("dataparser", {}).update(dm)
     return {**ov, "steps_per_eval_image": 0}
 
 

@@ -132,7 +132,8 @@ def measure(job: Job) -> dict[str, Any]:
 
     torch.set_num_threads(1)
     cfg = get_method(job.method).config
-    dm = dataclasses.replace(cfg.pipeline.datamanager, downscale=job.downscale)
+    dm = cfg.pipeline.datamanager
+    dm = dataclasses.replace(dm, dataparser=dataclasses.replace(dm.dataparser, downscale=job.downscale))
     steps = job.warmup + job.measure
     name = f"{job.method}_{Path(job.data).name}_ds{job.downscale:g}"
     cfg = dataclasses.replace(cfg, data=Path(job.data), output_dir=Path(job.run_root), timestamp=name, max_num_iterations=steps,

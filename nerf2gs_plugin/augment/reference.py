@@ -3,6 +3,7 @@ enhancer named by ``--augment.enhancer``, and the factory that wraps a DataManag
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import inspect
 from pathlib import Path
@@ -12,7 +13,6 @@ import torch
 
 from nerf2gs_plugin.augment.config import AugmentConfig
 from nerf2gs_plugin.augment.datamanager import AugmentedDataManager, Reference
-from nerf2gs_plugin.data import parse_dataset
 from nerf2gs_plugin.datamanagers.base import DataManager
 from nerf2gs_plugin.engine.checkpoints import dataset_fingerprint, load_checkpoint, resolve_checkpoint
 from nerf2gs_plugin.engine.config import read_config_doc
@@ -27,13 +27,15 @@ def _same_data_other_downscale(run_dir: Path, datamanager, fingerprint: Optional
     reference then renders at the target's cameras, i.e. at the target's resolution."""
     try:
         doc = read_config_doc(run_dir / "config.yml")
-        ref_ds = float(doc["config"]["pipeline"]["datamanager"]["downscale"])
+        saved = doc["config"]["pipeline"]["datamanager"]
+        ref_ds = float(saved.get("dataparser", saved)["downscale"])  # older configs: on the datamanager
     except (KeyError, TypeError, ValueError, ConfigError):
         return False
-    if fingerprint is None or ref_ds == float(datamanager.config.downscale):
+    ours = datamanager.config.dataparser
+    if fingerprint is None or ref_ds == float(ours.downscale):
         return False
-    options = datamanager.config.data_options() if hasattr(datamanager.config, "data_options") else {}
-    return dataset_fingerprint(parse_dataset(datamanager.data, "train", downscale=ref_ds, **options).image_filenames) == fingerprint
+    parsed = dataclasses.replace(ours, downscale=ref_ds).setup(datamanager.data).parse("train")
+    return dataset_fingerprint(parsed.image_filenames) == fingerprint
 
 
 def load_reference(reference: Path, datamanager, device: torch.device | str, appearance: str = "mean") -> Reference:

@@ -25,7 +25,7 @@ import tyro
 from nerf2gs_plugin.blocks.cells import Cell, inside, to_uv
 from nerf2gs_plugin.blocks.partition import block_of, read_partition
 from nerf2gs_plugin.blocks.reframe import PREFIX, means_to_data, reframe_state, select
-from nerf2gs_plugin.data import dataparser_config, load_dataparser_transform, save_dataparser_transform
+from nerf2gs_plugin.data import DataParserConfig, load_dataparser_transform, save_dataparser_transform
 from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
 from nerf2gs_plugin.data.normalize import DataparserTransform
 from nerf2gs_plugin.engine.checkpoints import checkpoint_path, list_checkpoints, load_checkpoint, resolve_checkpoint, save_checkpoint
@@ -93,9 +93,9 @@ def _check(runs: list[BlockRun], doc: dict) -> None:
 
 def _source_outputs(config: Any, source: Path):
     """The source dataset's train split parsed as the blocks' runs parse theirs (same options)."""
-    dm = config.pipeline.datamanager
-    options = dm.data_options() if hasattr(dm, "data_options") else {}
-    return dataparser_config(source, float(getattr(dm, "downscale", 1.0)), **options).parse("train")
+    # a plugin's datamanager config may have no dataparser: the defaults then
+    parser = getattr(config.pipeline.datamanager, "dataparser", None) or DataParserConfig()
+    return parser.setup(source).parse("train")
 
 
 def merge(cfg: MergeConfig) -> Path:

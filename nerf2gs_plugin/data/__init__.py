@@ -1,6 +1,6 @@
 """Datasets: nerfstudio and COLMAP parsers, masks, undistortion, normalisation, synthetic street.
 
-The datamanagers call :func:`parse_dataset` and :func:`list_splits` only; the format is detected
+The datamanagers hold a :class:`DataParserConfig` (the options) and call its ``setup``; the format is detected
 from the folder by the registered dataparsers (:mod:`.registry`: ``transforms.json`` -> nerfstudio,
 a COLMAP ``sparse`` model -> COLMAP, then plugins of the ``nerf2gs.dataparsers`` entry-point group).
 """
@@ -20,13 +20,13 @@ from nerf2gs_plugin.data.normalize import (
     load_dataparser_transform,
     save_dataparser_transform,
 )
-from nerf2gs_plugin.data.registry import discover_dataparsers
-from nerf2gs_plugin.errors import DataError
+from nerf2gs_plugin.data.parser_config import DataParserConfig
 from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
 
 __all__ = [
     "MASK_KINDS",
     "ColmapDataParserConfig",
+    "DataParserConfig",
     "DataparserOutputs",
     "DataparserTransform",
     "NerfstudioDataParserConfig",
@@ -42,16 +42,9 @@ __all__ = [
 
 def dataparser_config(data: Union[str, Path], downscale: float = 1.0, **options) -> Any:
     """The parser config for a dataset folder (or a ``transforms.json`` file): the first registered
-    dataparser that detects its format. ``options``: ``holdout_every``, ``metres_per_unit``,
-    ``camera_height`` (None = the parser's default)."""
-    data = Path(data)
-    options = {k: v for k, v in options.items() if v is not None}
-    if not data.exists():
-        raise DataError("dataset folder does not exist", data)
-    for spec in discover_dataparsers().parsers.values():
-        if spec.detect(data):
-            return spec.config(data, downscale, **options)
-    raise DataError("not a dataset: no transforms.json and no COLMAP model (sparse/0 or sparse/)", data)
+    dataparser that detects its format. ``options``: the other fields of :class:`DataParserConfig`
+    (``holdout_every``, ``metres_per_unit``, ``camera_height``, ``cache_dir``; None = the default)."""
+    return DataParserConfig(downscale=downscale, **options).setup(data)
 
 
 def parse_dataset(data: Union[str, Path], split: str = "train", downscale: float = 1.0, **options) -> DataparserOutputs:

@@ -63,8 +63,10 @@ def build_outputs(
     metres_per_unit: float = 1.0,
     points_xyz: Optional[np.ndarray] = None,
     points_rgb: Optional[np.ndarray] = None,
+    cache_dir: Optional[Path] = None,
 ) -> DataparserOutputs:
-    """Normalise (from the train frames), undistort/downscale through the cache, and package."""
+    """Normalise (from the train frames), undistort/downscale through the cache (under ``cache_dir``
+    when given, see :class:`~nerf2gs_plugin.data.undistort.SplitCache`), and package."""
     if not (math.isfinite(downscale) and downscale > 0):  # nan compares false with everything
         raise DataError(f"downscale must be a positive finite number, got {downscale}", root)
     pts = torch.from_numpy(np.asarray(points_xyz, dtype=np.float32)) if points_xyz is not None else None
@@ -72,7 +74,7 @@ def build_outputs(
     needs_cache = downscale != 1.0 or any(f.intr.distorted for f in frames) or any(
         f.depth is not None and f.depth.suffix.lower() not in (".npy", ".npz") for f in frames
     )
-    cache = SplitCache(root) if needs_cache else None
+    cache = SplitCache(root, cache_dir) if needs_cache else None
 
     images: list[Path] = []
     masks: dict[str, list[Optional[Path]]] = {k: [] for k in MASK_KINDS if any(f.masks.get(k) for f in frames)}

@@ -8,8 +8,8 @@ OPENCV (k1, k2, p1, p2) and are undistorted (see :mod:`undistort`). ``points3D``
 Splits: ``<data>/splits.json`` = ``{"train": [image names], "<split>": [image names], ...}``
 (without "train", train = the images in no other split); without the file, every
 ``holdout_every``-th image sorted by name (the 0th, 8th, ...) is the "test" split, as the
-mip-NeRF 360 / nerfstudio convention. Metric scale: ``--pipeline.datamanager.metres-per-unit``, or
-``--pipeline.datamanager.camera-height`` (ground plane, see :mod:`nerf2gs_plugin.data.ground`), or the
+mip-NeRF 360 / nerfstudio convention. Metric scale: ``--pipeline.datamanager.dataparser.metres-per-unit``, or
+``--pipeline.datamanager.dataparser.camera-height`` (ground plane, see :mod:`nerf2gs_plugin.data.ground`), or the
 older ``<data>/scene.json`` (``metres_per_unit`` and ``up`` for the COLMAP world); ``ns2gs-data process``
 writes a transforms.json with both instead.
 """
@@ -60,6 +60,8 @@ class ColmapDataParserConfig:
     """Without splits.json, every N-th image is the "test" split (0: none)."""
     camera_height: Optional[float] = None
     """Metric scale and up from the ground plane under the cameras at this height (m); see data/ground.py."""
+    cache_dir: Optional[Path] = None
+    """Where undistorted / resized copies go (None: in the dataset; see data/undistort.py)."""
 
     def splits(self) -> list[str]:
         return list(self.raw_frames())
@@ -90,7 +92,8 @@ class ColmapDataParserConfig:
 
             mpu, up_np = scale_from_frames(torch.stack([f.c2w for f in groups["train"]]).numpy(), xyz, self.camera_height, model_dir)
             up = torch.tensor(up_np, dtype=torch.float32)
-        return build_outputs(split, groups[split], groups["train"], Path(self.data), self.normalize, float(self.downscale), up, mpu, xyz, rgb)
+        return build_outputs(split, groups[split], groups["train"], Path(self.data), self.normalize, float(self.downscale),
+                             up, mpu, xyz, rgb, self.cache_dir)
 
     # ------------------------------------------------------------------ reading
     def _scene_meta(self) -> dict:
@@ -193,5 +196,5 @@ def _intrinsics(cam, model_dir: Path, image_name: str) -> Intrinsics:
 
 colmap_dataparser = DataParserSpecification(
     detect=lambda data: data.is_dir() and find_model_dir(data) is not None,
-    config=lambda data, downscale, **options: ColmapDataParserConfig(data=data, downscale=downscale, **options),
+    config=ColmapDataParserConfig,
     description="COLMAP sparse model (binary or text, via pycolmap) with its images")

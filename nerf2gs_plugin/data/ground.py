@@ -145,7 +145,7 @@ def estimate_metric_scale(points: np.ndarray, cam_centres: np.ndarray, cam_up: n
 
 
 def scale_from_frames(train_c2w, points_xyz, camera_height: float, where) -> tuple[float, "np.ndarray"]:
-    """Metres-per-unit and up for a parsed dataset (``--pipeline.datamanager.camera-height``):
+    """Metres-per-unit and up for a parsed dataset (``--pipeline.datamanager.dataparser.camera-height``):
     train cameras ``[N, 3, 4]`` OpenGL (their y axis is up) and the sparse points, original frame."""
     c2w = np.asarray(train_c2w, dtype=np.float64)
     if points_xyz is None or len(points_xyz) == 0:

@@ -69,6 +69,8 @@ class NerfstudioDataParserConfig:
     """Without split keys in the file, every N-th frame is the "test" split (0: none)."""
     camera_height: Optional[float] = None
     """Metric scale and up from the ground plane under the cameras at this height (m); see data/ground.py."""
+    cache_dir: Optional[Path] = None
+    """Where undistorted / resized copies go (None: in the dataset; see data/undistort.py)."""
 
     @property
     def json_path(self) -> Path:
@@ -107,7 +109,8 @@ class NerfstudioDataParserConfig:
 
             mpu, up_np = scale_from_frames(torch.stack([f.c2w for f in groups["train"]]).numpy(), xyz, self.camera_height, path)
             up = torch.tensor(up_np, dtype=torch.float32)
-        return build_outputs(split, groups[split], groups["train"], path.parent, self.normalize, float(self.downscale), up, mpu, xyz, rgb)
+        return build_outputs(split, groups[split], groups["train"], path.parent, self.normalize, float(self.downscale),
+                             up, mpu, xyz, rgb, self.cache_dir)
 
     # ------------------------------------------------------------------ reading
     def _frames(self) -> tuple[dict[str, Any], dict[str, list[RawFrame]]]:
@@ -274,5 +277,5 @@ def _detect(data: Path) -> bool:
 
 
 nerfstudio_dataparser = DataParserSpecification(
-    detect=_detect, config=lambda data, downscale, **options: NerfstudioDataParserConfig(data=data, downscale=downscale, **options),
+    detect=_detect, config=NerfstudioDataParserConfig,
     description="nerfstudio transforms.json (PINHOLE/OPENCV, instant-ngp keys, masks, eval splits)")

@@ -3,9 +3,11 @@
 it (built-ins first). A plugin that fails to load is reported by name and skipped.
 
 A new format is one module plus one registration: a :class:`DataParserSpecification` whose
-``config(data, downscale)`` returns an object with ``splits() -> list[str]`` and
-``parse(split) -> DataparserOutputs`` (``data.base.build_outputs`` does the normalisation,
-undistortion and packaging from raw frames).
+``config`` is the format's parser config, a dataclass with a ``data`` and a ``downscale`` field (and
+any of :class:`~nerf2gs_plugin.data.parser_config.DataParserConfig`'s options it supports) and the
+methods ``splits() -> list[str]`` and ``parse(split) -> DataparserOutputs`` (``data.base.build_outputs``
+does the normalisation, undistortion and packaging from raw frames). A callable
+``config(data, downscale, **options)`` (the older contract) is still accepted.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ class DataParserSpecification:
     """A dataset format: whether a folder holds it, and the parser config that reads it."""
 
     detect: Callable[[Path], bool]
-    config: Callable[..., Any]  # (data folder, downscale, **options) -> config with splits() and parse(split)
+    config: Callable[..., Any]  # the parser config dataclass (or a callable (data, downscale, **options))
     description: str
 
 

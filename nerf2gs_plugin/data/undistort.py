@@ -18,7 +18,7 @@ Choices (documented for users):
 
 Cache: ``<dataset>/.ns2gs_cache/`` (or ``$XDG_CACHE_HOME/nerf2gs/datasets/<hash>`` when the dataset is
 read-only), or ``<cache dir>/<dataset name>-<hash>`` when a cache dir is set
-(``--pipeline.datamanager.cache-dir`` / :func:`set_cache_root`, or ``$NS2GS_CACHE_DIR``). The first
+(``--pipeline.datamanager.dataparser.cache-dir``, the parsers' ``cache_dir``, or ``$NS2GS_CACHE_DIR``). The first
 file a command writes there prints where the cache is. A cached name depends on the source's path inside the dataset and the parameters only
 (so a moved copy keeps names); a ``.src`` sidecar holds the source's size and mtime, and a stale
 entry is rebuilt.
@@ -41,21 +41,14 @@ from nerf2gs_plugin.errors import DataError
 CACHE_DIRNAME = ".ns2gs_cache"
 CACHE_ENV = "NS2GS_CACHE_DIR"
 _VERSION = "1"
-_CACHE_ROOT: Optional[Path] = None
 _ANNOUNCED: set[Path] = set()
 
 
-def set_cache_root(path: Optional[Path]) -> None:
-    """Put every dataset's processed files under ``path`` (None: next to the dataset, the default)."""
-    global _CACHE_ROOT
-    _CACHE_ROOT = Path(path).expanduser().absolute() if path is not None else None
-
-
-def cache_root() -> Optional[Path]:
-    if _CACHE_ROOT is not None:
-        return _CACHE_ROOT
-    env = os.environ.get(CACHE_ENV)
-    return Path(env).expanduser().absolute() if env else None
+def cache_root(cache_dir: Optional[Path] = None) -> Optional[Path]:
+    """The folder every dataset's processed files go under: ``cache_dir``, else ``$NS2GS_CACHE_DIR``,
+    else None (next to the dataset)."""
+    chosen = cache_dir if cache_dir is not None else os.environ.get(CACHE_ENV) or None
+    return Path(chosen).expanduser().absolute() if chosen is not None else None
 
 
 @dataclass
@@ -109,10 +102,10 @@ def undistort_array(arr: np.ndarray, intr: Intrinsics, nearest: bool = False) ->
 class SplitCache:
     """Where a dataset's processed files go; see the module docstring."""
 
-    def __init__(self, root: Path) -> None:
+    def __init__(self, root: Path, cache_dir: Optional[Path] = None) -> None:
         self.root = Path(root).resolve()
         self.dir = self.root / CACHE_DIRNAME
-        chosen = cache_root()
+        chosen = cache_root(cache_dir)
         if chosen is not None:
             self.dir = chosen / f"{self.root.name}-{hashlib.sha1(str(self.root).encode()).hexdigest()[:12]}"
             self.dir.mkdir(parents=True, exist_ok=True)
@@ -142,7 +135,8 @@ class SplitCache:
         import sys
 
         print(f"note: undistorted/resized copies of the dataset's images are cached in {self.dir} "
-              f"(--pipeline.datamanager.cache-dir DIR or ${CACHE_ENV} to put them elsewhere)", file=sys.stderr, flush=True)
+              f"(--pipeline.datamanager.dataparser.cache-dir DIR or ${CACHE_ENV} to put them elsewhere)",
+              file=sys.stderr, flush=True)
 
     @staticmethod
     def _signature(src: Path) -> str:

@@ -10,13 +10,13 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator, Optional
+from typing import Any, ClassVar, Iterator, Optional
 
 import torch
 
 from nerf2gs_plugin.cameras import Cameras
-from nerf2gs_plugin.data import list_splits, parse_dataset
 from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
+from nerf2gs_plugin.data.parser_config import MOVED_TO_DATAPARSER, DataParserConfig
 from nerf2gs_plugin.datamanagers.image_set import ImageSet, load_image_set
 from nerf2gs_plugin.errors import DataError
 from nerf2gs_plugin.utils.config import InstantiateConfig
@@ -28,20 +28,10 @@ PREFERRED_EVAL_SPLITS = ("street", "bev_1", "bev_2", "val", "test")
 @dataclass
 class DataManagerConfig(InstantiateConfig):
     _target: type = field(default_factory=lambda: DataManager)
-    downscale: float = 1.0
-    """Shrink images on load by this factor (2 = half size)."""
-    holdout_every: Optional[int] = None
-    """Datasets without split keys: every N-th frame is the "test" split (None: the parser's 8; 0: none)."""
-    metres_per_unit: Optional[float] = None
-    """Metres per data unit (overrides the dataset's metres_per_unit / scene.json)."""
-    camera_height: Optional[float] = None
-    """Metric scale and up from the ground plane fitted to the sparse points, the train cameras being this
-    many metres above it (e.g. 1.5 for a car); for captures in arbitrary units (the bird's-eye height is then in metres)."""
-
-    def data_options(self) -> dict:
-        return {"holdout_every": self.holdout_every, "metres_per_unit": self.metres_per_unit, "camera_height": self.camera_height}
-    cache_dir: Optional[Path] = None
-    """Where undistorted / resized copies of the images go (default: DATA/.ns2gs_cache)."""
+    dataparser: DataParserConfig = field(default_factory=DataParserConfig)
+    """How the dataset folder is read: downscale, splits, metric scale, where resized copies go."""
+    moved_fields: ClassVar[dict[str, str]] = {name: f"dataparser.{name}" for name in MOVED_TO_DATAPARSER}
+    """Fields that moved into ``dataparser``: older config.yml files and override dicts name them here."""
 
 
 class DataManager(ABC):
@@ -54,17 +44,14 @@ class DataManager(ABC):
         self.config = config
         self.data = Path(data)
         self.device = torch.device(device)
-        if config.cache_dir is not None:
-            from nerf2gs_plugin.data.undistort import set_cache_root
-
-            set_cache_root(config.cache_dir)
-        self.train_data: DataparserOutputs = parse_dataset(self.data, "train", downscale=config.downscale, **config.data_options())
+        self.parser = config.dataparser.setup(self.data)
+        self.train_data: DataparserOutputs = self.parser.parse("train")
         if len(self.train_data) == 0:
             raise DataError("the train split is empty", self.data)
         self.train_images: ImageSet = load_image_set(self.train_data).to(self.device)
         self.extra_images: Optional[ImageSet] = None
         self.extra_prob = 0.0
-        self._split_names = [s for s in list_splits(self.data, **config.data_options()) if s != "train"]
+        self._split_names = [s for s in self.parser.splits() if s != "train"]
         self._eval_cache: dict[str, tuple[DataparserOutputs, ImageSet]] = {}
         self.generator = torch.Generator().manual_seed(seed)
 
@@ -106,7 +93,7 @@ class DataManager(ABC):
         if name not in self._eval_cache:
             if name not in self._split_names:
                 raise DataError(f"no eval split '{name}' (the dataset has: {', '.join(self.eval_split_names()) or 'none'})", self.data)
-            outputs = parse_dataset(self.data, name, downscale=self.config.downscale, **self.config.data_options())
+            outputs = self.parser.parse(name)
             if len(outputs) == 0:
                 raise DataError(f"eval split '{name}' is empty", self.data)
             self._eval_cache[name] = (outputs, load_image_set(outputs).to(self.device))

@@ -50,6 +50,6 @@ def check_trainer_config(cfg: Any) -> None:
     if not math.isfinite(aug.theta_pitch):
         raise ConfigError(f"must be finite, got {aug.theta_pitch}", "--augment.theta-pitch")
     dm = getattr(getattr(cfg, "pipeline", None), "datamanager", None)
-    ds = getattr(dm, "downscale", 1.0)
+    ds = getattr(getattr(dm, "dataparser", None), "downscale", 1.0)
     if not (isinstance(ds, (int, float)) and math.isfinite(ds) and ds > 0):
-        raise ConfigError(f"must be a positive finite number, got {ds}", "--pipeline.datamanager.downscale")
+        raise ConfigError(f"must be a positive finite number, got {ds}", "--pipeline.datamanager.dataparser.downscale")

@@ -81,8 +81,9 @@ def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[
         raise CheckpointError(f"method '{run.config.method_name}' cannot render cameras", run.checkpoint)
     train = run.pipeline.datamanager.train_data
     check_reference_dataset(run.checkpoint, train.image_filenames)
-    downscale = float(getattr(run.config.pipeline.datamanager, "downscale", 1.0))
-    data = {s: (train if s == "train" else parse_dataset(view, s, downscale=downscale)) for s in splits}
+    parser = run.config.pipeline.datamanager.dataparser
+    data = {s: train if s == "train" else parse_dataset(view, s, downscale=parser.downscale, cache_dir=parser.cache_dir)
+            for s in splits}
     t0 = time.perf_counter()
     views: dict[str, list[dict[str, Tensor]]] = {s: [] for s in splits}
     total = sum(len(d) for d in data.values())

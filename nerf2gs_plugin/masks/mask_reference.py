@@ -54,8 +54,7 @@ def ensure_reference(data: Path, run: Optional[Path], steps: int = DEFAULT_STEPS
     cfg = apply_plain(get_method("streetnerf").with_steps(steps),
                       {"steps_per_eval_image": 0, "steps_per_save": max(1, steps // 4), **REFERENCE_OVERRIDES}, where="masks reference")
     dm = cfg.pipeline.datamanager
-    if hasattr(dm, "downscale"):
-        dm = dataclasses.replace(dm, downscale=downscale)
+    dm = dataclasses.replace(dm, dataparser=dataclasses.replace(dm.dataparser, downscale=downscale))
     cfg = dataclasses.replace(cfg, data=maskless_view(data), progress=progress, run_dir=run,
                               pipeline=dataclasses.replace(cfg.pipeline, datamanager=dm),
                               load_checkpoint=ckpts[-1] if ckpts else None)

@@ -2,7 +2,8 @@
 (dataclass tree <-> YAML-safe dict) that run configs and benches use.
 
 Loading starts from a registered default config and applies stored values with type checks, so a
-renamed or removed field is a clear error instead of arbitrary code.
+renamed or removed field is a clear error instead of arbitrary code (a field a config moved into a
+nested one, listed in its ``moved_fields``, is read at its old place too).
 """
 
 from __future__ import annotations
@@ -60,6 +61,7 @@ def apply_plain(default: T, values: dict, where: str = "config") -> T:
     """Return ``default`` with the fields in ``values`` replaced, recursively, with type checks."""
     if not isinstance(values, dict):
         raise ConfigError(f"{where}: expected a mapping, got {type(values).__name__}")
+    values = _moved(values, getattr(type(default), "moved_fields", {}), where)
     hints = get_type_hints(type(default))
     names = {f.name for f in dataclasses.fields(default) if not f.name.startswith("_")}
     changes = {}
@@ -83,6 +85,23 @@ def apply_plain(default: T, values: dict, where: str = "config") -> T:
         else:
             changes[key] = _coerce(value, current, hints.get(key), f"{where}.{key}")
     return dataclasses.replace(default, **changes)
+
+
+def _moved(values: dict, moved: dict[str, str], where: str) -> dict:
+    """``values`` with each field a config lists in its ``moved_fields`` (old name -> ``parent.name``)
+    put under its new parent: configs saved before the move still load."""
+    if not any(old in values for old in moved):
+        return values
+    values = dict(values)
+    for old, new in moved.items():
+        if old not in values:
+            continue
+        parent, _, name = new.partition(".")
+        nested = values.get(parent) or {}
+        if not isinstance(nested, dict) or name in nested:
+            raise ConfigError(f"{where}: '{old}' moved to '{new}', which is given too")
+        values[parent] = {**nested, name: values.pop(old)}
+    return values
 
 
 _SIMPLE = (str, int, float, bool)

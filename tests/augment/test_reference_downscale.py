@@ -11,7 +11,9 @@ from nerf2gs_plugin.registry import get_method
 
 def _train(data, out, downscale, steps=2, **kw):
     base = get_method("voxel-grid").config
-    pipe = dataclasses.replace(base.pipeline, datamanager=dataclasses.replace(base.pipeline.datamanager, downscale=downscale))
+    dm = base.pipeline.datamanager
+    dm = dataclasses.replace(dm, dataparser=dataclasses.replace(dm.dataparser, downscale=downscale))
+    pipe = dataclasses.replace(base.pipeline, datamanager=dm)
     cfg = dataclasses.replace(base, data=data, output_dir=out, max_num_iterations=steps, steps_per_eval_image=0, progress=False,
                               timestamp="run", pipeline=pipe, **kw)
     t = Trainer(cfg)

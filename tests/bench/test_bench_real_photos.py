@@ -41,7 +41,8 @@ def test_overrides_hold_out_the_same_photos_in_every_run():
     opts = RealPhotosOptions(images="x", holdout_every=6, downscale=2.0)
     for method, steps in (("streetnerf", 100), ("splatfacto", 200)):
         ov = run_overrides(opts, method, steps)
-        assert ov["pipeline"]["datamanager"]["holdout_every"] == 6 and ov["pipeline"]["datamanager"]["downscale"] == 2.0
+        parser = ov["pipeline"]["datamanager"]["dataparser"]
+        assert parser["holdout_every"] == 6 and parser["downscale"] == 2.0
         assert ov["max_num_iterations"] == steps and ov["steps_per_eval_image"] == 0
 
 

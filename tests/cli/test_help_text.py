@@ -25,11 +25,12 @@ def help_text(method: str) -> str:
 
 def undescribed(text: str) -> list[str]:
     """Options whose help is only ``(default: ...)`` or ``(fixed ...)`` (tyro prints the
-    description, if any, on the lines between the option and its default)."""
+    description, if any, on the lines between the option and its default). An option line ending in
+    a comma lists an alias: the option's own line follows."""
     lines = [re.sub(r"[│╭╮╰╯─]", " ", line).rstrip() for line in text.splitlines()]
     missing = []
     for i, line in enumerate(lines):
-        if not _OPTION.match(line) or line.strip().startswith("-h"):
+        if not _OPTION.match(line) or line.strip().startswith("-h") or line.endswith(","):
             continue
         following = next((l.strip() for l in lines[i + 1:] if l.strip()), "")
         if following.startswith("(default") or following.startswith("(fixed") or _OPTION.match(following) or not following:

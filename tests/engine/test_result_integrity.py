@@ -169,4 +169,4 @@ def test_config_field_types_are_checked(tiny_run, tmp_path):
 def test_nan_downscale_is_one_line(tiny_scene, tmp_path, monkeypatch, capsys):
     code, err = _cli("train", ["voxel-grid", "--data", tiny_scene, "--output-dir", tmp_path, "--max-num-iterations", 2,
                                "--pipeline.datamanager.downscale", "nan"], monkeypatch, capsys)
-    assert code == 2 and len(err.splitlines()) == 1 and "--pipeline.datamanager.downscale" in err, err
+    assert code == 2 and len(err.splitlines()) == 1 and "--pipeline.datamanager.dataparser.downscale" in err, err

@@ -146,7 +146,8 @@ class SplatfactoModel(Model):
                 from nerf2gs_plugin.warn import warn
 
                 warn(f"{inside:.0%} of the sparse points lie within {metres:g} m of the camera path",
-                     "not keeping the path clear (is the metric scale right? --pipeline.datamanager.metres-per-unit, "
+                     "not keeping the path clear (is the metric scale right? "
+                     "--pipeline.datamanager.dataparser.metres-per-unit, "
                      "or --pipeline.model.strategy.path-clearance-m 0 to say so)", stacklevel=3)
                 return None
         return path, metre

@@ -10,6 +10,7 @@ from __future__ import annotations
 import csv
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Optional
 
 import torch
 
@@ -25,8 +26,12 @@ FILE = "poses.csv"
 
 @dataclass
 class PosesCsvDataParserConfig:
+    """The parser config: ``data`` and ``downscale``, plus the options of the DataManager's
+    ``--pipeline.datamanager.dataparser.*`` it supports (here ``cache_dir``; the splits are in the file)."""
+
     data: Path = Path("data/poses")
     downscale: float = 1.0
+    cache_dir: Optional[Path] = None
     normalize: NormalizeOptions = field(default_factory=NormalizeOptions)
 
     def _frames(self) -> dict[str, list[RawFrame]]:
@@ -49,11 +54,12 @@ class PosesCsvDataParserConfig:
     def parse(self, split: str = "train") -> DataparserOutputs:
         groups = self._frames()
         check_split(split, groups.get(split, []), list(groups), Path(self.data) / FILE)
-        return build_outputs(split, groups[split], groups["train"], Path(self.data), self.normalize, float(self.downscale))
+        return build_outputs(split, groups[split], groups["train"], Path(self.data), self.normalize, float(self.downscale),
+                             cache_dir=self.cache_dir)
 
 
 poses_csv_dataparser = DataParserSpecification(
     detect=lambda data: data.is_dir() and (data / FILE).is_file(),
-    config=lambda data, downscale: PosesCsvDataParserConfig(data=data, downscale=downscale),
+    config=PosesCsvDataParserConfig,
     description="example plugin: poses.csv (intrinsics + OpenGL camera-to-world per image)",
 )
