@@ -22,7 +22,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("masks", "rendering", "fields"),  # masks: mask files, segmenters, masks from renders, their evaluation
     # the image metrics (images in, numbers out): the enhancer's training uses them
     ("eval.metrics", "eval.lpips"),
-    ("datamanagers", "augment.config"),  # augment.config: the --augment.* values the trainer's config holds
+    ("datamanagers",),
     ("engine",),  # the contracts methods implement: Model, Pipeline, Trainer(Config), optimizers
     # MethodSpecification; built-in methods are named by string, not imported. runs: a trained run
     # loaded back, its method found in the registry

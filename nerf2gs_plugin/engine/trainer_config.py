@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional
 
-from nerf2gs_plugin.augment.config import AugmentConfig
+from nerf2gs_plugin.engine.augment_config import AugmentConfig
 from nerf2gs_plugin.engine.launch import MachineConfig
 from nerf2gs_plugin.engine.optimizers import OptimizerConfig
 from nerf2gs_plugin.engine.pipeline import PipelineConfig

@@ -1,0 +1,115 @@
+"""The ``--augment.*`` flags: plain values that the trainer's config holds. They sit with the
+trainer's config, below the augmentation (``nerf2gs_plugin.augment``) that reads them, so that no
+import runs up from the engine; ``nerf2gs_plugin.augment.config`` names them in the augmentation's room."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Annotated, Literal, Optional
+
+import tyro
+
+
+@dataclass
+class LaneShiftConfig:
+    """The lane-shift view family: the drive re-driven sideways."""
+
+    offsets: tuple[float, ...] = (-2.0, 2.0)
+    """Metres along the ground plane's lateral axis (positive: to the right of the input camera's
+    heading); one view per input pose and offset."""
+    look_ahead: float = 0.0
+    """Metres: > 0 turns each shifted camera (yaw about the up axis) toward the point this far ahead
+    on its input camera's line of travel (0: the input's own heading)."""
+    every_n: int = 1
+    """Use every n-th input pose."""
+
+
+@dataclass
+class RaiseConfig:
+    """The raise view family: the input views raised without pitch."""
+
+    heights: tuple[float, ...] = (2.0,)
+    """Metres above each input view along the scene's up vector; one view per input pose and height."""
+    every_n: int = 1
+    """Use every n-th input pose."""
+
+
+@dataclass
+class PosesFileConfig:
+    """The poses view family: views at poses the user gives."""
+
+    file: Optional[Path] = None
+    """A JSON file: {"camera_to_worlds": [a 3x4 or 4x4 matrix per view]} (or a nerfstudio camera_path.json:
+    its camera_path[].camera_to_world), OpenGL axes, in the run's normalised
+    world frame (the frame of the cache manifest's saved poses); each view takes the intrinsics of
+    the input camera nearest it."""
+
+
+FAMILY_FIELDS = {"lane-shift": "lane_shift", "raise": "raise_", "poses": "poses"}
+"""The built-in view families with parameters -> their AugmentConfig field."""
+
+
+@dataclass
+class AugmentConfig:
+    """The --augment.* flags; used only with --augment-from."""
+
+    composites: bool = True
+    """Replace transient-mask pixels of input views by the reference render."""
+    dilate_px: int = 2
+    """Grow transient masks by this many pixels before compositing."""
+    feather_px: int = 0
+    """Soften the composite seam over this many pixels (0 = hard mask)."""
+    extra_views: bool = True
+    """Add the additional views (of every family in views) rendered by the reference."""
+    views: tuple[str, ...] = ("birds-eye",)
+    """View families that make the additional views from the input poses (augment/views.py): birds-eye
+    (the --augment.delta-h/theta-pitch/... fields below), lane-shift, raise, poses; their parameters
+    under their names (--augment.lane-shift.offsets ...). One cache entry, manifest and sampling share."""
+    lane_shift: LaneShiftConfig = field(default_factory=LaneShiftConfig)
+    raise_: Annotated[RaiseConfig, tyro.conf.arg(name="raise")] = field(default_factory=RaiseConfig)
+    poses: PosesFileConfig = field(default_factory=PosesFileConfig)
+    delta_h: float = 10.0
+    """Height of the additional views above the input views, in metres."""
+    theta_pitch: float = 30.0
+    """Downward pitch of the additional views, in degrees."""
+    delta_h_spread: float = 0.0
+    """Each additional view's height drawn uniformly in delta-h +- this (metres; one draw per view, fixed
+    seed): a spread of heights instead of one ring of cameras (0: all at delta-h, the paper's views)."""
+    theta_pitch_spread: float = 0.0
+    """Each additional view's pitch drawn uniformly in theta-pitch +- this (degrees; 0: all at theta-pitch)."""
+    pitch_mode: Literal["absolute", "relative"] = "absolute"
+    """absolute: theta-pitch below the horizon of the ground plane (the input's tilt and roll removed);
+    relative: theta-pitch added to each input camera's own tilt (the paper's Fig. 3 with level cameras)."""
+    min_coverage: float = 0.5
+    """A bird's-eye render whose fraction of pixels with accumulation > 0.5 is below this is dropped (warned)."""
+    every_n: int = 1
+    """Use every n-th input pose for an additional view."""
+    extra_prob: Optional[float] = None
+    """Probability that a training sample comes from the additional views (None: their share of all views)."""
+    extra_weight: float = 1.0
+    """Loss weight of additional-view samples."""
+    enhancer: str = "none"
+    """none | builtin | builtin:PATH | onnx:PATH: image enhancement of the additional views."""
+    use_cache: bool = True
+    """Reuse the reference's cached renders when their manifest matches (False: render again)."""
+    confidence: Literal["none", "visibility", "consistency"] = "none"
+    """Per-pixel loss weight of the reference's pixels. none: all 1; visibility: how many training views
+    observed the surface the pixel shows (depth-consistent, not sky/transient there), reaching 1 at
+    confidence-full-views, times the render's accumulation; consistency: each of those observations
+    weighted by how well the reference's colour agrees with that real image (augment/confidence.py)."""
+    confidence_full_views: int = 3
+    """visibility: observations at which a pixel's confidence reaches 1."""
+    confidence_depth_tol: float = 0.05
+    """visibility, consistency: a training view observes a point when their depths agree within this fraction."""
+    confidence_color_tol: float = 0.1
+    """consistency: mean absolute RGB difference at which an observation counts exp(-1)."""
+    appearance: Literal["mean", "nearest"] = "mean"
+    """How a reference with an appearance model (StreetNeRF's per-photo colour transforms) colours what
+    it renders: mean: every view in the mean of the photos' transforms; nearest: each view in the
+    transform of the training photo nearest it (an input view its own, a view from above the photo it
+    was raised from), so the target sees the colours of the photos around each view."""
+    real_only_from: float = 0.9
+    """Fraction of the run after which only the input views (composites) are sampled: 0.9 gives the last
+    10% of the steps to the target's own street evidence (1.0: the additional views to the end; 0.9 was
+    chosen on validation views of two streets and a real capture: benchmarks/results/augment_variants.md)."""
