@@ -20,6 +20,7 @@
 #include <omp.h>
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 
 namespace {
 
@@ -65,6 +66,17 @@ static inline void level_corners(const float* p, int32_t res, uint32_t T, Corner
     }
 }
 
+// One level's features at a point: the corners' table entries weighted trilinearly.
+template <int F>
+static inline void interpolate(const float* tl, const Corners& c, float* acc) {
+    for (int f = 0; f < F; ++f) acc[f] = 0.f;
+    for (int k = 0; k < 8; ++k) {
+        const float* e = tl + (int64_t)c.idx[k] * F;
+        const float w = c.w[k];
+        for (int f = 0; f < F; ++f) acc[f] += w * e[f];
+    }
+}
+
 template <int F>
 void forward_impl(const float* x, const float* table, const int32_t* res, float* out, int64_t N, int L, uint32_t T) {
 #pragma omp parallel for schedule(static)
@@ -76,12 +88,7 @@ void forward_impl(const float* x, const float* table, const int32_t* res, float*
             level_corners(p, res[l], T, c);
             const float* tl = table + (int64_t)l * T * F;
             float acc[F];
-            for (int f = 0; f < F; ++f) acc[f] = 0.f;
-            for (int k = 0; k < 8; ++k) {
-                const float* e = tl + (int64_t)c.idx[k] * F;
-                const float w = c.w[k];
-                for (int f = 0; f < F; ++f) acc[f] += w * e[f];
-            }
+            interpolate<F>(tl, c, acc);
             for (int f = 0; f < F; ++f) o[l * F + f] = acc[f];
         }
     }
@@ -105,12 +112,7 @@ void forward_aa_impl(const float* x, const float* table, const int32_t* res, con
             const float arg = 1.f / std::sqrt(8.f * rr * rr);
             const float a = arg >= 4.f ? 1.f : std::erf(arg);  // erf(4) rounds to 1 in float: skip the call
             float acc[F];
-            for (int f = 0; f < F; ++f) acc[f] = 0.f;
-            for (int k = 0; k < 8; ++k) {
-                const float* e = tl + (int64_t)c.idx[k] * F;
-                const float w = c.w[k];
-                for (int f = 0; f < F; ++f) acc[f] += w * e[f];
-            }
+            interpolate<F>(tl, c, acc);
             float* o = out + (n * (int64_t)L + l) * F;
             for (int f = 0; f < F; ++f) o[f] = acc[f] * a;
         }
@@ -185,57 +187,61 @@ void check(const torch::Tensor& x, const torch::Tensor& table, const torch::Tens
     TORCH_CHECK(T > 0 && (T & (T - 1)) == 0, "hashgrid: table size must be a power of two");
 }
 
+// Runs fn(std::integral_constant<int, F>{}) for the feature counts the kernels are compiled for.
+template <typename Fn>
+static void dispatch_features(int F, Fn&& fn) {
+    switch (F) {
+        case 1: fn(std::integral_constant<int, 1>{}); break;
+        case 2: fn(std::integral_constant<int, 2>{}); break;
+        case 4: fn(std::integral_constant<int, 4>{}); break;
+        case 8: fn(std::integral_constant<int, 8>{}); break;
+        default: TORCH_CHECK(false, "hashgrid: features per level must be 1, 2, 4 or 8");
+    }
+}
+
+// The checked, contiguous inputs of an entry point and their sizes.
+struct Grid {
+    torch::Tensor x, table, res;
+    int64_t N;
+    int L, F;
+    uint32_t T;
+    Grid(const torch::Tensor& x_, const torch::Tensor& table_, const torch::Tensor& res_) {
+        check(x_, table_, res_);
+        x = x_.contiguous();
+        table = table_.contiguous();
+        res = res_.contiguous();
+        N = x.size(0);
+        L = (int)table.size(0);
+        T = (uint32_t)table.size(1);
+        F = (int)table.size(2);
+    }
+};
+
 }  // namespace
 
 torch::Tensor hashgrid_forward(torch::Tensor x, torch::Tensor table, torch::Tensor res) {
-    check(x, table, res);
-    x = x.contiguous();
-    table = table.contiguous();
-    res = res.contiguous();
-    const int64_t N = x.size(0);
-    const int L = (int)table.size(0);
-    const uint32_t T = (uint32_t)table.size(1);
-    const int F = (int)table.size(2);
-    auto out = torch::empty({N, L, F}, x.options());
-    const float* xp = x.data_ptr<float>();
-    const float* tp = table.data_ptr<float>();
-    const int32_t* rp = res.data_ptr<int32_t>();
+    const Grid g(x, table, res);
+    auto out = torch::empty({g.N, g.L, g.F}, g.x.options());
+    const float* xp = g.x.data_ptr<float>();
+    const float* tp = g.table.data_ptr<float>();
+    const int32_t* rp = g.res.data_ptr<int32_t>();
     float* op = out.data_ptr<float>();
-    switch (F) {
-        case 1: forward_impl<1>(xp, tp, rp, op, N, L, T); break;
-        case 2: forward_impl<2>(xp, tp, rp, op, N, L, T); break;
-        case 4: forward_impl<4>(xp, tp, rp, op, N, L, T); break;
-        case 8: forward_impl<8>(xp, tp, rp, op, N, L, T); break;
-        default: TORCH_CHECK(false, "hashgrid: features per level must be 1, 2, 4 or 8");
-    }
+    dispatch_features(g.F, [&](auto f) { forward_impl<decltype(f)::value>(xp, tp, rp, op, g.N, g.L, g.T); });
     return out;
 }
 
 torch::Tensor hashgrid_forward_aa(torch::Tensor x, torch::Tensor table, torch::Tensor res, torch::Tensor radius) {
-    check(x, table, res);
+    const Grid g(x, table, res);
     TORCH_CHECK(radius.device().is_cpu() && radius.dtype() == torch::kFloat32 && radius.numel() == x.size(0),
                 "hashgrid: radius must be float32 [N] on the CPU");
-    x = x.contiguous();
-    table = table.contiguous();
-    res = res.contiguous();
     radius = radius.contiguous();
-    const int64_t N = x.size(0);
-    const int L = (int)table.size(0);
-    const uint32_t T = (uint32_t)table.size(1);
-    const int F = (int)table.size(2);
-    auto out = torch::empty({N, L, F}, x.options());
-    const float* xp = x.data_ptr<float>();
-    const float* tp = table.data_ptr<float>();
-    const int32_t* rp = res.data_ptr<int32_t>();
+    auto out = torch::empty({g.N, g.L, g.F}, g.x.options());
     const float* ap = radius.data_ptr<float>();
     float* op = out.data_ptr<float>();
-    switch (F) {
-        case 1: forward_aa_impl<1>(xp, tp, rp, ap, op, N, L, T); break;
-        case 2: forward_aa_impl<2>(xp, tp, rp, ap, op, N, L, T); break;
-        case 4: forward_aa_impl<4>(xp, tp, rp, ap, op, N, L, T); break;
-        case 8: forward_aa_impl<8>(xp, tp, rp, ap, op, N, L, T); break;
-        default: TORCH_CHECK(false, "hashgrid: features per level must be 1, 2, 4 or 8");
-    }
+    dispatch_features(g.F, [&](auto f) {
+        forward_aa_impl<decltype(f)::value>(g.x.data_ptr<float>(), g.table.data_ptr<float>(), g.res.data_ptr<int32_t>(), ap, op,
+                                            g.N, g.L, g.T);
+    });
     return out;
 }
 
@@ -252,41 +258,22 @@ torch::Tensor hashgrid_backward(torch::Tensor x, torch::Tensor grad_out, torch::
     const float* gp = grad_out.data_ptr<float>();
     const int32_t* rp = res.data_ptr<int32_t>();
     float* op = grad_table.data_ptr<float>();
-    switch (F) {
-        case 1: backward_impl<1>(xp, gp, rp, op, N, L, (uint32_t)T); break;
-        case 2: backward_impl<2>(xp, gp, rp, op, N, L, (uint32_t)T); break;
-        case 4: backward_impl<4>(xp, gp, rp, op, N, L, (uint32_t)T); break;
-        case 8: backward_impl<8>(xp, gp, rp, op, N, L, (uint32_t)T); break;
-        default: TORCH_CHECK(false, "hashgrid: features per level must be 1, 2, 4 or 8");
-    }
+    dispatch_features(F, [&](auto f) { backward_impl<decltype(f)::value>(xp, gp, rp, op, N, L, (uint32_t)T); });
     return grad_table;
 }
 
 torch::Tensor hashgrid_backward_x(torch::Tensor x, torch::Tensor table, torch::Tensor grad_out, torch::Tensor res) {
-    check(x, table, res);
+    const Grid g(x, table, res);
     TORCH_CHECK(grad_out.dim() == 3 && grad_out.size(0) == x.size(0) && grad_out.size(1) == table.size(0) &&
                 grad_out.size(2) == table.size(2), "hashgrid: grad_out must be [N, L, F]");
-    x = x.contiguous();
-    table = table.contiguous();
     grad_out = grad_out.contiguous().to(torch::kFloat32);
-    res = res.contiguous();
-    const int64_t N = x.size(0);
-    const int L = (int)table.size(0);
-    const uint32_t T = (uint32_t)table.size(1);
-    const int F = (int)table.size(2);
-    auto grad_x = torch::zeros({N, 3}, x.options());
-    const float* xp = x.data_ptr<float>();
-    const float* tp = table.data_ptr<float>();
+    auto grad_x = torch::zeros({g.N, 3}, g.x.options());
     const float* gp = grad_out.data_ptr<float>();
-    const int32_t* rp = res.data_ptr<int32_t>();
     float* op = grad_x.data_ptr<float>();
-    switch (F) {
-        case 1: backward_x_impl<1>(xp, tp, gp, rp, op, N, L, T); break;
-        case 2: backward_x_impl<2>(xp, tp, gp, rp, op, N, L, T); break;
-        case 4: backward_x_impl<4>(xp, tp, gp, rp, op, N, L, T); break;
-        case 8: backward_x_impl<8>(xp, tp, gp, rp, op, N, L, T); break;
-        default: TORCH_CHECK(false, "hashgrid: features per level must be 1, 2, 4 or 8");
-    }
+    dispatch_features(g.F, [&](auto f) {
+        backward_x_impl<decltype(f)::value>(g.x.data_ptr<float>(), g.table.data_ptr<float>(), gp, g.res.data_ptr<int32_t>(), op,
+                                            g.N, g.L, g.T);
+    });
     return grad_x;
 }
 
