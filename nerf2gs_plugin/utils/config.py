@@ -104,6 +104,31 @@ def _moved(values: dict, moved: dict[str, str], where: str) -> dict:
     return values
 
 
+def missing_fields(default: Any, values: Any, where: str = "") -> list[str]:
+    """Dotted names of the fields of ``default`` (recursively) that ``values`` does not set."""
+    if not isinstance(values, dict):
+        return []
+    values = _moved(values, getattr(type(default), "moved_fields", {}), where)  # at their old place: given
+    out: list[str] = []
+    for f in dataclasses.fields(default):
+        if f.name.startswith("_"):
+            continue
+        name = f"{where}{f.name}"
+        if f.name not in values:
+            out.append(name)
+            continue
+        current = getattr(default, f.name)
+        if dataclasses.is_dataclass(current):
+            out += missing_fields(current, values[f.name], name + ".")
+        elif isinstance(current, dict) and isinstance(values[f.name], dict) and all(dataclasses.is_dataclass(v) for v in current.values()):
+            for k, v in current.items():
+                if k not in values[f.name]:
+                    out.append(f"{name}.{k}")
+                else:
+                    out += missing_fields(v, values[f.name][k], f"{name}.{k}.")
+    return out
+
+
 _SIMPLE = (str, int, float, bool)
 
 

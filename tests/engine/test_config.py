@@ -5,6 +5,7 @@ import yaml
 
 from nerf2gs_plugin.engine.config import load_config, save_config
 
+from nerf2gs_plugin.utils.config import to_plain
 from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.engine.optimizers import OptimizerConfig
 from nerf2gs_plugin.errors import ConfigError
@@ -95,3 +96,45 @@ def test_a_section_cut_off_to_nothing_is_a_config_error(tmp_path):
     atomic_write_text(tmp_path / "config.yml", yaml.safe_dump(doc))
     with pytest.raises(ConfigError, match="datamanager: expected a mapping"):
         load_config(tmp_path / "config.yml", _default())
+
+
+def _cut_at_line(path, keep):
+    lines = path.read_text().splitlines(keepends=True)
+    path.write_text("".join(lines[:keep]))
+    return len(lines)
+
+
+@pytest.mark.parametrize("keep", [-1, -3, 12])
+def test_a_config_cut_at_a_line_boundary_is_refused(tmp_path, keep):
+    """YAML reads a file cut short at a line boundary as valid: the missing fields silently took
+    their defaults (eval exit 0 on the wrong config). The end marker's absence gives it away."""
+    cfg = _default()
+    path = tmp_path / "config.yml"
+    save_config(path, cfg.method_name, cfg)
+    n = _cut_at_line(path, keep)
+    assert 4 < (keep % n) < n
+    with pytest.raises(ConfigError, match="cut short") as e:
+        load_config(path, _default())
+    assert str(path) in str(e.value) and "\n" not in str(e.value)
+
+
+def test_an_older_config_without_the_marker_loads_and_names_what_it_lacks(tmp_path):
+    """A config written before the marker (or by hand) still loads; fields it lacks take their
+    defaults with one warning naming them (it cannot tell a newer field from a lost one)."""
+    from nerf2gs_plugin.warn import Nerf2gsWarning
+
+    cfg = _default()
+    path = tmp_path / "config.yml"
+    doc = {"format_version": 1, "method_name": cfg.method_name, "config": to_plain(cfg)}
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", Nerf2gsWarning)
+        assert load_config(path, _default()) == cfg  # complete: no warning
+    del doc["config"]["max_num_iterations"], doc["config"]["pipeline"]["model"]
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    with pytest.warns(Nerf2gsWarning, match=r"no end marker.*max_num_iterations.*pipeline\.model") as w:
+        loaded = load_config(path, _default())
+    assert str(path) in str(w[0].message)
+    assert loaded.max_num_iterations == cfg.max_num_iterations
