@@ -408,6 +408,9 @@ def case_masks(case: CaptureCase, fx: Fixtures, scratch: Path, rng: random.Rando
         if not ran.killed_by_us and classify(ran)[0] not in ("ok", "clean_error"):
             return classify(ran)
         outcome, detail = _judge(run_cmd("data", args + ["--overwrite"]), {}, [], ok)
+        left = sorted(p.name for p in data.glob(".masks-*.tmp"))
+        if outcome == "ok" and left:  # the killed run's staging folder must not stay in the dataset
+            outcome, detail = "wrong_result", f"left {', '.join(left)}"
         return outcome, f"killed after {case.params['delay']:.1f} s, then run again with --overwrite: {detail}".rstrip(": ")
     if case.fault == "concurrent":
         return judge_concurrent("data", args, ok, check_after_errors=False)

@@ -22,7 +22,7 @@ from nerf2gs_plugin.data.dataparser_outputs import MASK_KINDS
 from nerf2gs_plugin.masks.auto import AutoOptions
 from nerf2gs_plugin.masks.maskless import maskless_view, strip_mask_keys
 from nerf2gs_plugin.errors import ConfigError, DataError
-from nerf2gs_plugin.utils.io import atomic_write_text
+from nerf2gs_plugin.utils.io import atomic_write_text, remove_dead_staging
 
 
 @dataclass
@@ -119,6 +119,9 @@ def make_masks(cfg: MasksConfig, log: Callable[[str], None] = print) -> dict:
     # bad image or model halfway leaves no partial set (that a re-run would call "already has masks")
     staging = data / f".masks-{os.getpid()}.tmp"
     shutil.rmtree(staging, ignore_errors=True)
+    stale = remove_dead_staging(data, ".masks-")
+    if stale:
+        log(f"removed {len(stale)} staging folder(s) left in {data} by a masks run that was killed")
     try:
         _segment(cfg, data, frames, groups, staging, summary, count, log)
         _install(staging / "masks", data / "masks")

@@ -52,3 +52,31 @@ def default_file_mode() -> int:
 
 def atomic_write_text(path: Path, text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` runs on this machine (a zombie, killed but not yet reaped, does not)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return True
+
+
+def remove_dead_staging(parent: Path, prefix: str, suffix: str = ".tmp") -> list[Path]:
+    """Remove the folders ``<prefix><pid><suffix>`` in ``parent`` whose process is gone (left by a
+    kill -9); a live process's folder (a run going on beside this one) is left alone."""
+    import shutil
+
+    removed = []
+    for p in Path(parent).glob(f"{prefix}*{suffix}"):
+        pid = p.name[len(prefix):len(p.name) - len(suffix)]
+        if p.is_dir() and pid.isdigit() and int(pid) != os.getpid() and not pid_alive(int(pid)):
+            shutil.rmtree(p, ignore_errors=True)
+            removed.append(p)
+    return removed

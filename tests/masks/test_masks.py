@@ -162,6 +162,49 @@ def test_make_masks_onnx_writes_the_layout_the_parsers_read(tmp_path):
         make_masks(MasksConfig(data=data, segmenter=f"onnx:{model}", progress=False), log=lambda s: None)
 
 
+def test_staging_left_by_a_killed_run_is_removed_and_a_live_runs_kept(tmp_path):
+    """kill -9 during masks left its hidden .masks-<pid>.tmp folder in the dataset for good: the next
+    run removes those of processes that are gone, and only those (a run going on beside it keeps its own)."""
+    import subprocess
+
+    model = _prototype_model(tmp_path / "seg.onnx")
+    (tmp_path / "seg.onnx.json").write_text(json.dumps(SIDECAR))
+    data = _tiny_dataset(tmp_path / "d")
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    live = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        for pid in (gone.pid, live.pid):
+            (data / f".masks-{pid}.tmp" / "masks" / "sky").mkdir(parents=True)
+            (data / f".masks-{pid}.tmp" / "masks" / "sky" / "f0.png").write_bytes(b"half")
+        (data / ".masks-notes.tmp").mkdir()  # not a pid: not ours to judge
+        lines: list[str] = []
+        make_masks(MasksConfig(data=data, segmenter=f"onnx:{model}", progress=False), log=lines.append)
+        hidden = sorted(p.name for p in data.iterdir() if p.name.startswith("."))
+        assert hidden == sorted([f".masks-{live.pid}.tmp", ".masks-notes.tmp"])
+        assert any("removed 1 staging folder" in s for s in lines)
+        assert (data / "masks" / "sky" / "f0.png").stat().st_size > len(b"half")
+    finally:
+        live.kill()
+        live.wait()
+
+
+def test_a_killed_process_not_yet_reaped_counts_as_gone():
+    """A run killed under a parent that has not reaped it yet (a zombie) still answers signal 0."""
+    import subprocess
+    import time
+
+    from nerf2gs_plugin.utils.io import pid_alive
+
+    p = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    assert pid_alive(p.pid)
+    p.kill()
+    deadline = time.time() + 10
+    while pid_alive(p.pid) and time.time() < deadline:
+        time.sleep(0.05)
+    assert not pid_alive(p.pid) and p.poll() is not None
+
+
 def test_cli_bad_segmenter_is_one_error_line(tmp_path, monkeypatch, capsys):
     data = _tiny_dataset(tmp_path / "d")
     bad = tmp_path / "bad.onnx"
