@@ -124,6 +124,17 @@ def _size_of(root: Path) -> int:
     return total
 
 
+def silence_colmap(logs: Path) -> None:
+    """COLMAP's errors only, into its log file under ``logs`` (pycolmap also copies every message to
+    stderr by default: the run's own error is the one line there); its INFO stream would bury the bars."""
+    import pycolmap
+
+    pycolmap.logging.minloglevel = 2
+    pycolmap.logging.alsologtostderr = False
+    pycolmap.logging.stderrthreshold = 3
+    colmap_logs_into(logs)  # not the system temp folder
+
+
 def colmap_logs_into(folder: Path) -> None:
     """pycolmap's glog file (otherwise ``<tmp>/<prog>.<host>.log.{INFO,WARNING,ERROR}.*`` on every run
     that logs) as ``folder/colmap.<time>.<pid>``: one file, every level (only errors: see minloglevel)."""

@@ -73,19 +73,6 @@ class ProcessReport:
         ]
 
 
-def _silence_colmap(logs: Path) -> None:
-    import pycolmap
-
-    from nerf2gs_plugin.data.process.output import colmap_logs_into
-
-    pycolmap.logging.minloglevel = 2  # errors only: COLMAP's INFO stream would bury the progress bars
-    # its errors go to the log file (pycolmap also copies every message to stderr by default): the
-    # run's own error is the one line there
-    pycolmap.logging.alsologtostderr = False
-    pycolmap.logging.stderrthreshold = 3
-    colmap_logs_into(logs)  # not the system temp folder
-
-
 def check_options(opts: ProcessOptions) -> None:
     """Flags checked before anything is read or written."""
     from nerf2gs_plugin.errors import ConfigError
@@ -98,7 +85,7 @@ def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=Non
     """``frames_fn(frame_dir, progress) -> FrameReport`` makes the frames; the rest is shared. ``size_hint``:
     (frames, bytes per frame) expected, for the free-space check (:mod:`.output`)."""
     from nerf2gs_plugin.data.process import sfm
-    from nerf2gs_plugin.data.process.output import LOGS, claimed_output, estimate_bytes, expected_pairs
+    from nerf2gs_plugin.data.process.output import LOGS, claimed_output, estimate_bytes, expected_pairs, silence_colmap
     from nerf2gs_plugin.progress import make_progress
 
     check_options(opts)
@@ -113,7 +100,7 @@ def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=Non
             fr = frames_fn(frame_dir, progress)
             times["frames"] = time.perf_counter() - t
             claim.keep()  # frames made and checked: worth resuming from here on
-            _silence_colmap(claim.work / LOGS)
+            silence_colmap(claim.work / LOGS)
             for p in frame_dir.iterdir():  # frames of an earlier run with other options
                 if p.is_file() and p.name not in set(fr.names):
                     p.unlink()
@@ -131,6 +118,8 @@ def _sfm_stages(work: Path, names: list[str], opts: ProcessOptions, is_video: bo
     """Features, matching and mapping of the frames in ``work/frames``, each reused only for the same
     frame content: (matching method, :class:`~.sfm.MapResult`)."""
     from nerf2gs_plugin.data.process import sfm
+    from nerf2gs_plugin.data.process.output import LOGS
+    from nerf2gs_plugin.data.process.sfm_worker import run_sfm_stages
 
     frame_dir = work / "frames"
     hashes = frame_hashes(frame_dir, names)
@@ -140,17 +129,9 @@ def _sfm_stages(work: Path, names: list[str], opts: ProcessOptions, is_video: bo
         from nerf2gs_plugin.data.images import image_size
 
         focal = 0.5 * image_size(frame_dir / names[0])[0] / np.tan(np.radians(opts.fov_deg) / 2)
-    t = time.perf_counter()
-    sfm.extract(work / "database.db", frame_dir, names, opts.sfm, focal, progress, hashes=hashes)
-    times["features"] = time.perf_counter() - t
     method = sfm.choose_matching(opts.sfm, len(names), is_video)
-    t = time.perf_counter()
-    changed = sfm.match(work / "database.db", method, opts.sfm, work / "matching.json", progress, content=content)
-    times["matching"] = time.perf_counter() - t
-    t = time.perf_counter()
-    mapped = sfm.reconstruct(work / "database.db", frame_dir, work / "distorted", len(names), opts.sfm, changed, progress,
-                             content=content, method=method)
-    times["mapping"] = time.perf_counter() - t
+    mapped, stage_times = run_sfm_stages(work, names, opts.sfm, focal, hashes, content, method, work / LOGS, progress)
+    times.update(stage_times)
     return method, mapped
 
 
