@@ -247,6 +247,23 @@ def test_sigterm_exits_143(tmp_path):
     assert r.returncode == 143 and "cleaned up" in r.stdout and r.stderr.strip() == "terminated", (r.returncode, r.stderr)
 
 
+def test_sigterm_after_pycolmap_is_imported_still_cleans_up(tmp_path):
+    """pycolmap's import put glog's failure handler over SIGTERM: a stack dump and no clean-up."""
+    code = ("import os, signal, time\n"
+            "from pathlib import Path\n"
+            "from nerf2gs_plugin.cli.common import run_cli\n"
+            "from nerf2gs_plugin.data.process.output import silence_colmap\n"
+            "def main():\n"
+            f"    silence_colmap(Path({str(tmp_path / 'logs')!r}))\n"
+            "    try:\n"
+            "        os.kill(os.getpid(), signal.SIGTERM); time.sleep(5)\n"
+            "    except KeyboardInterrupt:\n"
+            "        print('cleaned up', flush=True); raise\n"
+            "run_cli(main)\n")
+    r = subprocess.run([sys.executable, "-c", code], env=_env(tmp_path), capture_output=True, text=True, timeout=60)
+    assert r.returncode == 143 and "cleaned up" in r.stdout and r.stderr.strip() == "terminated", (r.returncode, r.stderr[-800:])
+
+
 def test_train_sigterm_saves_and_exits_143(monkeypatch, capsys):
     """The trainer's preemption signal saves a checkpoint like Ctrl-C, and exits 143, not SIGINT's 130."""
     from types import SimpleNamespace

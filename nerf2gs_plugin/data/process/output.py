@@ -3,7 +3,8 @@ at a time (a lock), COLMAP's logs inside it, and nothing left behind by a run th
 made anything worth resuming.
 
 COLMAP writes its database through SQLite, and a full disk there is a native abort (no Python error to
-catch): the free space is checked up front against a generous estimate of what the run writes.
+catch): the free space is checked up front against a generous estimate of what the run writes, and a
+disk that fills up later (another writer) is caught by running the SfM in a child (:mod:`.sfm_worker`).
 """
 
 from __future__ import annotations
@@ -133,6 +134,18 @@ def silence_colmap(logs: Path) -> None:
     pycolmap.logging.alsologtostderr = False
     pycolmap.logging.stderrthreshold = 3
     colmap_logs_into(logs)  # not the system temp folder
+    _keep_sigterm_handler()
+
+
+def _keep_sigterm_handler() -> None:
+    """Importing pycolmap installs glog's failure handler over SIGTERM (a stack dump, then death): put
+    Python's own back, so SIGTERM runs the clean-up and exits 143 (:func:`~nerf2gs_plugin.cli.common.exit_on_sigterm`)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        handler = signal.getsignal(signal.SIGTERM)
+        signal.signal(signal.SIGTERM, handler if handler is not None else signal.SIG_DFL)
 
 
 def colmap_logs_into(folder: Path) -> None:

@@ -118,37 +118,13 @@ def run_sfm_stages(work: Path, names: list[str], sfm_opts, focal: Optional[float
                                 pass_fds=[theirs.fileno()], stderr=err)
     theirs.close()
     conn = Connection(ours.detach())
-    stage, tasks, reply = "start", {}, None
     try:
         conn.send(job)
-        while reply is None:
-            if not conn.poll(0.2):
-                if proc.poll() is not None and not conn.poll(0):
-                    break
-                continue
-            try:
-                msg = conn.recv()
-            except (EOFError, OSError):
-                break
-            if msg[0] == "stage":
-                stage = msg[1]
-            elif msg[0] == "add_task" and progress is not None:
-                tasks[msg[1]] = progress.add_task(msg[2], **msg[3])
-            elif msg[0] == "update" and progress is not None:
-                progress.update(tasks[msg[1]], **msg[2])
-            elif msg[0] in ("result", "error"):
-                reply = msg
-    finally:
-        conn.close()
-        if proc.poll() is None and reply is None:  # the parent was interrupted (Ctrl-C, SIGTERM)
-            proc.terminate()
-        try:
-            rc = proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            rc = proc.wait()
-    if reply is not None and err_path.stat().st_size == 0:
-        err_path.unlink()  # nothing said there: the reply says it all
+        stage, reply = _relay(conn, proc, progress)
+    except BaseException:  # the parent interrupted (Ctrl-C, SIGTERM): the child goes too
+        _stop(proc, conn, err_path, terminate=True)
+        raise
+    rc = _stop(proc, conn, err_path, terminate=False, keep_log=reply is None)
     if reply is not None and reply[0] == "result":
         return reply[1]
     if reply is not None:
@@ -156,6 +132,43 @@ def run_sfm_stages(work: Path, names: list[str], sfm_opts, focal: Optional[float
     if rc == 130:
         raise KeyboardInterrupt
     raise DataError(crash_line(stage, rc, work, err_path), work)
+
+
+def _relay(conn: Connection, proc: subprocess.Popen, progress) -> tuple[str, Optional[tuple]]:
+    """Pass the child's progress to ``progress`` until it replies or dies: (its last stage, its reply or None)."""
+    stage, tasks = "start", {}
+    while True:
+        if not conn.poll(0.2):
+            if proc.poll() is not None and not conn.poll(0):
+                return stage, None
+            continue
+        try:
+            msg = conn.recv()
+        except (EOFError, OSError):
+            return stage, None
+        if msg[0] == "stage":
+            stage = msg[1]
+        elif msg[0] == "add_task" and progress is not None:
+            tasks[msg[1]] = progress.add_task(msg[2], **msg[3])
+        elif msg[0] == "update" and progress is not None:
+            progress.update(tasks[msg[1]], **msg[2])
+        elif msg[0] in ("result", "error"):
+            return stage, msg
+
+
+def _stop(proc: subprocess.Popen, conn: Connection, err_path: Path, terminate: bool, keep_log: bool = False) -> int:
+    """Wait for the child (terminated first when asked); its stderr file goes when empty and not named in an error."""
+    conn.close()
+    if terminate and proc.poll() is None:
+        proc.terminate()
+    try:
+        rc = proc.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        rc = proc.wait()
+    if not keep_log and err_path.is_file() and err_path.stat().st_size == 0:
+        err_path.unlink()
+    return rc
 
 
 def _raise_child_error(e: BaseException, tb: str, stage: str, work: Path, err_path: Path) -> None:
