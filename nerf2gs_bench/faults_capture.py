@@ -1,7 +1,8 @@
 """Fault injection on the capture path, through the command line as a user runs it: ``process``
 (photos and video), ``masks`` (onnx and auto), ``enhance apply`` and ``eval``, with byte flips and
-truncations of their inputs, NaN / out-of-range / odd-layout models, kill -9 mid-run (then the
-same command again) and two runs at once.
+truncations of their inputs (a config cut at a line break too), NaN / out-of-range / odd-layout
+models, kill -9 mid-run (then the same command again), two runs at once and a disk that fills up
+during the SfM (a file size limit).
 
 Each case runs the real command in a subprocess and is classified from its exit status, its
 stderr and what it left on disk:
@@ -73,13 +74,27 @@ def _cmd(module: str, args: list[Any]) -> list[str]:
     return [sys.executable, "-m", f"nerf2gs_plugin.cli.{module}", *map(str, args)]
 
 
-def run_cmd(module: str, args: list[Any], timeout: float = CASE_TIMEOUT_S, cwd: Optional[Path] = None) -> Ran:
+def run_cmd(module: str, args: list[Any], timeout: float = CASE_TIMEOUT_S, cwd: Optional[Path] = None,
+            preexec: Optional[Callable[[], None]] = None) -> Ran:
     try:
-        p = subprocess.run(_cmd(module, args), capture_output=True, text=True, timeout=timeout, env=_env(), cwd=cwd)
+        p = subprocess.run(_cmd(module, args), capture_output=True, text=True, timeout=timeout, env=_env(), cwd=cwd,
+                           preexec_fn=preexec)
         return Ran(p.returncode, p.stderr)
     except subprocess.TimeoutExpired as e:
         err = e.stderr.decode(errors="replace") if isinstance(e.stderr, bytes) else (e.stderr or "")
         return Ran(None, err)
+
+
+def limit_file_size(limit: int) -> Callable[[], None]:
+    """For ``preexec``: no file of the command grows past ``limit`` bytes, a write beyond fails (EFBIG,
+    SIGXFSZ ignored), as when another writer fills the disk while it runs."""
+    import resource
+
+    def pre() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    return pre
 
 
 def run_killed(module: str, args: list[Any], delay: float, cwd: Optional[Path] = None) -> Ran:
@@ -258,6 +273,14 @@ def flip(path: Path, rng: random.Random, k: Optional[int] = None) -> str:
     return f"flipped bytes {offs}"
 
 
+def cut_at_line(path: Path, rng: random.Random) -> str:
+    """Keep the first lines of a text file, up to a line break (a file cut short that still parses)."""
+    lines = path.read_bytes().splitlines(keepends=True)
+    n = rng.randrange(1, len(lines))
+    path.write_bytes(b"".join(lines[:n]))
+    return f"cut after line {n} of {len(lines)}"
+
+
 def truncate(path: Path, rng: random.Random, to: Optional[int] = None) -> str:
     data = path.read_bytes()
     n = rng.randrange(len(data)) if to is None else to
@@ -272,6 +295,8 @@ def break_file(path: Path, kind: str, rng: random.Random) -> str:
         return truncate(path, rng)
     if kind == "empty":
         return truncate(path, rng, 0)
+    if kind == "cut at a line":
+        return cut_at_line(path, rng)
     if kind == "junk":
         path.write_bytes(bytes(rng.randrange(256) for _ in range(2048)))
         return "replaced by 2 KB of random bytes"
@@ -286,11 +311,11 @@ def _judge(ran: Ran, before: dict[str, str], after_paths: list[Path], check_ok: 
            must_fail: bool = False, fresh: Optional[list[Path]] = None) -> tuple[str, str]:
     """The outcome of one command: its exit, then what it left. ``before``: digests of the results
     that existed (an error must leave them as they were); ``fresh``: result paths that must not
-    exist after an error; ``must_fail``: a bad model, exit 0 is a wrong result."""
+    exist after an error; ``must_fail``: bad input (a model, flag or file), exit 0 is a wrong result."""
     outcome, detail = classify(ran)
     if outcome == "ok":
         if must_fail:
-            return "wrong_result", "exit 0 from a bad model"
+            return "wrong_result", "exit 0 from bad input"
         bad = check_ok()
         return ("wrong_result", bad) if bad else ("ok", "")
     if outcome == "clean_error":
@@ -329,6 +354,14 @@ def case_process(case: CaptureCase, fx: Fixtures, scratch: Path, rng: random.Ran
                 return first
         outcome, detail = _judge(run_cmd("data", args), {}, [], ok)
         return outcome, f"killed after {case.params['delay']:.1f} s, then run again: {detail}".rstrip(": ")
+    if case.fault == "disk fills":  # during the SfM: the database stops growing, the frames fit
+        note = f"files limited to {case.params['limit'] // 1000} KB"
+        outcome, detail = _judge(run_cmd("data", args, preexec=limit_file_size(case.params["limit"])), {}, [], ok, must_fail=True,
+                                 fresh=[out / "transforms.json"])
+        if outcome != "clean_error":
+            return outcome, f"{note}: {detail}"
+        again, more = _judge(run_cmd("data", args), {}, [], ok)  # with room again: it resumes and finishes
+        return again, f"{note}: {detail}; then with room: {more or 'ok'}"
     if case.fault == "changed content":  # same names, other photos: the dataset must follow the new content
         first = run_cmd("data", args)
         if classify(first)[0] != "ok":
@@ -466,7 +499,7 @@ def case_eval(case: CaptureCase, fx: Fixtures, scratch: Path, rng: random.Random
     args = [run, "--data", data, "--device", "cpu", *case.params.get("extra", [])]
     ok = lambda: check_eval_json(result)  # noqa: E731
     note = ""
-    if case.fault in ("flip", "truncate", "empty", "junk"):
+    if case.fault in ("flip", "truncate", "empty", "junk", "cut at a line"):
         ckpt = sorted((run / "checkpoints").iterdir())[-1]
         target = {"checkpoint": ckpt, "config.yml": run / "config.yml", "image": data / "images" / "street_000.png",
                   "transforms.json": data / "transforms.json", "dataparser_transforms.json": run / "dataparser_transforms.json"}[case.what]
@@ -487,7 +520,7 @@ def case_eval(case: CaptureCase, fx: Fixtures, scratch: Path, rng: random.Random
         return "ok", f"killed after {case.params['delay']:.1f} s: eval.json {'kept' if 'note' in doc else 'complete'}"
     if case.fault == "concurrent":
         return judge_concurrent("eval", args, ok)
-    outcome, detail = _judge(run_cmd("eval", args), before, [result], ok)
+    outcome, detail = _judge(run_cmd("eval", args), before, [result], ok, must_fail=case.fault == "cut at a line")
     return outcome, note + detail
 
 
@@ -512,6 +545,7 @@ def make_capture_cases(seed: int = 0) -> list[CaptureCase]:
     cases += [C("process images", "kill -9", "mid-run", {"delay": d}) for d in (3.0, 7.0)]
     cases += [C("process images", "concurrent", "--out", {"stagger": s}) for s in (0.0, 0.5)]
     cases.append(C("process images", "changed content", "every photo"))
+    cases.append(C("process images", "disk fills", "during the SfM", {"limit": 256_000}))
     # process video
     for kind in ("flip", "flip", "flip", "truncate", "truncate", "empty", "junk"):
         cases.append(C("process video", kind, "drive.avi"))
@@ -540,6 +574,7 @@ def make_capture_cases(seed: int = 0) -> list[CaptureCase]:
                        ("checkpoint", "truncate"), ("config.yml", "flip"), ("config.yml", "truncate"), ("image", "flip"),
                        ("image", "truncate"), ("transforms.json", "flip"), ("dataparser_transforms.json", "truncate")):
         cases.append(C("eval", kind, what))
+    cases.append(C("eval", "cut at a line", "config.yml"))
     cases.append(C("eval", "bad config", "alias bomb", {"text": ALIAS_BOMB}))
     cases.append(C("eval", "bad flag", "--max-images 0", {"extra": ["--max-images", "0"]}))
     cases.append(C("eval", "bad flag", "--max-images -3", {"extra": ["--max-images", "-3"]}))
@@ -550,7 +585,7 @@ def make_capture_cases(seed: int = 0) -> list[CaptureCase]:
 
 # the CI subset: one case of each kind of fault per entry point where it is quick
 CI_SUBSET = [("enhance apply", "bad model"), ("enhance apply", "flip"), ("enhance apply", "kill -9"), ("masks onnx", "bad model"),
-             ("masks onnx", "truncate"), ("eval", "flip"), ("eval", "bad flag"), ("eval", "bad config"), ("eval", "kill -9"),
+             ("masks onnx", "truncate"), ("eval", "flip"), ("eval", "cut at a line"), ("eval", "bad flag"), ("eval", "bad config"), ("eval", "kill -9"),
              ("process video", "junk")]
 
 

@@ -27,6 +27,6 @@ def test_capture_faults_subset(tmp_path):
     s = doc["summary"]
     bad = [c for c in doc["cases"] if c["outcome"] not in ("ok", "clean_error")]
     assert s["cases"] >= 8 and not bad, bad
-    # the bad models and flags are refused, not passed through
-    refused = [c for c in doc["cases"] if c["case"]["fault"] in ("bad model", "bad flag", "bad config")]
+    # the bad models, flags and cut configs are refused, not passed through
+    refused = [c for c in doc["cases"] if c["case"]["fault"] in ("bad model", "bad flag", "bad config", "cut at a line")]
     assert refused and all(c["outcome"] == "clean_error" for c in refused), refused
