@@ -187,28 +187,18 @@ def test_colmap_logs_go_under_the_dataset(tmp_path):
     assert "Failed to create any sparse model" in next((out / "colmap" / "logs").iterdir()).read_text()
 
 
-def _limit_file_size(limit: int):
-    """A child whose files cannot grow past ``limit`` bytes: writes beyond fail (EFBIG), as on a disk
-    that another writer filled up meanwhile (SIGXFSZ ignored, so it is the write that fails)."""
-    import resource
-
-    def pre() -> None:
-        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
-
-    return pre
-
-
 def test_a_write_failing_during_the_sfm_is_one_line_not_a_native_abort(tmp_path):
     """A disk filling up during the SfM: SQLite's write error inside COLMAP was a native abort with a
     stack dump (exit 134). The SfM stages run in a child process: one line naming the stage and COLMAP's
     message, exit 2, and a re-run with room resumes."""
+    from nerf2gs_bench.faults_capture import limit_file_size
+
     photos, out, tmp = tmp_path / "photos", tmp_path / "d", tmp_path / "tmp"
     _photos(photos, n=8, w=320, h=240)  # megabytes of SIFT features: the database outgrows the limit
     tmp.mkdir()
     cmd = [sys.executable, "-m", "nerf2gs_plugin.cli.data", "process", "images", str(photos), "--out", str(out), "--no-progress",
            "--num-threads", "1"]
-    r = subprocess.run(cmd, env=_env(tmp), capture_output=True, text=True, timeout=120, preexec_fn=_limit_file_size(256_000))
+    r = subprocess.run(cmd, env=_env(tmp), capture_output=True, text=True, timeout=120, preexec_fn=limit_file_size(256_000))
     err = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(err) == 1, (r.returncode, r.stderr[-2000:])
     assert "during the SfM (features)" in err[0] and "SQLite" in err[0] and str(out / "colmap" / "logs") in err[0]
