@@ -132,6 +132,12 @@ def test_an_older_config_without_the_marker_loads_and_names_what_it_lacks(tmp_pa
     with warnings.catch_warnings():
         warnings.simplefilter("error", Nerf2gsWarning)
         assert load_config(path, _default()) == cfg  # complete: no warning
+    dm = doc["config"]["pipeline"]["datamanager"]
+    dm["downscale"] = dm["dataparser"].pop("downscale")  # where a config saved before the move has it: not missing
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", Nerf2gsWarning)
+        load_config(path, _default())
     del doc["config"]["max_num_iterations"], doc["config"]["pipeline"]["model"]
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
     with pytest.warns(Nerf2gsWarning, match=r"no end marker.*max_num_iterations.*pipeline\.model") as w:
