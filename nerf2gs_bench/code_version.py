@@ -5,10 +5,11 @@ The rule (stated once, used by :mod:`nerf2gs_bench.runs` and
 file of ``nerf2gs_plugin`` except those under ``eval/``, ``cli/`` and ``viewer/``, which read models but
 never change one, and the dataset makers ``masks/``, ``data/process/`` and ``blocks/`` (city-block partition and merge), which write the files a run reads or merge finished
 runs (those files key the run through the dataset fingerprint instead). No model code imports the
-excluded folders, but for ``MODEL_METRIC_CODE``, which is hashed (``tests/bench/test_bench_keys.py``
-checks it on the import graph). That is coarser than the files a method imports (an edit to another
-method retrains every bench run), but it can never miss a dependency. An evaluation depends on the
-model plus the metric code: ``eval/metrics.py``, ``eval/lpips.py`` and ``eval/evaluate.py``.
+excluded folders (``tests/bench/test_bench_keys.py`` checks it on the import graph); the image metrics
+the enhancer trains and selects by sit under ``utils/`` and key models with the rest. That is coarser
+than the files a method imports (an edit to another method retrains every bench run), but it can never
+miss a dependency. An evaluation depends on the model plus the metric code: ``eval/metrics.py``,
+``eval/evaluate.py``, ``utils/image_metrics.py`` and ``utils/lpips.py``.
 """
 
 from __future__ import annotations
@@ -24,9 +25,7 @@ SOURCE_ROOT = Path(nerf2gs_plugin.__file__).resolve().parent
 SOURCE_SUFFIXES = (".py", ".cpp", ".h", ".cu")
 NOT_MODEL_CODE = ("eval", "cli", "viewer", "masks", "data/process", "blocks")
 """Folders (relative to the package) whose files never key a trained model."""
-METRIC_CODE = ("eval/metrics.py", "eval/lpips.py", "eval/evaluate.py")
-MODEL_METRIC_CODE = ("eval/metrics.py", "eval/lpips.py")
-"""The metric code that model code imports (``enhancer/train.py``): it keys models too."""
+METRIC_CODE = ("eval/metrics.py", "eval/evaluate.py", "utils/image_metrics.py", "utils/lpips.py")
 
 
 def model_source_files(root: Path | None = None) -> list[Path]:
@@ -35,10 +34,8 @@ def model_source_files(root: Path | None = None) -> list[Path]:
     def excluded(rel: Path) -> bool:
         return any(rel.parts[:len(Path(f).parts)] == Path(f).parts for f in NOT_MODEL_CODE)
 
-    files = {p for p in root.rglob("*") if p.suffix in SOURCE_SUFFIXES and p.is_file()
-             and not excluded(p.relative_to(root)) and "__pycache__" not in p.parts}
-    # the enhancer's training selects its checkpoint by PSNR/LPIPS: the metric code shapes that model
-    return sorted(files | {root / name for name in MODEL_METRIC_CODE})
+    return sorted(p for p in root.rglob("*") if p.suffix in SOURCE_SUFFIXES and p.is_file()
+                  and not excluded(p.relative_to(root)) and "__pycache__" not in p.parts)
 
 
 @lru_cache(maxsize=8)

@@ -14,7 +14,7 @@ from typing import Any, Callable, Optional
 from nerf2gs_plugin.errors import UserError
 from nerf2gs_bench.runs import RunSpec, evaluation_lock, run_key, train_or_reuse
 from nerf2gs_bench.machine import machine_info, machine_line
-from nerf2gs_plugin.eval.metrics import LPIPS
+from nerf2gs_plugin.utils.lpips import LPIPS
 from nerf2gs_plugin.utils.config import apply_plain
 from nerf2gs_plugin.utils.io import atomic_write_text
 

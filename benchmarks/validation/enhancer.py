@@ -20,7 +20,7 @@ torch.set_num_threads(1)
 from nerf2gs_plugin.runs.load import load_run  # noqa: E402
 from nerf2gs_bench.runner import fmt  # noqa: E402
 from nerf2gs_plugin.eval.evaluate import evaluate_run  # noqa: E402
-from nerf2gs_plugin.eval.metrics import LPIPS  # noqa: E402
+from nerf2gs_plugin.utils.lpips import LPIPS  # noqa: E402
 from nerf2gs_bench.machine import machine_info, machine_line  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 

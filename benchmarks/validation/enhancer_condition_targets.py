@@ -22,7 +22,7 @@ from nerf2gs_plugin.runs.load import load_run  # noqa: E402
 from nerf2gs_plugin.engine.trainer import Trainer  # noqa: E402
 from nerf2gs_plugin.eval.evaluate import evaluate_run  # noqa: E402
 from nerf2gs_bench.machine import machine_info, machine_line  # noqa: E402
-from nerf2gs_plugin.eval.metrics import LPIPS  # noqa: E402
+from nerf2gs_plugin.utils.lpips import LPIPS  # noqa: E402
 from nerf2gs_plugin.registry import get_method  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 

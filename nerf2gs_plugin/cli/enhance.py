@@ -137,7 +137,7 @@ def evaluate_enhancer(spec: str, data: Path, reference: Optional[Path], splits: 
             result["splits"][s] = {"images": r["images"], "psnr_before": r["psnr_degraded"], "psnr_after": r["psnr_enhanced"]}
         return result
     from nerf2gs_plugin.runs.load import load_run
-    from nerf2gs_plugin.eval.metrics import LPIPS
+    from nerf2gs_plugin.utils.lpips import LPIPS
     from nerf2gs_plugin.progress import make_progress
 
     lpips = LPIPS.load_default()

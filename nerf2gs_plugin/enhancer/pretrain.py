@@ -34,7 +34,7 @@ from nerf2gs_plugin.enhancer.pairs import Pair
 from nerf2gs_plugin.enhancer.train import _CropSampler, _lpips_loss, _Validator, fit_network, report_path, save_prior, training_threads
 from nerf2gs_plugin.enhancer.unet import ResidualUNet, export_onnx
 from nerf2gs_plugin.errors import ConfigError
-from nerf2gs_plugin.eval.metrics import LPIPS
+from nerf2gs_plugin.utils.lpips import LPIPS
 from nerf2gs_plugin.progress import make_progress
 from nerf2gs_plugin.utils.io import atomic_write_bytes, atomic_write_text
 

@@ -40,11 +40,10 @@ from nerf2gs_plugin.enhancer.pairs import Pair, split_indices
 from nerf2gs_plugin.enhancer.unet import MULTIPLE, ResidualUNet, export_onnx
 from nerf2gs_plugin.enhancer.warp import WARPED_CHANNELS
 from nerf2gs_plugin.errors import ConfigError, DataError
-from nerf2gs_plugin.eval.lpips import to_nchw
-from nerf2gs_plugin.eval.metrics import LPIPS
 from nerf2gs_plugin.progress import make_progress
 from nerf2gs_plugin.utils.image_metrics import psnr, psnr_from_mse
 from nerf2gs_plugin.utils.io import atomic_write_bytes, atomic_write_text
+from nerf2gs_plugin.utils.lpips import LPIPS, to_nchw
 
 # Checkpoint selection score: PSNR - LPIPS_DB * LPIPS (0.01 LPIPS weighs like 0.2 dB).
 LPIPS_DB = 20.0

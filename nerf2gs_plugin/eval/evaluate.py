@@ -14,8 +14,9 @@ from nerf2gs_plugin.runs.load import LoadedRun
 from nerf2gs_plugin.errors import ConfigError, DataError
 from nerf2gs_plugin.eval.extrapolated import extrapolated_summary
 from nerf2gs_plugin.eval.figures import save_eval_grid
-from nerf2gs_plugin.eval.metrics import IMAGE_METRICS, LPIPS
+from nerf2gs_plugin.eval.metrics import IMAGE_METRICS
 from nerf2gs_plugin.utils.image_metrics import psnr
+from nerf2gs_plugin.utils.lpips import LPIPS
 
 
 def _mean_std(values: list[float]) -> tuple[Optional[float], Optional[float]]:

@@ -1,5 +1,5 @@
 """PSNR and SSIM: the one copy that training logs, the splatting losses, the enhancer and the
-evaluation all use (LPIPS, which needs weights, stays in ``eval.metrics``).
+evaluation all use (LPIPS, which needs weights, is in ``utils.lpips``).
 
 Images are ``[H,W,3]`` in [0, 1] (``[B,3,H,W]`` is accepted too). SSIM is the standard Wang et
 al. form used by nerfstudio's ``ns-eval`` (torchmetrics), skimage (``gaussian_weights=True``) and

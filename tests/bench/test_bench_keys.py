@@ -34,11 +34,10 @@ def test_model_files_rule():
     names = {str(p.relative_to(code_version.SOURCE_ROOT)) for p in code_version.model_source_files()}
     assert "engine/losses.py" in names and "methods/splatfacto/model.py" in names
     assert any(n.endswith(".cpp") for n in names)  # the kernels count
-    assert not any(n.split("/")[0] in ("eval", "cli", "viewer", "masks") for n in names
-                   if n not in code_version.MODEL_METRIC_CODE)
+    assert not any(n.split("/")[0] in ("eval", "cli", "viewer", "masks") for n in names)
     assert not any(n.startswith(("data/process/",)) for n in names)
     assert "data/ground.py" in names and "data/colmap_parser.py" in names  # parsers read it
-    assert "eval/metrics.py" in names and "eval/lpips.py" in names  # the enhancer selects by them
+    assert "utils/image_metrics.py" in names and "utils/lpips.py" in names  # the enhancer selects by them
 
 
 def test_no_model_code_imports_the_folders_left_out_of_the_hash():
@@ -52,9 +51,8 @@ def test_no_model_code_imports_the_folders_left_out_of_the_hash():
         rel = "/".join(module.split(".")[1:])
         return next((f for f in code_version.NOT_MODEL_CODE if rel == f or rel.startswith(f + "/")), None)
 
-    hashed = {"nerf2gs_plugin." + n[:-3].replace("/", ".") for n in code_version.MODEL_METRIC_CODE}
     arrows = sorted((a, b) for a, bs in import_graph().items() for b in bs
-                    if folder(a) is None and folder(b) is not None and b not in hashed)
+                    if folder(a) is None and folder(b) is not None)
     assert not arrows, f"model code imports code left out of the model hash: {arrows}"
 
 
@@ -76,7 +74,7 @@ def test_run_key_changes_with_one_line_of_a_loss_and_with_the_device(source_copy
 
 def test_bench_retrains_after_a_loss_change_reevaluates_after_a_metric_change_and_reruns(tiny_scene, tmp_path, source_copy,
                                                                                         monkeypatch):
-    from nerf2gs_plugin.eval import lpips as lpips_mod
+    from nerf2gs_plugin.utils import lpips as lpips_mod
     from nerf2gs_bench.runner import BenchRunner
 
     monkeypatch.setattr(lpips_mod.importlib.util, "find_spec", lambda name: None)  # fast: LPIPS n/a

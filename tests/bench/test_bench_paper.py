@@ -9,7 +9,7 @@ from nerf2gs_bench.runs import RunSpec
 
 
 def test_paper_bench_runs_a_plan_with_one_bar_and_log(tiny_scene, tmp_path, monkeypatch):
-    from nerf2gs_plugin.eval import lpips as lpips_mod
+    from nerf2gs_plugin.utils import lpips as lpips_mod
     from nerf2gs_bench.paper import run_named_bench
 
     monkeypatch.setattr(lpips_mod.importlib.util, "find_spec", lambda name: None)
@@ -62,7 +62,7 @@ def test_paper_bench_records_failed_runs_and_goes_on(tiny_scene, tmp_path, monke
     augments from a failed run fails too, and the bench ends with BenchFailed (exit status 2)."""
     from ns2gs_example_method import VoxelGridModel
 
-    from nerf2gs_plugin.eval import lpips as lpips_mod
+    from nerf2gs_plugin.utils import lpips as lpips_mod
     from nerf2gs_bench.runner import BenchFailed
     from nerf2gs_bench.paper import run_named_bench
 
@@ -130,7 +130,7 @@ def test_tables_gain_lane_and_extrapolated_columns(tiny_scene, tmp_path, monkeyp
     without lane views keeps the three old columns."""
     import shutil
 
-    from nerf2gs_plugin.eval import lpips as lpips_mod
+    from nerf2gs_plugin.utils import lpips as lpips_mod
     from nerf2gs_bench.paper import markdown_table, run_named_bench, target_groups
 
     monkeypatch.setattr(lpips_mod.importlib.util, "find_spec", lambda name: None)

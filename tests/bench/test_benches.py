@@ -303,7 +303,7 @@ def test_stability_and_size_end_to_end_on_plugin_method(tiny_scene, tmp_path, mo
     divergence, all reported; a rerun reuses everything; then a size sweep over the grid resolution."""
     from ns2gs_example_method import VoxelGridModel
 
-    from nerf2gs_plugin.eval import lpips as lpips_mod
+    from nerf2gs_plugin.utils import lpips as lpips_mod
 
     monkeypatch.setattr(lpips_mod.importlib.util, "find_spec", lambda name: None)  # keep it fast: LPIPS n/a
     monkeypatch.delenv(lpips_mod.ENV_VAR, raising=False)

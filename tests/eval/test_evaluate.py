@@ -15,9 +15,9 @@ import torch
 from nerf2gs_plugin.utils.config import apply_plain
 from nerf2gs_plugin.runs.load import load_run
 from nerf2gs_plugin.engine.trainer import Trainer
-from nerf2gs_plugin.eval import lpips as lpips_mod
+from nerf2gs_plugin.utils import lpips as lpips_mod
 from nerf2gs_plugin.eval.evaluate import evaluate_run
-from nerf2gs_plugin.eval.metrics import LPIPS
+from nerf2gs_plugin.utils.lpips import LPIPS
 from nerf2gs_plugin.registry import get_method
 
 BIN = Path(sys.executable).parent

@@ -9,9 +9,9 @@ import pytest
 import torch
 
 from nerf2gs_plugin.errors import CheckpointError
-from nerf2gs_plugin.eval import lpips as lpips_mod
-from nerf2gs_plugin.eval.metrics import LPIPS
+from nerf2gs_plugin.utils import lpips as lpips_mod
 from nerf2gs_plugin.utils.image_metrics import psnr, ssim, ssim_map
+from nerf2gs_plugin.utils.lpips import LPIPS
 
 DATA = Path(__file__).parent / "data"
 

