@@ -19,6 +19,8 @@ from typing import Optional
 
 import numpy as np
 
+from nerf2gs_plugin.data.ground import MAX_TILT_DEG
+
 
 def path_directions(centres: np.ndarray, min_extent: float, ratio: float = 0.2) -> np.ndarray:
     """``[K, 3]`` unit directions the camera centres spread along (principal axes whose RMS spread
@@ -74,30 +76,37 @@ def upright_normal(normal: np.ndarray, cam_right: np.ndarray, centres: np.ndarra
     return up if up @ n >= np.cos(np.radians(max_deg)) else None
 
 
-def plane_offset(points: np.ndarray, centres: np.ndarray, normal: np.ndarray, rel_thresh: float = 0.05,
-                 min_inliers: int = 10) -> Optional[float]:
-    """Offset ``d`` of the plane ``normal . x + d = 0`` through the densest layer of points below the
-    cameras (1-D RANSAC over the points' heights: every point's height is a candidate, its support
-    the points within ``rel_thresh`` x the camera height above it; then the median of that band);
-    None without ``min_inliers`` support."""
+def road_layer(points: np.ndarray, centres: np.ndarray, normal: np.ndarray, rel_thresh: float = 0.05,
+               min_inliers: int = 10) -> tuple[Optional[float], int]:
+    """``(offset, support)`` of the densest layer of points below the cameras along ``normal`` (1-D
+    RANSAC over the points' heights: every point's height is a candidate, its support the points
+    within ``rel_thresh`` x the camera height above it; then the median of that band); offset None
+    without ``min_inliers`` support."""
     n = np.asarray(normal, dtype=np.float64)
     cam = float(np.median(np.asarray(centres, dtype=np.float64).reshape(-1, 3) @ n))
     h = np.asarray(points, dtype=np.float64).reshape(-1, 3) @ n
     h = np.sort(h[h < cam])
     if len(h) < min_inliers:
-        return None
+        return None, len(h)
     band = rel_thresh * (cam - h)
     counts = np.searchsorted(h, h + band, side="right") - np.searchsorted(h, h - band, side="left")
     best = int(counts.argmax())
     if counts[best] < min_inliers:
-        return None
+        return None, int(counts[best])
     level = float(h[best])
     for _ in range(3):
         inl = h[np.abs(h - level) < rel_thresh * (cam - level)]
         if len(inl) < min_inliers:
             break
         level = float(np.median(inl))
-    return -level
+    return -level, int(counts[best])
+
+
+def plane_offset(points: np.ndarray, centres: np.ndarray, normal: np.ndarray, rel_thresh: float = 0.05,
+                 min_inliers: int = 10) -> Optional[float]:
+    """Offset ``d`` of the plane ``normal . x + d = 0`` through the densest layer of points below the
+    cameras (:func:`road_layer`); None without ``min_inliers`` support."""
+    return road_layer(points, centres, normal, rel_thresh, min_inliers)[0]
 
 
 def level_plane(normal: np.ndarray, offset: float, points: np.ndarray, centres: np.ndarray,
@@ -110,9 +119,20 @@ def level_plane(normal: np.ndarray, offset: float, points: np.ndarray, centres: 
     n = np.asarray(normal, dtype=np.float64)
     c = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
     cam_h = float(np.median(c @ n + offset))
-    up = upright_normal(n, cam_right, c, min_extent=max(cam_h, 1e-12)) if cam_right is not None else None
-    n2 = up if up is not None else level_normal(n, c, min_extent=max(cam_h, 1e-12))
-    d2 = plane_offset(points, c, n2, rel_thresh)
+    ext = max(cam_h, 1e-12)
+    up = upright_normal(n, cam_right, c, min_extent=ext) if cam_right is not None else None
+    n2 = up if up is not None else level_normal(n, c, min_extent=ext)
+    d2, support = road_layer(points, c, n2, rel_thresh)
+    if up is None and cam_right is not None:
+        # the points' normal leans past UPRIGHT_MAX_DEG from the cameras' upright: movers, car roofs
+        # and facade feet can tilt a plane fitted on few road points (the roll of a straight drive
+        # is theirs alone), yet a tilted mount also gets here: the normal whose road layer holds
+        # more points wins
+        far = upright_normal(n, cam_right, c, min_extent=ext, max_deg=MAX_TILT_DEG)
+        if far is not None:
+            d3, support3 = road_layer(points, c, far, rel_thresh)
+            if d3 is not None and support3 > support:
+                n2, d2 = far, d3
     if d2 is None:
         d2 = -float(np.median(c, axis=0) @ n2 - cam_h)
     return n2, float(d2)

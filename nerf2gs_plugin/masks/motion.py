@@ -1,22 +1,24 @@
 """Moving objects from motion, no weights: where the image moves otherwise than the static scene would.
 
-A camera moving through a static street sees every static pixel move by the *rigid flow*: the pixel's
-surface point (its distance along the ray from a depth: the first reference's render) projected into
-a neighbouring frame with the SfM poses. Dense optical flow (OpenCV's DIS) measures how the image
-actually moved. A pixel whose observed flow disagrees with its rigid flow (endpoint error above
-``rel`` times the rigid flow's length, and above ``floor_px``) moves:
+A camera moving through a static street sees every static pixel move along its *epipolar line*
+(from where the camera's rotation alone puts it, outward as the surface comes closer), and by how far
+depends on the surface's distance. Dense optical flow (OpenCV's DIS, after warping the neighbour by
+the rigid flow of a prior depth: the first reference's render, so that what is left is small) measures
+how the image actually moved. A pixel moves where no static surface explains its flow:
 
-  * an object riding ahead at the camera's speed stays put in the image (observed flow ~ 0), while
-    the road beneath it flows: a static surface seen by a ray pointing down is never farther than the
-    ground plane along that ray, so the rigid flow is computed with the depth clamped to the plane's
-    (:func:`static_distance`), and a mask-less reference that rendered the object far away (where
-    zero parallax puts it) cannot hide it;
-  * a pedestrian crossing or an oncoming car moves across or faster than its background's flow;
+  * it leaves the epipolar line (``perp_px``): a pedestrian crossing, a car turning;
+  * it has less parallax than the farthest static surface along its ray (``bound``): an object riding
+    ahead at the camera's speed stays put in the image, while the road beneath it flows, and a
+    static surface seen by a ray pointing down is never farther than the ground plane along that ray
+    (:func:`static_distance`), so a mask-less reference that rendered the object far away (where zero
+    parallax puts it) cannot hide it;
+  * it has clearly less parallax than the reference depth gives (``ref_rel``): farther than the
+    reference says. Not the other way (``ref_close_rel``, off): a short reference's holes and
+    smeared depth put static surfaces too far much more often than a mover comes closer;
   * a parked car is where its depth says: its flow is the rigid flow, it stays unmasked.
 
-Each frame is compared with several neighbours before and after it (``neighbours``); a pair counts only
-where the flow is forward-backward consistent (an occluded or textureless pixel tells nothing) and a
-pixel moves when at least ``vote`` of its valid pairs say so, on both sides (what a mover uncovers
+Each frame is compared with several neighbours before and after it (``neighbours``); a pair counts where
+the pixel's static point lands inside the neighbour, in front of it, and a pixel moves when at least ``vote`` of its valid pairs say so, on both sides (what a mover uncovers
 was hidden only in the frames before it). The votes are grown to object outlines:
 superpixels (SLIC on the image) join where ``grow`` of their pixels move, then the regions are closed,
 their holes filled and small ones dropped (``masks/from_renders.clean_regions``).
@@ -48,10 +50,21 @@ class MotionOptions:
     estimated poses and depth it still marks much static road (see docs/masks-motion.md)."""
     neighbours: tuple[int, ...] = (-2, -1, 1, 2)
     """Frames compared with each frame (offsets in the sequence, sorted by file name)."""
+    perp_px: float = 1.5
+    """A pixel moves where its flow leaves the epipolar line by more than this many pixels ..."""
+    perp_rel: float = 0.05
+    """... and this fraction of its flow (pose errors grow with the flow) ..."""
     rel: float = 0.15
-    """A pixel moves where the flow's endpoint error exceeds this fraction of the rigid flow's length ..."""
+    """... or where its parallax falls short of the farthest static surface's (the ground plane's,
+    below the horizon) by more than this fraction of it ..."""
     floor_px: float = 2.0
-    """... and this many pixels (at the reference's resolution)."""
+    """... and this many pixels (at the reference's resolution) ..."""
+    ref_rel: float = 0.3
+    """... or where its parallax falls short of the reference depth's by more than this fraction (inf:
+    off; only this side: a short reference's floaters and holes make static pixels read closer than
+    it says far more often than a mover does) ..."""
+    ref_close_rel: float = math.inf
+    """... or where its parallax exceeds the reference depth's by more than this fraction (inf: off) ..."""
     photo_grey: float = 45.0
     """... or where frame ``j`` warped by the rigid flow differs from frame ``i`` by more than this
     (grey levels of images normalised to a spread of 48, 3x3 means; 0: off): a small mover that DIS
@@ -80,6 +93,9 @@ class MotionFrame:
     dist: Tensor
     c2w: Tensor
     intr: Intrinsics
+    bound: Optional[Tensor] = None
+    """``[H, W]`` the farthest a static surface can be along each ray (the ground plane's distance
+    along downward rays, inf elsewhere); None: no bound."""
 
 
 def ray_directions(c2w: Tensor, intr: Intrinsics, h: int, w: int) -> Tensor:
@@ -148,20 +164,68 @@ def warp(image: np.ndarray, flow: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return cv2.remap(image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE), inside
 
 
-def pair_moving(grey_i: np.ndarray, grey_j: np.ndarray, rig: Tensor, ok: Tensor, opts: "MotionOptions") -> tuple[Tensor, Tensor]:
-    """Frame ``j`` warped onto frame ``i`` by the rigid flow ``rig``: what is static now lines up, so
-    the optical flow left between the two (small: where DIS is reliable) is what moved. A pixel moves
-    where that residual flow exceeds ``rel`` times the rigid flow (depth errors scale with it) and
-    ``floor_px``. Returns (moving, valid)."""
+def epipolar_line(fi: "MotionFrame", fj: "MotionFrame") -> tuple[Tensor, Tensor, Tensor]:
+    """Where frame ``i``'s pixels can land in frame ``j`` if static: on the epipolar line from
+    ``p_inf`` (the pixel's flow at infinity: the rotation alone) along the unit direction ``u``
+    (``[H, W, 2]`` each, as flows from the pixel) in which parallax grows as the surface comes closer;
+    and where that direction is defined (not at the epipole)."""
+    h, w = fi.dist.shape
+    p_inf, _ = rigid_flow(fi.c2w, fi.intr, torch.full((h, w), math.inf), fj.c2w, fj.intr)
+    far = 100.0 * max(float((fi.c2w[:, 3] - fj.c2w[:, 3]).norm()), 1e-9)  # in front of both cameras
+    p_far, ok = rigid_flow(fi.c2w, fi.intr, torch.full((h, w), far), fj.c2w, fj.intr)
+    d = (p_far - p_inf).double()
+    n = d.norm(dim=-1, keepdim=True)
+    return p_inf, (d / n.clamp(min=1e-12)).float(), ok & (n[..., 0] > 1e-6)
+
+
+def along(flow: Tensor, p_inf: Tensor, u: Tensor) -> Tensor:
+    """``flow``'s parallax: its position along the epipolar line, pixels from ``p_inf``."""
+    return ((flow - p_inf) * u).sum(-1)
+
+
+def pair_moving(fi: "MotionFrame", fj: "MotionFrame", grey_i: np.ndarray, grey_j: np.ndarray, opts: "MotionOptions") -> tuple[Tensor, Tensor]:
+    """Frame ``j`` warped onto frame ``i`` by the rigid flow of ``i``'s prior depth: what is static
+    lines up roughly, so DIS measures the rest of the observed flow where it is reliable (small
+    flows). The observed flow is then judged against what any static surface could do, not against
+    the prior depth alone (a short reference's depth has floaters and holes):
+
+      * off the epipolar line by more than ``perp_px`` (and ``perp_rel`` of the flow): no depth explains it;
+      * less parallax than the farthest static surface along the ray (``bound``: the ground plane
+        below the horizon; infinity above it) by more than ``rel`` of that parallax and
+        ``floor_px``: it recedes with the camera (a car ahead at the drive's speed);
+      * less parallax than the prior depth's by more than ``ref_rel`` of it and ``floor_px``: farther
+        than the reference says (one-sided and loose: the reference is the least reliable part);
+      * the neighbour warped by the observed flow differs by ``photo_grey`` grey levels: a small
+        mover DIS lost still fails to line up.
+
+    Returns (moving, valid)."""
+    rig, ok = rigid_flow(fi.c2w, fi.intr, fi.dist, fj.c2w, fj.intr)
     wj, inside = warp(grey_j, rig.numpy())
     wj = np.where(inside, wj, grey_i)  # outside frame j: nothing to compare, no flow to invent there
-    resid = torch.from_numpy(optical_flow(grey_i, wj)).norm(dim=-1)
-    limit = torch.clamp(opts.rel * rig.norm(dim=-1), min=opts.floor_px)
-    moving = resid > limit
-    if opts.photo_grey > 0:  # a small mover DIS loses in its coarse levels still fails to line up
+    resid = torch.from_numpy(optical_flow(grey_i, wj))
+    obs = rig + resid  # the residual is measured on i's grid: the composition is rig + resid where rig is smooth
+    p_inf, u, line_ok = epipolar_line(fi, fj)
+    off = obs - p_inf
+    perp = (off[..., 0] * u[..., 1] - off[..., 1] * u[..., 0]).abs()
+    moving = line_ok & (perp > torch.clamp(opts.perp_rel * off.norm(dim=-1), min=opts.perp_px))
+    s_obs = along(obs, p_inf, u)
+    if fi.bound is not None:
+        rb, ok_b = rigid_flow(fi.c2w, fi.intr, fi.bound, fj.c2w, fj.intr)
+        s_b = torch.where(ok_b, along(rb, p_inf, u), torch.zeros_like(s_obs))
+    else:
+        s_b = torch.zeros_like(s_obs)
+    moving |= line_ok & (s_obs < s_b - torch.clamp(opts.rel * s_b, min=opts.floor_px))
+    if math.isfinite(opts.ref_rel):
+        s_r = along(rig, p_inf, u)
+        moving |= line_ok & ok & (s_r - s_obs > torch.clamp(opts.ref_rel * s_r.abs(), min=opts.floor_px))
+    if math.isfinite(opts.ref_close_rel):
+        s_r = along(rig, p_inf, u)
+        moving |= line_ok & ok & (s_obs - s_r > torch.clamp(opts.ref_close_rel * s_r.abs(), min=opts.floor_px))
+    if opts.photo_grey > 0:
         import cv2
 
-        diff = np.abs(cv2.blur(grey_i.astype(np.float32), (3, 3)) - cv2.blur(wj.astype(np.float32), (3, 3)))
+        wo, _ = warp(grey_j, obs.numpy())  # not by the prior's flow: where the reference's depth is off, that misaligns static texture
+        diff = np.abs(cv2.blur(grey_i.astype(np.float32), (3, 3)) - cv2.blur(wo.astype(np.float32), (3, 3)))
         moving |= torch.from_numpy(diff > opts.photo_grey)
     return moving, ok & torch.from_numpy(inside)
 
@@ -181,8 +245,7 @@ def moving_fraction(frames: Sequence[MotionFrame], i: int, opts: MotionOptions, 
             j = i + off
             if off * side <= 0 or j < 0 or j >= len(frames):
                 continue
-            rig, ok = rigid_flow(f.c2w, f.intr, f.dist, frames[j].c2w, frames[j].intr)
-            moving, valid = pair_moving(greys[i], greys[j], rig, ok, opts)
+            moving, valid = pair_moving(f, frames[j], greys[i], greys[j], opts)
             votes += (moving & valid).float()
             valid_n += valid.float()
         shares.append((votes / valid_n.clamp(min=1), valid_n > 0))
@@ -236,8 +299,9 @@ def frames_from_renders(views: Sequence[dict], sky: Sequence[Tensor], up: Tensor
     for v, s in zip(views, sky):
         intr = tuple(float(x) for x in v["intr"])
         dist = torch.where(s, torch.full_like(v["depth"], math.inf), v["depth"].float())
-        dist = static_distance(dist, v["c2w"], intr, up, height) if clamp else dist
-        out.append(MotionFrame(v["image"], dist, v["c2w"], intr))  # type: ignore[arg-type]
+        bound = static_distance(torch.full_like(dist, math.inf), v["c2w"], intr, up, height) if clamp else None
+        dist = torch.minimum(dist, bound) if bound is not None else dist
+        out.append(MotionFrame(v["image"], dist, v["c2w"], intr, bound))  # type: ignore[arg-type]
     return out
 
 

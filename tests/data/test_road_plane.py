@@ -93,3 +93,21 @@ def test_metric_scale_up_from_the_cameras_scale_from_the_plane():
     upright = estimate_metric_scale(pts, cams, np.array([0.0, 0, 1]), camera_height=3.0, cam_right=right)
     assert upright.metres_per_unit == plain.metres_per_unit
     assert _angle(upright.up, np.array([0.0, 0, 1])) < 0.3
+
+
+def test_a_plane_rolled_past_the_upright_guard_loses_to_the_cameras_when_the_road_says_so():
+    """On a street with movers and parked cars the sparse points' plane can roll 12 deg about a
+    straight drive: past UPRIGHT_MAX_DEG, so the cameras' upright alone may not replace it, but the
+    road layer along the upright holds more points, and it wins. A mount rolled 15 deg on purpose
+    (the cameras' axes rolled, the road level) keeps the points' normal: the road layer along the
+    cameras' upright is smeared."""
+    rng = np.random.default_rng(5)
+    cams, pts = _drive(rng, n_road=80)
+    right = np.array([0.0, -1.0, 0.0]) + rng.normal(0, 0.01, (len(cams), 3))
+    rolled = _rot("x", 12.0) @ np.array([0.0, 0, 1])
+    assert upright_normal(rolled, right, cams, min_extent=3.0) is None
+    n, d = level_plane(rolled, 0.0, pts, cams, cam_right=right)
+    assert _angle(n, np.array([0.0, 0, 1])) < 0.5 and abs(np.median(cams @ n + d) - 3.0) < 0.1
+    tilted_mount = right @ _rot("x", 15.0).T
+    n2, _ = level_plane(np.array([0.0, 0, 1]), 0.0, pts, cams, cam_right=tilted_mount)
+    assert _angle(n2, np.array([0.0, 0, 1])) < 0.5
