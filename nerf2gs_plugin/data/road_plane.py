@@ -19,8 +19,6 @@ from typing import Optional
 
 import numpy as np
 
-from nerf2gs_plugin.data.ground import MAX_TILT_DEG
-
 
 def path_directions(centres: np.ndarray, min_extent: float, ratio: float = 0.2) -> np.ndarray:
     """``[K, 3]`` unit directions the camera centres spread along (principal axes whose RMS spread
@@ -50,6 +48,11 @@ def level_normal(normal: np.ndarray, centres: np.ndarray, min_extent: float) -> 
 UPRIGHT_MAX_DEG = 10.0
 """The most the cameras' upright direction may differ from the plane's normal and still replace it:
 beyond, the cameras are rolled on purpose (portrait photos, a tilted mount) and the points decide."""
+
+
+UPRIGHT_COMPETE_DEG = 20.0
+"""Beyond UPRIGHT_MAX_DEG and up to this, the cameras' upright still competes with the points' normal
+on the support of the road layer along each (:func:`level_plane`)."""
 
 
 def upright_normal(normal: np.ndarray, cam_right: np.ndarray, centres: np.ndarray, min_extent: float,
@@ -128,7 +131,7 @@ def level_plane(normal: np.ndarray, offset: float, points: np.ndarray, centres: 
         # and facade feet can tilt a plane fitted on few road points (the roll of a straight drive
         # is theirs alone), yet a tilted mount also gets here: the normal whose road layer holds
         # more points wins
-        far = upright_normal(n, cam_right, c, min_extent=ext, max_deg=MAX_TILT_DEG)
+        far = upright_normal(n, cam_right, c, min_extent=ext, max_deg=UPRIGHT_COMPETE_DEG)
         if far is not None:
             d3, support3 = road_layer(points, c, far, rel_thresh)
             if d3 is not None and support3 > support:
