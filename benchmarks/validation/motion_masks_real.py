@@ -3,7 +3,8 @@
 here), the bonnet cropped (rows 0-789) and resized to 480x237, frames FIRST..FIRST+N-1 as a video ->
 ``process video`` (64.6 deg FOV, camera 1.5 m up) -> 1000-step mask-less reference -> transient masks
 without / with the motion route, scored against ``labels/nuscenes_moving.json`` (polygons drawn by eye
-on the 480x237 crops: approximate outlines of the clearly moving objects) on the labelled frames that
+on the 480x237 crops: approximate outlines of the clearly moving objects; 'ignore' regions, objects
+whose motion cannot be told, count neither way) on the labelled frames that
 are training frames.
 
 Usage: python benchmarks/validation/motion_masks_real.py NUSCENES_IMAGE_DIR WORK OUT_STEM [FIRST N]
@@ -67,11 +68,15 @@ for label, res in (("without_motion", base), ("with_motion", motion)):
         key = f"{first + br.frame_index(Path(name)):06d}"  # frame_000004 is the 5th frame of the drive
         if key not in labels["frames"]:
             continue
-        gt = np.zeros(SIZE[::-1], np.uint8)
-        for poly in labels["frames"][key].values():
-            cv2.fillPoly(gt, [np.array(poly, np.int32)], 1)
-        pred = cv2.resize(m.transient.numpy().astype(np.uint8), SIZE, interpolation=cv2.INTER_NEAREST) > 0
-        gt = gt > 0
+        gt, ignore = np.zeros(SIZE[::-1], np.uint8), np.zeros(SIZE[::-1], np.uint8)
+        for what, poly in labels["frames"][key].items():
+            polys = poly if what == "ignore" else [poly]
+            cv2.fillPoly(ignore if what == "ignore" else gt, [np.array(q, np.int32) for q in polys], 1)
+        keep = ignore == 0  # an ignore region counts neither way
+        pred = (cv2.resize(m.transient.numpy().astype(np.uint8), SIZE, interpolation=cv2.INTER_NEAREST) > 0) & keep
+        gt = (gt > 0) & keep
+        if label == "with_motion":
+            cv2.imwrite(str(work / f"pred_{key}.png"), np.stack([gt * 255, pred * 255, ignore * 120], -1).astype(np.uint8))
         c += [int((pred & gt).sum()), int((pred | gt).sum()), int(pred.sum()), int(gt.sum())]
         used.append(key) if label == "with_motion" else None
     i, u, p, t = (int(x) for x in c)
