@@ -38,7 +38,15 @@ CACHE_FORMAT_VERSION = 1
 CACHE_DIR_NAME = "augment_cache"
 MANIFEST_NAME = "manifest.json"
 # AugmentConfig fields that do not change a rendered image (so not in the key)
-UNKEYED_FIELDS = ("extra_prob", "extra_weight", "use_cache", "enhancer", "real_only_from")
+UNKEYED_FIELDS = ("extra_prob", "extra_weight", "use_cache", "enhancer", "real_only_from", "birds_eye_share")
+UNKEYED_FAMILY_FIELDS = ("share",)
+"""A view family's parameters that do not change its views (how often they are sampled)."""
+
+
+def family_params(config: dict[str, Any], name: str) -> Optional[dict[str, Any]]:
+    """A family's parameters in a plain AugmentConfig (its field ``name``), without the unkeyed ones."""
+    params = config.get(name)
+    return {k: v for k, v in params.items() if k not in UNKEYED_FAMILY_FIELDS} if isinstance(params, dict) else params
 
 
 @dataclass
@@ -137,6 +145,8 @@ def cache_key(ref_key: str, dataset: str, config: dict[str, Any], bev: Optional[
     for family, name in FAMILY_FIELDS.items():  # a family's parameters key the entry only when it is used
         if family not in views:
             relevant.pop(name, None)
+        elif name in relevant:
+            relevant[name] = family_params(relevant, name)
     if views != ["birds-eye"]:  # the bird's-eye views alone: the entries of runs before the families
         relevant["views"] = views
     if relevant.get("confidence", "none") == "none":  # no confidence maps: the entries of runs before the option

@@ -38,6 +38,7 @@ from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
 from nerf2gs_plugin.augment.config import FAMILY_FIELDS, AugmentConfig
 from nerf2gs_plugin.augment.geometry import ViewGeometry, WorldFrame
+from nerf2gs_plugin.augment.shares import extra_sampling
 from nerf2gs_plugin.augment.views import additional_views
 from nerf2gs_plugin.augment.cache import (
     CACHE_DIR_NAME,
@@ -46,6 +47,7 @@ from nerf2gs_plugin.augment.cache import (
     ViewStore,
     cache_key,
     cache_manifests,
+    family_params,
     confidence_path,
     load_confidence,
     load_png,
@@ -397,9 +399,9 @@ class AugmentedDataManager(DataManager):
         if self.views.composites is not None:
             inner.set_train_images(self.views.composites)
         if self.views.extra is not None:
-            n_real, n_extra = len(inner.train_images), len(self.views.extra)
-            prob = augment.extra_prob if augment.extra_prob is not None else n_extra / (n_real + n_extra)
-            inner.set_extra_images(self.views.extra, prob)
+            families = self.views.manifest.extra_families or ["birds-eye"] * len(self.views.extra)
+            prob, view_probs = extra_sampling(families, len(inner.train_images), augment)
+            inner.set_extra_images(self.views.extra, prob, view_probs)
 
     @property
     def manifest(self) -> CacheManifest:
@@ -449,8 +451,8 @@ class AugmentedDataManager(DataManager):
     def set_train_images(self, images: ImageSet) -> None:
         self.inner.set_train_images(images)
 
-    def set_extra_images(self, images: Optional[ImageSet], prob: float) -> None:
-        self.inner.set_extra_images(images, prob)
+    def set_extra_images(self, images: Optional[ImageSet], prob: float, view_probs: Optional[Tensor] = None) -> None:
+        self.inner.set_extra_images(images, prob, view_probs)
 
     def next_train(self, step: int) -> tuple[Any, dict[str, Any]]:
         if self.real_only_step is not None and step >= self.real_only_step:
@@ -485,7 +487,7 @@ def same_families(recorded: dict[str, Any], augment: AugmentConfig) -> bool:
     if views != list(augment.views):
         return False
     plain = json.loads(json.dumps(asdict(augment), default=str))
-    return all(recorded.get(name) == plain[name] for family, name in FAMILY_FIELDS.items() if family in views)
+    return all(family_params(recorded, name) == family_params(plain, name) for family, name in FAMILY_FIELDS.items() if family in views)
 
 
 def find_cached_extra_views(cache_root: Path, dataset: str, augment: AugmentConfig, num_views: int) -> Optional[CacheManifest]:

@@ -3,8 +3,9 @@
 ``--augment.views birds-eye lane-shift`` names the families; each makes cameras (with the input
 views' intrinsics) and says which input view each one came from. The augmentation renders the
 concatenation of every family's cameras, in the order given, as one set of additional views: one
-cache entry, one manifest (the poses and each view's family saved), one share of the training
-samples, and the same drop rules (outside the scene box, mostly empty render).
+cache entry, one manifest (the poses and each view's family saved) and the same drop rules (outside
+the scene box, mostly empty render); each family has its own share of the training samples
+(augment/shares.py).
 
 Built-in families (their parameters under their names, ``augment/config.py``):
   * ``birds-eye``: raised by delta-h and pitched down by theta-pitch (the paper's views);

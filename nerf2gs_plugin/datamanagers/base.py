@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, ClassVar, Iterator, Optional
 
 import torch
+from torch import Tensor
 
 from nerf2gs_plugin.cameras import Cameras
 from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
@@ -51,6 +52,7 @@ class DataManager(ABC):
         self.train_images: ImageSet = load_image_set(self.train_data).to(self.device)
         self.extra_images: Optional[ImageSet] = None
         self.extra_prob = 0.0
+        self.extra_view_probs: Optional[Tensor] = None
         self._split_names = [s for s in self.parser.splits() if s != "train"]
         self._eval_cache: dict[str, tuple[DataparserOutputs, ImageSet]] = {}
         self.generator = torch.Generator().manual_seed(seed)
@@ -60,10 +62,14 @@ class DataManager(ABC):
         """Replace the training pixels (e.g. with transient-free composites); cameras stay."""
         self.train_images = images.to(self.device)
 
-    def set_extra_images(self, images: Optional[ImageSet], prob: float) -> None:
-        """Mix ``images`` into training with probability ``prob`` per sample."""
+    def set_extra_images(self, images: Optional[ImageSet], prob: float, view_probs: Optional[Tensor] = None) -> None:
+        """Mix ``images`` into training with probability ``prob`` per sample; ``view_probs`` ``[len(images)]``:
+        how often each is drawn among them (None: all alike)."""
         self.extra_images = images.to(self.device) if images is not None and len(images) else None
         self.extra_prob = float(prob) if self.extra_images is not None else 0.0
+        if view_probs is not None and (self.extra_images is None or len(view_probs) != len(self.extra_images)):
+            raise ValueError("view_probs needs one probability per extra image")
+        self.extra_view_probs = view_probs.double().cpu() if view_probs is not None else None
 
     @property
     def all_train_cameras(self) -> Cameras:
@@ -119,6 +125,13 @@ class DataManager(ABC):
 
     def _use_extra(self) -> bool:
         return self.extra_images is not None and torch.rand((), generator=self.generator).item() < self.extra_prob
+
+    def _extra_indices(self, n: int) -> Tensor:
+        """``n`` extra-image indices drawn at :attr:`extra_view_probs` (uniform without them: the draws of before)."""
+        assert self.extra_images is not None
+        if self.extra_view_probs is None:
+            return torch.randint(len(self.extra_images), (n,), generator=self.generator)
+        return torch.multinomial(self.extra_view_probs, n, replacement=True, generator=self.generator)
 
     def state_dict(self) -> dict:
         return {"generator": self.generator.get_state()}

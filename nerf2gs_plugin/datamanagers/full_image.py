@@ -18,7 +18,7 @@ class FullImageDataManagerConfig(DataManagerConfig):
 
 class FullImageDataManager(DataManager):
     """Cycles through a random permutation of the training images; extra views are drawn with
-    probability ``extra_prob``. ``image_idx`` indexes :attr:`all_train_cameras`."""
+    probability ``extra_prob`` (each at ``extra_view_probs``). ``image_idx`` indexes :attr:`all_train_cameras`."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
@@ -26,7 +26,7 @@ class FullImageDataManager(DataManager):
 
     def next_train(self, step: int) -> tuple[Cameras, dict[str, Any]]:
         if self._use_extra():
-            i = int(torch.randint(len(self.extra_images), (), generator=self.generator))
+            i = int(self._extra_indices(1)[0])
             return self.extra_images.cameras[i], self.train_batch(len(self.train_images) + i)
         if not self._order:
             self._order = torch.randperm(len(self.train_images), generator=self.generator).tolist()

@@ -22,8 +22,17 @@ class RayDataManagerConfig(DataManagerConfig):
 class RayDataManager(DataManager):
     config: RayDataManagerConfig
 
-    def _sample(self, images: ImageSet, n: int, index_offset: int) -> tuple[RayBundle, dict[str, Any]]:
-        flat = torch.randint(images.num_pixels, (n,), generator=self.generator).to(self.device)
+    def _pixels(self, images: ImageSet, n: int, extra: bool) -> torch.Tensor:
+        """``n`` flat pixel indices: uniform over all pixels, or (extra views with view probabilities)
+        an image at its probability, then a pixel of it."""
+        if not extra or self.extra_view_probs is None:
+            return torch.randint(images.num_pixels, (n,), generator=self.generator)
+        img = self._extra_indices(n)
+        sizes = (images.cameras.height * images.cameras.width).reshape(-1).long().cpu()[img]
+        return images.offsets.cpu()[img] + (torch.rand(n, generator=self.generator, dtype=torch.float64) * sizes).long()
+
+    def _sample(self, images: ImageSet, n: int, index_offset: int, extra: bool = False) -> tuple[RayBundle, dict[str, Any]]:
+        flat = self._pixels(images, n, extra).to(self.device)
         img, v, u = images.locate(flat)
         rays = images.cameras.generate_rays(img, torch.stack([u, v], dim=-1))
         rays.camera_indices = img + index_offset
@@ -47,6 +56,6 @@ class RayDataManager(DataManager):
         rays, batch = self._sample(self.train_images, n - n_extra, 0)
         if n_extra == 0:
             return rays, batch
-        rays_x, batch_x = self._sample(self.extra_images, n_extra, len(self.train_images))
+        rays_x, batch_x = self._sample(self.extra_images, n_extra, len(self.train_images), extra=True)
         rays = RayBundle(*(torch.cat([getattr(rays, k), getattr(rays_x, k)]) for k in ("origins", "directions", "pixel_radius", "camera_indices")))
         return rays, {k: torch.cat([batch[k], batch_x[k]]) for k in batch}

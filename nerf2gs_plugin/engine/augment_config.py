@@ -6,9 +6,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, Literal, Optional
+from typing import Annotated, Any, Literal, Optional
 
 import tyro
+
+from nerf2gs_plugin.errors import ConfigError
 
 
 @dataclass
@@ -23,6 +25,9 @@ class LaneShiftConfig:
     on its input camera's line of travel (0: the input's own heading)."""
     every_n: int = 1
     """Use every n-th input pose."""
+    share: Optional[float] = None
+    """Probability that a training sample is one of this family's views (None: its views' share of
+    them and the input views, out of the input views' share; augment/shares.py)."""
 
 
 @dataclass
@@ -33,6 +38,9 @@ class RaiseConfig:
     """Metres above each input view along the scene's up vector; one view per input pose and height."""
     every_n: int = 1
     """Use every n-th input pose."""
+    share: Optional[float] = None
+    """Probability that a training sample is one of this family's views (None: its views' share of
+    them and the input views, out of the input views' share; augment/shares.py)."""
 
 
 @dataclass
@@ -44,6 +52,9 @@ class PosesFileConfig:
     its camera_path[].camera_to_world), OpenGL axes, in the run's normalised
     world frame (the frame of the cache manifest's saved poses); each view takes the intrinsics of
     the input camera nearest it."""
+    share: Optional[float] = None
+    """Probability that a training sample is one of this family's views (None: its views' share of
+    them and the input views, out of the input views' share; augment/shares.py)."""
 
 
 FAMILY_FIELDS = {"lane-shift": "lane_shift", "raise": "raise_", "poses": "poses"}
@@ -65,7 +76,8 @@ class AugmentConfig:
     views: tuple[str, ...] = ("birds-eye",)
     """View families that make the additional views from the input poses (augment/views.py): birds-eye
     (the --augment.delta-h/theta-pitch/... fields below), lane-shift, raise, poses; their parameters
-    under their names (--augment.lane-shift.offsets ...). One cache entry, manifest and sampling share."""
+    under their names (--augment.lane-shift.offsets ...). One cache entry and manifest; each family its
+    own share of the training samples (--augment.lane-shift.share ...)."""
     lane_shift: LaneShiftConfig = field(default_factory=LaneShiftConfig)
     raise_: Annotated[RaiseConfig, tyro.conf.arg(name="raise")] = field(default_factory=RaiseConfig)
     poses: PosesFileConfig = field(default_factory=PosesFileConfig)
@@ -85,8 +97,13 @@ class AugmentConfig:
     """A bird's-eye render whose fraction of pixels with accumulation > 0.5 is below this is dropped (warned)."""
     every_n: int = 1
     """Use every n-th input pose for an additional view."""
+    birds_eye_share: Optional[float] = None
+    """Probability that a training sample is a bird's-eye view (None: their share of them and the input
+    views, the paper's draw of one image among all); each family has its own (--augment.lane-shift.share
+    ...), so adding a family takes samples from the input views only (augment/shares.py)."""
     extra_prob: Optional[float] = None
-    """Probability that a training sample comes from the additional views (None: their share of all views)."""
+    """Probability that a training sample comes from any additional view (None: the families' shares
+    added up); when set, split between the families in proportion to their shares."""
     extra_weight: float = 1.0
     """Loss weight of additional-view samples."""
     enhancer: str = "none"
@@ -113,3 +130,31 @@ class AugmentConfig:
     """Fraction of the run after which only the input views (composites) are sampled: 0.9 gives the last
     10% of the steps to the target's own street evidence (1.0: the additional views to the end; 0.9 was
     chosen on validation views of two streets and a real capture: benchmarks/results/augment_variants.md)."""
+
+
+def share_flag(family: str) -> str:
+    return "--augment.birds-eye-share" if family == "birds-eye" else f"--augment.{family}.share"
+
+
+def given_share(augment: Any, family: str) -> Optional[float]:
+    """The share ``augment`` sets for ``family`` (None: the default rule; a plugin family without a field: None)."""
+    if family == "birds-eye":
+        return getattr(augment, "birds_eye_share", None)
+    attr = FAMILY_FIELDS.get(family)
+    return getattr(getattr(augment, attr, None), "share", None) if attr else None
+
+
+def check_given_shares(augment: Any) -> None:
+    """Each share given in [0, 1) and together below 1 (the input views keep some samples); a
+    :class:`ConfigError` naming the flag otherwise."""
+    total = 0.0
+    for family in augment.views:
+        s = given_share(augment, family)
+        if s is None:
+            continue
+        if not 0.0 <= s < 1.0:
+            raise ConfigError(f"must be in [0, 1), got {s}", share_flag(family))
+        total += s
+    if total >= 1.0:
+        raise ConfigError(f"the view families' shares add up to {total:g}: the input views need some samples",
+                          " ".join(share_flag(f) for f in augment.views if given_share(augment, f) is not None))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from nerf2gs_plugin.engine.augment_config import check_given_shares
 from nerf2gs_plugin.errors import ConfigError
 
 # Adam's first step is lr / (1 - beta1) = 10 lr; above ~3e37 that overflows float32 inside torch
@@ -47,6 +48,7 @@ def check_trainer_config(cfg: Any) -> None:
         raise ConfigError(f"must be >= 1, got {aug.every_n}", "--augment.every-n")
     if aug.extra_prob is not None and not 0 <= aug.extra_prob <= 1:
         raise ConfigError(f"must be in [0, 1], got {aug.extra_prob}", "--augment.extra-prob")
+    check_given_shares(aug)
     if not math.isfinite(aug.theta_pitch):
         raise ConfigError(f"must be finite, got {aug.theta_pitch}", "--augment.theta-pitch")
     dm = getattr(getattr(cfg, "pipeline", None), "datamanager", None)

@@ -157,7 +157,8 @@ def test_tiny_training_run_with_two_families(tiny_scene, tmp_path):
     ref = trainer.train()
     p = subprocess.run([sys.executable, "-m", "nerf2gs_plugin.cli.train", "voxel-grid", "--data", str(tiny_scene),
                         "--augment-from", str(ref), "--augment.views", "birds-eye", "lane-shift",
-                        "--augment.lane-shift.offsets", "-1", "1", "--augment.delta-h", "2", "--augment.min-coverage", "0",
+                        "--augment.lane-shift.offsets", "-1", "1", "--augment.lane-shift.share", "0.2", "--augment.delta-h", "2",
+                        "--augment.min-coverage", "0",
                         "--max-num-iterations", "6", "--progress", "False", "--output-dir", str(tmp_path / "tgt")],
                        capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr[-2000:]
@@ -168,3 +169,50 @@ def test_tiny_training_run_with_two_families(tiny_scene, tmp_path):
     assert fams.count("lane-shift") == 2 * fams.count("birds-eye") > 0
     log = json.loads(next((tmp_path / "tgt").rglob("train_log.json")).read_text())
     assert log["reference_render_seconds"] > 0
+
+
+def test_each_family_has_its_own_share_of_the_samples():
+    from nerf2gs_plugin.augment.shares import extra_sampling, family_shares
+
+    bev, lanes = ["birds-eye"] * 10, ["lane-shift"] * 20
+    alone = family_shares(bev, 10, AugmentConfig())
+    assert alone == {"birds-eye": 0.5}  # the draw of one image among all, as before the families
+    both = AugmentConfig(views=("birds-eye", "lane-shift"))
+    # lane-shift added after birds-eye: its default comes out of the input views' share only
+    assert family_shares(bev + lanes, 10, both) == pytest.approx({"birds-eye": 0.5, "lane-shift": 0.5 * 20 / 30})
+    given = dataclasses.replace(both, lane_shift=LaneShiftConfig(share=0.2))
+    assert family_shares(bev + lanes, 10, given) == pytest.approx({"birds-eye": 0.5, "lane-shift": 0.2})
+    # --augment.extra-prob: all additional views together, split in proportion to the shares
+    assert family_shares(bev + lanes, 10, dataclasses.replace(given, extra_prob=0.35)) == pytest.approx({"birds-eye": 0.25, "lane-shift": 0.1})
+    prob, per_view = extra_sampling(bev + lanes, 10, given)
+    assert prob == pytest.approx(0.7) and per_view[:10].sum() == pytest.approx(0.5 / 0.7) and per_view[10:].sum() == pytest.approx(0.2 / 0.7)
+    assert extra_sampling(bev, 10, AugmentConfig())[1] is None  # one family: the uniform draw of before
+    with pytest.raises(ConfigError, match="lane-shift.share"):
+        family_shares(bev + lanes, 10, dataclasses.replace(both, lane_shift=LaneShiftConfig(share=0.6)))
+    with pytest.raises(ConfigError, match="birds-eye-share"):
+        family_shares(bev, 10, AugmentConfig(birds_eye_share=1.0))
+    # a share is how often the views are drawn, not what they are: it keys no cache entry
+    cams = _rolled_camera()
+    assert cache_key("ref", "data", asdict(given), cams, cams, "none") == cache_key("ref", "data", asdict(both), cams, cams, "none")
+    assert same_families(json.loads(json.dumps(asdict(both))), given)
+
+
+@pytest.mark.parametrize("manager", ["full-image", "rays"])
+def test_training_samples_each_family_at_its_share(tiny_scene, tmp_path, manager):
+    from nerf2gs_plugin.augment.datamanager import AugmentedDataManager, Reference
+    from nerf2gs_plugin.datamanagers.full_image import FullImageDataManagerConfig
+    from nerf2gs_plugin.datamanagers.rays import RayDataManagerConfig
+
+    config = FullImageDataManagerConfig() if manager == "full-image" else RayDataManagerConfig(rays_per_batch=64)
+    dm = config.setup(data=tiny_scene, device="cpu")
+    aug = AugmentConfig(views=("birds-eye", "lane-shift"), delta_h=1.0, composites=False, min_coverage=0.0, real_only_from=1.0,
+                        lane_shift=LaneShiftConfig(offsets=(-0.5, 0.5), share=0.2))
+    adm = AugmentedDataManager(dm, Reference(_constant_render, "ref:a", tmp_path), aug)
+    n_real = len(adm.train_images)
+    families = adm.manifest.extra_families
+    assert families.count("lane-shift") == 2 * families.count("birds-eye") == 2 * n_real
+    drawn = torch.cat([torch.as_tensor(adm.next_train(step)[1]["image_idx"]).reshape(-1) for step in range(1500 if manager == "full-image" else 60)])
+    extra = drawn[drawn >= n_real] - n_real
+    frac = {f: sum(families[j] == f for j in extra.tolist()) / len(drawn) for f in ("birds-eye", "lane-shift")}
+    # birds-eye keeps its share of before (its views' share of them and the input views), lane-shift has its 0.2
+    assert frac["birds-eye"] == pytest.approx(0.5, abs=0.04) and frac["lane-shift"] == pytest.approx(0.2, abs=0.04)

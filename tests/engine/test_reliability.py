@@ -192,6 +192,15 @@ def test_negative_augment_delta_h_is_rejected(tiny_scene, tmp_path):
         Trainer(dataclasses.replace(cfg, augment=dataclasses.replace(cfg.augment, delta_h=-3.0)))
 
 
+def test_view_family_share_out_of_range_is_rejected(tiny_scene, tmp_path):
+    from nerf2gs_plugin.augment.config import LaneShiftConfig
+
+    cfg = _config(tiny_scene, tmp_path)
+    aug = dataclasses.replace(cfg.augment, views=("birds-eye", "lane-shift"), lane_shift=LaneShiftConfig(share=1.5))
+    with pytest.raises(ConfigError, match=r"^--augment.lane-shift.share: must be in \[0, 1\)"):
+        Trainer(dataclasses.replace(cfg, augment=aug))
+
+
 def test_train_log_is_written_with_every_checkpoint(tiny_scene, tmp_path, monkeypatch):
     trainer = Trainer(_config(tiny_scene, tmp_path, steps=30, steps_per_save=10))
     trainer.setup()
