@@ -1,42 +1,93 @@
 """Splatfacto alone vs + bird's-eye views vs + bird's-eye and lane-shift views (``--augment.views``),
-all from one StreetNeRF reference, at the quick bench's step counts, on the embedded street
+all from one StreetNeRF reference, at the quick bench's step counts, on a synthetic street
 (generator version 3: it has the lane-shift ground truth lane_1/lane_2/lane_4).
 
 Why: the lane-shift family is meant to teach the target the views one lane over (lane_2, lane_4)
-without costing the bird's-eye or street views; this measures that, same reference, same steps.
+without costing the bird's-eye or street views; this measures that, same reference, same steps:
+the lane-shift views with their own share of the samples (the family's defaults, chosen on the
+validation views by lane_shift_sweep.py) and, for comparison, with the one share of before
+(every additional view drawn alike: bird's-eye 0.25, lane-shift 0.5 of the samples).
 
-Usage: python benchmarks/validation/view_families.py WORK [SEED]
+Usage: python benchmarks/validation/view_families.py WORK [SEED] [REFERENCE_RUN]
   WORK holds the street (WORK/street-seedN) and the runs (WORK/runs); runs already trained are reused.
-Writes benchmarks/results/view_families.{json,md} (seed 0) or view_families_seedN.{json,md}.
+  REFERENCE_RUN: a finished StreetNeRF bench run of that street to render the views from (else one is
+  trained at the quick bench's steps).
+Writes benchmarks/results/view_families.{json,md,png} (seed 0) or view_families_seedN.{json,md,png}.
 """
-import argparse
+import json
 import sys
 from pathlib import Path
+from typing import Optional
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_street, read_generator_version  # noqa: E402
 from nerf2gs_bench.paper import _overrides, ratios_md, run_plan, write_results  # noqa: E402
+from nerf2gs_bench.runner import EVAL_SPLITS, BenchRunner, failure_reason  # noqa: E402
 from nerf2gs_bench.runs import RunSpec  # noqa: E402
 
-ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-ap.add_argument("work", type=Path)
-ap.add_argument("seed", type=int, nargs="?", default=0)
-args = ap.parse_args()
-work, seed = args.work, args.seed
-data = work / f"street-seed{seed}"
-if read_generator_version(data) != 3:
-    generate_street(SynthStreetConfig(out=data, seed=seed, overwrite=True))
-t = "splatfacto"
-plan = [RunSpec("StreetNeRF", "streetnerf", _overrides("quick", "streetnerf")),
-        RunSpec(t, t, _overrides("quick", t)),
-        RunSpec(f"{t} + birds-eye", t, _overrides("quick", t), augment_from="StreetNeRF"),
-        RunSpec(f"{t} + birds-eye lane-shift", t, _overrides("quick", t), augment_from="StreetNeRF",
-                augment={"views": ["birds-eye", "lane-shift"]})]
-results = run_plan(plan, data, work / "runs", name="view_families")
-pairs = [(f"{t} + birds-eye", t), (f"{t} + birds-eye lane-shift", t), (f"{t} + birds-eye lane-shift", f"{t} + birds-eye")]
-name = "view_families" if seed == 0 else f"view_families_seed{seed}"
-note = (f"Street seed {seed} (200x112, generator version 3), quick-bench steps (StreetNeRF 1500, Splatfacto 800), one run each; "
-        "lane-shift: the family's defaults (offsets -2 and +2 m, every input view). "
-        "`python benchmarks/validation/view_families.py WORK" + (f" {seed}" if seed else "") + "`.\n\n")
-write_results(Path(__file__).resolve().parents[1] / "results", name, results, "View families (synthetic street, quick scale)",
-              extra_md=note + "Differences, same bench run:\n\n" + ratios_md(results, pairs) + "\n")
+TARGET = "splatfacto"
+SHARED = {"birds_eye_share": 0.25, "lane_shift": {"share": 0.5}}
+"""The one share of before the per-family shares, on a street of N input views (N bird's-eye, 2N lane views)."""
+
+
+def street(work: Path, seed: int) -> Path:
+    data = work / f"street-seed{seed}"
+    if read_generator_version(data) != 3:
+        generate_street(SynthStreetConfig(out=data, seed=seed, overwrite=True))
+    return data
+
+
+def reference(data: Path, runs: Path, given: Optional[str]) -> tuple[Path, str, dict]:
+    """(run folder, run key, its evaluation on the test splits): ``given`` or a quick StreetNeRF trained here."""
+    if given:
+        ref = Path(given)
+        out = BenchRunner(runs)._evaluate(ref, json.loads((ref / "bench_run.json").read_text())["key"], *_loaders())
+        return ref, json.loads((ref / "bench_run.json").read_text())["key"], out | {"label": "StreetNeRF", "target": "streetnerf"}
+    res = run_plan([RunSpec("StreetNeRF", "streetnerf", _overrides("quick", "streetnerf"))], data, runs, name="view_families")["StreetNeRF"]
+    return Path(res["run_dir"]), Path(res["run_dir"]).name, res
+
+
+def _loaders():
+    from nerf2gs_plugin.eval.evaluate import evaluate_run
+    from nerf2gs_plugin.runs.load import load_run
+
+    return load_run, evaluate_run
+
+
+def run_augmented(runner: BenchRunner, data: Path, ref: tuple[Path, str], label: str, augment: Optional[dict]) -> dict:
+    """One quick target run (+ ``augment``'s views from ``ref``; None: the target alone), evaluated on the runner's splits."""
+    spec = RunSpec(label, TARGET, _overrides("quick", TARGET), augment_from="StreetNeRF" if augment is not None else None,
+                   augment=augment or {})
+    out = runner.run(spec, data, reference=ref if augment is not None else None)
+    reason = failure_reason(out)
+    return out.result if reason is None else {"label": label, "target": TARGET, "failed": True, "error": reason}
+
+
+def main() -> None:
+    work = Path(sys.argv[1])
+    seed = int(sys.argv[2]) if len(sys.argv) > 2 else 0
+    data = street(work, seed)
+    ref_dir, ref_key, ref_result = reference(data, work / "runs", sys.argv[3] if len(sys.argv) > 3 else None)
+    runner = BenchRunner(work / "runs", splits=EVAL_SPLITS)
+    lanes = {"views": ["birds-eye", "lane-shift"]}
+    rows = {"StreetNeRF": ref_result,
+            TARGET: run_augmented(runner, data, (ref_dir, ref_key), TARGET, None),
+            f"{TARGET} + birds-eye": run_augmented(runner, data, (ref_dir, ref_key), f"{TARGET} + birds-eye", {}),
+            f"{TARGET} + birds-eye lane-shift (one share)": run_augmented(runner, data, (ref_dir, ref_key),
+                                                                        f"{TARGET} + birds-eye lane-shift (one share)", lanes | SHARED),
+            f"{TARGET} + birds-eye lane-shift": run_augmented(runner, data, (ref_dir, ref_key), f"{TARGET} + birds-eye lane-shift", lanes)}
+    t = TARGET
+    pairs = [(f"{t} + birds-eye", t), (f"{t} + birds-eye lane-shift", t), (f"{t} + birds-eye lane-shift", f"{t} + birds-eye"),
+             (f"{t} + birds-eye lane-shift (one share)", f"{t} + birds-eye")]
+    name = "view_families" if seed == 0 else f"view_families_seed{seed}"
+    note = (f"Street seed {seed} (200x112, generator version 3), quick-bench steps (StreetNeRF 1500, Splatfacto 800), one run each, "
+            f"reference {ref_dir.name}. lane-shift: the family's defaults (augment/config.py: offsets, share, look-ahead chosen "
+            "on val_lane by lane_shift_sweep.py); (one share): every additional view drawn alike, as before the per-family "
+            "shares (bird's-eye 0.25, lane-shift 0.5 of the samples). "
+            "`python benchmarks/validation/view_families.py WORK" + (f" {seed}" if seed else "") + " [REFERENCE_RUN]`.\n\n")
+    write_results(Path(__file__).resolve().parents[1] / "results", name, rows, "View families (synthetic street, quick scale)",
+                  extra_md=note + "Differences, same bench run:\n\n" + ratios_md(rows, pairs) + "\n")
+
+
+if __name__ == "__main__":
+    main()

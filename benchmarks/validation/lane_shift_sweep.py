@@ -1,0 +1,92 @@
+"""The lane-shift family's options (offsets, share, look-ahead), chosen on the validation views.
+
+Why: its defaults must come from views no reported number uses: each variant (+ bird's-eye views,
+as the family is used) is scored on val_street, val_bev and val_lane (1.5 and 3 m to the side)
+against the bird's-eye views alone, on two streets (the embedded layout, seed 0, and seed 7), at
+the quick bench's steps, from one StreetNeRF reference per street. The choice: the best mean
+val_lane gain over both streets among the variants that keep val_bev within 0.2 dB and val_street
+within 0.1 dB of the bird's-eye views alone on both; lane_2 / lane_4 (test) are never looked at.
+
+Usage: python benchmarks/validation/lane_shift_sweep.py WORK [SEED=REFERENCE_RUN ...]
+  WORK as view_families.py's (streets WORK/street-seedN, runs WORK/runs); a StreetNeRF bench run per
+  seed may be given (else one is trained at the quick bench's steps).
+Writes benchmarks/results/lane_shift_sweep.{json,md}.
+"""
+import json
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from view_families import TARGET, reference, run_augmented, street  # noqa: E402
+from nerf2gs_bench.machine import machine_line  # noqa: E402
+from nerf2gs_bench.runner import VAL_SPLITS, BenchRunner  # noqa: E402
+from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
+
+SEEDS = (0, 7)
+VARIANTS: dict[str, dict] = {  # name -> --augment.lane-shift.* (always with the bird's-eye views)
+    "offsets 2, share 0.15": {"offsets": [-2.0, 2.0], "share": 0.15},
+    "offsets 2, share 0.3": {"offsets": [-2.0, 2.0], "share": 0.3},
+    "offsets 3, share 0.15": {"offsets": [-3.0, 3.0], "share": 0.15},
+    "offsets 3, share 0.3": {"offsets": [-3.0, 3.0], "share": 0.3},
+    "offsets 3, share 0.3, every 2nd": {"offsets": [-3.0, 3.0], "share": 0.3, "every_n": 2},
+    "offsets 3, share 0.3, every 2nd, look-ahead 20 m": {"offsets": [-3.0, 3.0], "share": 0.3, "every_n": 2, "look_ahead": 20.0},
+}
+BEV_TOL, STREET_TOL = 0.2, 0.1
+
+
+def psnr(res: dict, split: str) -> float:
+    return res["results"][split]["psnr"]
+
+
+def main() -> None:
+    work = Path(sys.argv[1])
+    given = dict(a.split("=", 1) for a in sys.argv[2:])
+    rows: dict[str, dict[str, dict]] = {}
+    for seed in SEEDS:
+        data = street(work, seed)
+        ref_dir, ref_key, _ = reference(data, work / "runs", given.get(str(seed)))
+        runner = BenchRunner(work / "runs", splits=VAL_SPLITS)
+        base = run_augmented(runner, data, (ref_dir, ref_key), f"{TARGET} + birds-eye", {})
+        seed_rows = {"birds-eye": base}
+        for name, lane in VARIANTS.items():
+            seed_rows[name] = run_augmented(runner, data, (ref_dir, ref_key), f"{TARGET} + birds-eye lane-shift ({name})",
+                                            {"views": ["birds-eye", "lane-shift"], "lane_shift": lane})
+        rows[str(seed)] = {k: {s: psnr(v, s) for s in VAL_SPLITS} if not v.get("failed") else {"failed": v["error"]}
+                           for k, v in seed_rows.items()}
+    deltas = {name: {seed: {s: rows[seed][name][s] - rows[seed]["birds-eye"][s] for s in VAL_SPLITS} for seed in rows}
+              for name in VARIANTS if all("failed" not in rows[seed][name] for seed in rows)}
+    keeps = {n: all(d[s]["val_bev"] >= -BEV_TOL and d[s]["val_street"] >= -STREET_TOL for s in d) for n, d in deltas.items()}
+    gain = {n: sum(d[s]["val_lane"] for s in d) / len(d) for n, d in deltas.items()}
+    chosen = max((n for n in deltas if keeps[n]), key=gain.get, default=None)
+    doc = {"machine": machine_line(), "splits": list(VAL_SPLITS), "variants": VARIANTS, "psnr": rows, "delta_vs_birds_eye": deltas,
+           "keeps_bev_and_street": keeps, "mean_val_lane_gain": gain, "chosen": chosen}
+    out = Path(__file__).resolve().parents[1] / "results" / "lane_shift_sweep"
+    atomic_write_text(out.with_suffix(".json"), json.dumps(doc, indent=1))
+    lines = ["# lane-shift options on the validation views (`benchmarks/validation/lane_shift_sweep.py`)", "",
+             f"Machine: {doc['machine']}", "",
+             f"Splatfacto at the quick bench's steps (800) + bird's-eye views + lane-shift views of each variant, one StreetNeRF "
+             f"reference per street (quick, 1500 steps); PSNR on the validation views, d: against the bird's-eye views alone. "
+             f"Kept: val_bev within {BEV_TOL} dB and val_street within {STREET_TOL} dB on both streets.", "",
+             "| variant | " + " | ".join(f"seed {s} {v}" for s in rows for v in ("val_street", "val_bev", "val_lane"))
+             + " | mean d val_lane | kept |", "|---" * (2 + 3 * len(rows)) + "|"]
+    for name in ["birds-eye", *VARIANTS]:
+        cells = []
+        for seed in rows:
+            r = rows[seed][name]
+            for v in VAL_SPLITS:
+                if "failed" in r:
+                    cells.append("failed")
+                elif name == "birds-eye":
+                    cells.append(f"{r[v]:.2f}")
+                else:
+                    cells.append(f"{r[v]:.2f} ({deltas[name][seed][v]:+.2f})")
+        tail = "" if name == "birds-eye" or name not in gain else f"{gain[name]:+.2f} | {'yes' if keeps[name] else 'no'}"
+        lines.append(f"| {name} | " + " | ".join(cells) + f" | {tail or '- | -'} |")
+    lines += ["", f"Chosen: **{chosen or 'none (no variant keeps the bird''s-eye and street views)'}**.", ""]
+    atomic_write_text(out.with_suffix(".md"), "\n".join(lines))
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
