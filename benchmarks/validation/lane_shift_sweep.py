@@ -45,7 +45,7 @@ def main() -> None:
     rows: dict[str, dict[str, dict]] = {}
     for seed in SEEDS:
         data = street(work, seed)
-        ref_dir, ref_key, _ = reference(data, work / "runs", given.get(str(seed)))
+        ref_dir, ref_key, _ = reference(data, work / "runs", given.get(str(seed)), evaluate=False)
         runner = BenchRunner(work / "runs", splits=VAL_SPLITS)
         base = run_augmented(runner, data, (ref_dir, ref_key), f"{TARGET} + birds-eye", {})
         seed_rows = {"birds-eye": base}

@@ -37,21 +37,20 @@ def street(work: Path, seed: int) -> Path:
     return data
 
 
-def reference(data: Path, runs: Path, given: Optional[str]) -> tuple[Path, str, dict]:
-    """(run folder, run key, its evaluation on the test splits): ``given`` or a quick StreetNeRF trained here."""
+def reference(data: Path, runs: Path, given: Optional[str], evaluate: bool = True) -> tuple[Path, str, Optional[dict]]:
+    """(run folder, run key, its evaluation on the test splits or None): ``given`` or a quick StreetNeRF trained here."""
     if given:
         ref = Path(given)
-        out = BenchRunner(runs)._evaluate(ref, json.loads((ref / "bench_run.json").read_text())["key"], *_loaders())
-        return ref, json.loads((ref / "bench_run.json").read_text())["key"], out | {"label": "StreetNeRF", "target": "streetnerf"}
+        key = json.loads((ref / "bench_run.json").read_text())["key"]
+        if not evaluate:
+            return ref, key, None
+        from nerf2gs_plugin.eval.evaluate import evaluate_run
+        from nerf2gs_plugin.runs.load import load_run
+
+        out = BenchRunner(runs)._evaluate(ref, key, load_run, evaluate_run)
+        return ref, key, out | {"label": "StreetNeRF", "target": "streetnerf", "run_dir": str(ref)}
     res = run_plan([RunSpec("StreetNeRF", "streetnerf", _overrides("quick", "streetnerf"))], data, runs, name="view_families")["StreetNeRF"]
     return Path(res["run_dir"]), Path(res["run_dir"]).name, res
-
-
-def _loaders():
-    from nerf2gs_plugin.eval.evaluate import evaluate_run
-    from nerf2gs_plugin.runs.load import load_run
-
-    return load_run, evaluate_run
 
 
 def run_augmented(runner: BenchRunner, data: Path, ref: tuple[Path, str], label: str, augment: Optional[dict]) -> dict:

@@ -15,13 +15,14 @@ from nerf2gs_plugin.datamanagers.image_set import ImageSet
 from nerf2gs_plugin.errors import UserError
 
 
-def _frames(images: ImageSet, out: Path, prefix: str) -> list[dict]:
+def _frames(images: ImageSet, out: Path, prefixes: list[str]) -> list[dict]:
+    """One frame per image, written as ``<its prefix>_<index>.png``."""
     from nerf2gs_plugin.data.images import write_image_atomic, write_mask_atomic
 
     frames = []
     cams = images.cameras
     for i in range(len(images)):
-        name = f"{prefix}_{i:05d}.png"
+        name = f"{prefixes[i]}_{i:05d}.png"
         write_image_atomic(out / "images" / name, images.image(i).cpu())
         c2w = torch.cat([cams.camera_to_worlds[i].cpu(), torch.tensor([[0.0, 0.0, 0.0, 1.0]])]).tolist()
         frame = {"file_path": f"images/{name}", "transform_matrix": c2w, "fl_x": float(cams.fx[i]), "fl_y": float(cams.fy[i]),
@@ -33,6 +34,15 @@ def _frames(images: ImageSet, out: Path, prefix: str) -> list[dict]:
                 frame[f"{kind}_mask_path"] = f"masks/{kind}/{name}"
         frames.append(frame)
     return frames
+
+
+def extra_prefixes(datamanager) -> list[str]:
+    """Per additional view the name of its family as its files' prefix (``birdseye`` for the bird's-eye
+    views, as before the families; ``lane-shift``, ...), from the augmentation's manifest."""
+    n = len(datamanager.extra_images)
+    manifest = getattr(datamanager, "manifest", None)
+    families = (manifest.extra_families if manifest is not None else None) or ["birds-eye"] * n
+    return ["birdseye" if f == "birds-eye" else f for f in families]
 
 
 def export_augmented_dataset(datamanager, out: Path, overwrite: bool = False) -> Path:
@@ -48,9 +58,9 @@ def export_augmented_dataset(datamanager, out: Path, overwrite: bool = False) ->
         shutil.rmtree(out)
     tmp = out.with_name(f".{out.name}.tmp")
     shutil.rmtree(tmp, ignore_errors=True)
-    frames = _frames(datamanager.train_images, tmp, "input")
+    frames = _frames(datamanager.train_images, tmp, ["input"] * len(datamanager.train_images))
     if datamanager.extra_images is not None:
-        frames += _frames(datamanager.extra_images, tmp, "birdseye")
+        frames += _frames(datamanager.extra_images, tmp, extra_prefixes(datamanager))
     td = datamanager.train_data
     meta = {"camera_model": "PINHOLE", "frames": frames, "up": td.up.tolist(), "metres_per_unit": td.world_to_metres(1.0),
             "generator": "nerf2gs export-augmented"}

@@ -216,3 +216,19 @@ def test_training_samples_each_family_at_its_share(tiny_scene, tmp_path, manager
     frac = {f: sum(families[j] == f for j in extra.tolist()) / len(drawn) for f in ("birds-eye", "lane-shift")}
     # birds-eye keeps its share of before (its views' share of them and the input views), lane-shift has its 0.2
     assert frac["birds-eye"] == pytest.approx(0.5, abs=0.04) and frac["lane-shift"] == pytest.approx(0.2, abs=0.04)
+
+
+def test_export_names_each_view_by_its_family(tiny_scene, tmp_path):
+    from nerf2gs_plugin.augment.datamanager import AugmentedDataManager, Reference
+    from nerf2gs_plugin.augment.export import export_augmented_dataset
+    from nerf2gs_plugin.datamanagers.full_image import FullImageDataManagerConfig
+
+    dm = FullImageDataManagerConfig().setup(data=tiny_scene, device="cpu")
+    n = len(dm.train_images)
+    aug = AugmentConfig(views=("birds-eye", "lane-shift"), delta_h=1.0, composites=False, min_coverage=0.0,
+                        lane_shift=LaneShiftConfig(offsets=(0.5,)))
+    adm = AugmentedDataManager(dm, Reference(_constant_render, "ref:a", tmp_path / "ref"), aug)
+    out = export_augmented_dataset(adm, tmp_path / "export")
+    names = [f["file_path"] for f in json.loads((out / "transforms.json").read_text())["frames"]]
+    assert names[n] == "images/birdseye_00000.png" and names[2 * n] == f"images/lane-shift_{n:05d}.png"
+    assert sum(x.startswith("images/lane-shift_") for x in names) == n and all((out / x).is_file() for x in names)
