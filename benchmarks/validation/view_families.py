@@ -2,7 +2,7 @@
 all from one StreetNeRF reference, at the quick bench's step counts, on a synthetic street
 (generator version 3: it has the lane-shift ground truth lane_1/lane_2/lane_4).
 
-Why: the lane-shift family is meant to teach the target the views one lane over (lane_2, lane_4)
+Rows: each family alone and both (an ablation per family). Why: the lane-shift family is meant to teach the target the views one lane over (lane_2, lane_4)
 without costing the bird's-eye or street views; this measures that, same reference, same steps:
 the lane-shift views with their own share of the samples (the family's defaults, chosen on the
 validation views by lane_shift_sweep.py) and, for comparison, with the one share of before
@@ -25,8 +25,10 @@ from nerf2gs_bench.paper import _overrides, ratios_md, run_plan, write_results  
 from nerf2gs_bench.runner import EVAL_SPLITS, BenchRunner, failure_reason  # noqa: E402
 from nerf2gs_bench.runs import RunSpec  # noqa: E402
 
+RESULTS = Path(__file__).resolve().parents[1] / "results"
+
 TARGET = "splatfacto"
-SHARED = {"birds_eye_share": 0.25, "lane_shift": {"share": 0.5}}
+SHARED = {"birds_eye_share": 0.25, "lane_shift": {"offsets": [-2.0, 2.0], "share": 0.5}}
 """The one share of before the per-family shares, on a street of N input views (N bird's-eye, 2N lane views)."""
 
 
@@ -62,29 +64,41 @@ def run_augmented(runner: BenchRunner, data: Path, ref: tuple[Path, str], label:
     return out.result if reason is None else {"label": label, "target": TARGET, "failed": True, "error": reason}
 
 
+def chosen_lane_shift() -> tuple[str, dict]:
+    """The lane-shift options lane_shift_sweep.py chose on the validation views (its results file)."""
+    doc = json.loads((RESULTS / "lane_shift_sweep.json").read_text())
+    name = doc["chosen"] or max(doc["mean_val_lane_gain"], key=doc["mean_val_lane_gain"].get)
+    return name, doc["variants"][name]
+
+
 def main() -> None:
     work = Path(sys.argv[1])
     seed = int(sys.argv[2]) if len(sys.argv) > 2 else 0
     data = street(work, seed)
     ref_dir, ref_key, ref_result = reference(data, work / "runs", sys.argv[3] if len(sys.argv) > 3 else None)
     runner = BenchRunner(work / "runs", splits=EVAL_SPLITS)
-    lanes = {"views": ["birds-eye", "lane-shift"]}
+    ref = (ref_dir, ref_key)
     rows = {"StreetNeRF": ref_result,
-            TARGET: run_augmented(runner, data, (ref_dir, ref_key), TARGET, None),
-            f"{TARGET} + birds-eye": run_augmented(runner, data, (ref_dir, ref_key), f"{TARGET} + birds-eye", {}),
-            f"{TARGET} + birds-eye lane-shift (one share)": run_augmented(runner, data, (ref_dir, ref_key),
-                                                                        f"{TARGET} + birds-eye lane-shift (one share)", lanes | SHARED),
-            f"{TARGET} + birds-eye lane-shift": run_augmented(runner, data, (ref_dir, ref_key), f"{TARGET} + birds-eye lane-shift", lanes)}
+            TARGET: run_augmented(runner, data, ref, TARGET, None),
+            f"{TARGET} + birds-eye": run_augmented(runner, data, ref, f"{TARGET} + birds-eye", {}),
+            f"{TARGET} + birds-eye lane-shift (one share)": run_augmented(runner, data, ref, f"{TARGET} + birds-eye lane-shift (one share)",
+                                                                        {"views": ["birds-eye", "lane-shift"]} | SHARED)}
+    if len(sys.argv) > 4 and sys.argv[4] == "--only-fixed-rows":  # the rows that do not wait for the sweep's choice
+        return
+    chosen, lane = chosen_lane_shift()
+    rows[f"{TARGET} + lane-shift"] = run_augmented(runner, data, ref, f"{TARGET} + lane-shift", {"views": ["lane-shift"], "lane_shift": lane})
+    rows[f"{TARGET} + birds-eye lane-shift"] = run_augmented(runner, data, ref, f"{TARGET} + birds-eye lane-shift",
+                                                            {"views": ["birds-eye", "lane-shift"], "lane_shift": lane})
     t = TARGET
-    pairs = [(f"{t} + birds-eye", t), (f"{t} + birds-eye lane-shift", t), (f"{t} + birds-eye lane-shift", f"{t} + birds-eye"),
+    pairs = [(f"{t} + birds-eye", t), (f"{t} + lane-shift", t), (f"{t} + birds-eye lane-shift", t), (f"{t} + birds-eye lane-shift", f"{t} + birds-eye"),
              (f"{t} + birds-eye lane-shift (one share)", f"{t} + birds-eye")]
     name = "view_families" if seed == 0 else f"view_families_seed{seed}"
     note = (f"Street seed {seed} (200x112, generator version 3), quick-bench steps (StreetNeRF 1500, Splatfacto 800), one run each, "
-            f"reference {ref_dir.name}. lane-shift: the family's defaults (augment/config.py: offsets, share, look-ahead chosen "
-            "on val_lane by lane_shift_sweep.py); (one share): every additional view drawn alike, as before the per-family "
-            "shares (bird's-eye 0.25, lane-shift 0.5 of the samples). "
+            f"reference {ref_dir.name}. lane-shift: {chosen} ({json.dumps(lane)}), the options lane_shift_sweep.py chose on the "
+            "validation views (the family's defaults); (one share): offsets -2 and +2 m, every additional view drawn alike, as "
+            "before the per-family shares (bird's-eye 0.25, lane-shift 0.5 of the samples). "
             "`python benchmarks/validation/view_families.py WORK" + (f" {seed}" if seed else "") + " [REFERENCE_RUN]`.\n\n")
-    write_results(Path(__file__).resolve().parents[1] / "results", name, rows, "View families (synthetic street, quick scale)",
+    write_results(RESULTS, name, rows, "View families (synthetic street, quick scale)",
                   extra_md=note + "Differences, same bench run:\n\n" + ratios_md(rows, pairs) + "\n")
 
 
