@@ -447,6 +447,49 @@ def page_findings() -> str:
         "## The enhancer on the validation views", "", enhancer_section(), ""])
 
 
+def lane_sentence(results: dict[str, dict]) -> str:
+    """What the lane-shift views did, computed from a view_families result."""
+    t, lanes, bev = "splatfacto", "splatfacto + birds-eye lane-shift", "splatfacto + birds-eye"
+    if any(x not in results or results[x].get("failed") for x in (t, lanes, bev)):
+        return ""
+    d = {s: psnr(results[lanes], s) - psnr(results[bev], s) for s in ("street", "bev_1", "bev_2", "lane_2", "lane_4")}
+    return (f"With the lane-shift views beside the bird's-eye views, lane_4 is {db(psnr(results[lanes], 'lane_4') - psnr(results[t], 'lane_4'))} dB "
+            f"over Splatfacto alone (target: +2) and {db(d['lane_4'])} over the bird's-eye views alone (lane_2 {db(d['lane_2'])}); "
+            f"bev_1 / bev_2 {db(d['bev_1'])} / {db(d['bev_2'])} (target: within 0.2 dB), street {db(d['street'])}.")
+
+
+def sweep_section() -> str:
+    doc = load("lane_shift_sweep.json")
+    seeds = list(doc["psnr"])
+    lines = ["| variant | " + " | ".join(f"d val_lane seed {s}" for s in seeds) + " | " + " | ".join(f"d val_bev seed {s}" for s in seeds)
+             + " | mean d val_lane | kept |", "|---" * (3 + 2 * len(seeds)) + "|"]
+    for name, d in doc["delta_vs_birds_eye"].items():
+        cell = lambda seed, split: db(d[seed][split]) if seed in d else "-"  # noqa: E731
+        kept = ("yes" if doc["keeps_bev_and_street"][name] else "no") if name in doc["tried_on_both"] else "first street only"
+        lines.append(f"| {name} | " + " | ".join(cell(s, "val_lane") for s in seeds) + " | "
+                     + " | ".join(cell(s, "val_bev") for s in seeds) + f" | {db(doc['mean_val_lane_gain'][name])} | {kept} |")
+    chosen = doc["chosen"] or "none"
+    return (f"Each variant + the bird's-eye views against the bird's-eye views alone, on the validation views. "
+            f"Source: {source('lane_shift_sweep.json')}, `python benchmarks/validation/lane_shift_sweep.py`. "
+            f"Chosen: {chosen}.\n\n" + "\n".join(lines))
+
+
+def page_view_families() -> str:
+    paper = bench_module("bench_paper")
+    parts = ["# View families: the next lane beside the bird's eye", "",
+             "Splatfacto alone, with the bird's-eye views, the lane-shift views (`--augment.views`, each family its own "
+             "share of the samples) and both, from one StreetNeRF reference per street at the quick bench's steps, "
+             "scored on the test views (lane_2 / lane_4: 2 and 4 m to the side at camera height).", "",
+             "## Choosing the lane-shift options", "", sweep_section()]
+    for rel, street in (("view_families.json", "The embedded street (seed 0)"), ("view_families_seed7.json", "A second street (seed 7)")):
+        results = load(rel)["results"]
+        pairs = compare_pairs(results) + [(f"splatfacto + birds-eye lane-shift{v}", "splatfacto + birds-eye") for v in ("", " (one share)")]
+        parts += ["", f"## {street}", "", f"Source: {source(rel)}, `python benchmarks/validation/view_families.py`.", "",
+                  demote(paper.markdown_table(results, paper.target_groups(results), f"View families, {street.lower()}")), "",
+                  lane_sentence(results), "", "Differences, same bench run:", "", paper.ratios_md(results, pairs)]
+    return "\n".join(parts)
+
+
 PAGES: dict[str, tuple[str, Callable[[], str], tuple[str, ...]]] = {
     "paper-table.md": ("the paper's table: quick and default scale, a second street",
                        page_paper_table, ("paper_table", "default/paper_table", "second_scene/paper_table")),
@@ -464,6 +507,8 @@ PAGES: dict[str, tuple[str, Callable[[], str], tuple[str, ...]]] = {
                         ("blocks", "scale", "dist_speedup")),
     "robustness.md": ("fault injection, rasterizer and hash-grid speed, the quick bench on a GPU", page_robustness,
                       ("faults", "raster", "field", "gpu/quick")),
+    "view-families.md": ("lane-shift views beside the bird's-eye views, their options chosen on validation views",
+                         page_view_families, ("lane_shift_sweep", "view_families", "view_families_seed7")),
     "findings.md": ("why the targets stay below the reference, and the evidence behind the defaults", page_findings,
                     ("fit_vs_generalise", "augment_spread", "appearance_reg", "depth_loss", "path_clearance",
                      "augment_weight_val", "reference_length_val", "castle_confidence", "confidence_depth_val",
