@@ -110,7 +110,7 @@ def main() -> None:
         tail = ("" if name == "birds-eye" or name not in gain else
                 f"{gain[name]:+.2f} | {'yes' if keeps[name] and name in both else 'no' if name in both else 'first street only'}")
         lines.append(f"| {name} | " + " | ".join(cells) + f" | {tail or '- | -'} |")
-    lines += ["", f"Chosen: **{chosen or 'none (no variant keeps the bird''s-eye and street views)'}**.", ""]
+    lines += ["", f"Chosen: **{chosen or 'none'}**" + ("" if chosen else " (no variant keeps the bird's-eye and street views)") + ".", ""]
     atomic_write_text(out.with_suffix(".md"), "\n".join(lines))
     print("\n".join(lines))
 

@@ -17,15 +17,16 @@ from nerf2gs_plugin.errors import ConfigError
 class LaneShiftConfig:
     """The lane-shift view family: the drive re-driven sideways."""
 
-    offsets: tuple[float, ...] = (-2.0, 2.0)
+    offsets: tuple[float, ...] = (-3.0, 3.0)
     """Metres along the ground plane's lateral axis (positive: to the right of the input camera's
-    heading); one view per input pose and offset."""
+    heading); one view per input pose and offset (+-3 m with a share of 0.15: the best lane views of
+    those tried on the validation views of two streets, benchmarks/results/lane_shift_sweep.md)."""
     look_ahead: float = 0.0
     """Metres: > 0 turns each shifted camera (yaw about the up axis) toward the point this far ahead
     on its input camera's line of travel (0: the input's own heading)."""
     every_n: int = 1
     """Use every n-th input pose."""
-    share: Optional[float] = None
+    share: Optional[float] = 0.15
     """Probability that a training sample is one of this family's views (None: its views' share of
     them and the input views, out of the input views' share; augment/shares.py)."""
 

@@ -177,9 +177,10 @@ def test_each_family_has_its_own_share_of_the_samples():
     bev, lanes = ["birds-eye"] * 10, ["lane-shift"] * 20
     alone = family_shares(bev, 10, AugmentConfig())
     assert alone == {"birds-eye": 0.5}  # the draw of one image among all, as before the families
-    both = AugmentConfig(views=("birds-eye", "lane-shift"))
-    # lane-shift added after birds-eye: its default comes out of the input views' share only
+    both = AugmentConfig(views=("birds-eye", "lane-shift"), lane_shift=LaneShiftConfig(share=None))
+    # lane-shift (share unset) added after birds-eye: its share comes out of the input views' share only
     assert family_shares(bev + lanes, 10, both) == pytest.approx({"birds-eye": 0.5, "lane-shift": 0.5 * 20 / 30})
+    assert family_shares(bev + lanes, 10, AugmentConfig(views=("birds-eye", "lane-shift")))["birds-eye"] == 0.5
     given = dataclasses.replace(both, lane_shift=LaneShiftConfig(share=0.2))
     assert family_shares(bev + lanes, 10, given) == pytest.approx({"birds-eye": 0.5, "lane-shift": 0.2})
     # --augment.extra-prob: all additional views together, split in proportion to the shares
