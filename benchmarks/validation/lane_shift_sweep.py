@@ -14,6 +14,7 @@ Usage: python benchmarks/validation/lane_shift_sweep.py WORK [SEED=REFERENCE_RUN
   seed may be given (else one is trained at the quick bench's steps).
 Writes benchmarks/results/lane_shift_sweep.{json,md}.
 """
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -58,8 +59,12 @@ def psnr(res: dict, split: str) -> float:
 
 
 def main() -> None:
-    work = Path(sys.argv[1])
-    given = dict(a.split("=", 1) for a in sys.argv[2:])
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("work", type=Path)
+    ap.add_argument("references", nargs="*", metavar="SEED=REFERENCE_RUN")
+    args = ap.parse_args()
+    work = args.work
+    given = dict(a.split("=", 1) for a in args.references)
     rows: dict[str, dict[str, dict]] = {}
     for seed in SEEDS:
         data = street(work, seed)

@@ -14,6 +14,7 @@ Usage: python benchmarks/validation/view_families.py WORK [SEED] [REFERENCE_RUN]
   trained at the quick bench's steps).
 Writes benchmarks/results/view_families.{json,md,png} (seed 0) or view_families_seedN.{json,md,png}.
 """
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -77,10 +78,15 @@ def chosen_lane_shift() -> tuple[str, dict]:
 
 
 def main() -> None:
-    work = Path(sys.argv[1])
-    seed = int(sys.argv[2]) if len(sys.argv) > 2 else 0
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("work", type=Path)
+    ap.add_argument("seed", type=int, nargs="?", default=0)
+    ap.add_argument("reference_run", nargs="?", default=None)
+    ap.add_argument("--only-fixed-rows", action="store_true", help="the rows that do not wait for the sweep's choice")
+    args = ap.parse_args()
+    work, seed = args.work, args.seed
     data = street(work, seed)
-    ref_dir, ref_key, ref_result = reference(data, work / "runs", sys.argv[3] if len(sys.argv) > 3 else None)
+    ref_dir, ref_key, ref_result = reference(data, work / "runs", args.reference_run)
     runner = BenchRunner(work / "runs", splits=EVAL_SPLITS)
     ref = (ref_dir, ref_key)
     rows = {"StreetNeRF": ref_result,
@@ -88,7 +94,7 @@ def main() -> None:
             f"{TARGET} + birds-eye": run_augmented(runner, data, ref, f"{TARGET} + birds-eye", {}),
             f"{TARGET} + birds-eye lane-shift (one share)": run_augmented(runner, data, ref, f"{TARGET} + birds-eye lane-shift (one share)",
                                                                         {"views": ["birds-eye", "lane-shift"]} | SHARED)}
-    if len(sys.argv) > 4 and sys.argv[4] == "--only-fixed-rows":  # the rows that do not wait for the sweep's choice
+    if args.only_fixed_rows:
         return
     chosen, lane = chosen_lane_shift()
     rows[f"{TARGET} + lane-shift"] = run_augmented(runner, data, ref, f"{TARGET} + lane-shift", {"views": ["lane-shift"], "lane_shift": lane})
