@@ -10,8 +10,8 @@ are training frames.
 Usage: python benchmarks/validation/motion_masks_real.py NUSCENES_IMAGE_DIR WORK OUT_STEM [FIRST N]
 (WORK keeps the crops, capture, reference and renders). Writes OUT_STEM.json's ``real`` entry (merged).
 """
+import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -24,8 +24,14 @@ from nerf2gs_bench import real as br  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
 CROP_ROWS, SIZE, FOV, CAM_H = 790, (480, 237), 64.6, 1.5
-src, work, out = Path(sys.argv[1]), Path(sys.argv[2]), Path(sys.argv[3])
-first, n = (int(sys.argv[4]), int(sys.argv[5])) if len(sys.argv) > 5 else (25, 30)
+parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+parser.add_argument("src", type=Path, help="nuScenes image_2/ folder")
+parser.add_argument("work", type=Path, help="work folder (crops, capture, reference, renders)")
+parser.add_argument("out", type=Path, help="results stem (OUT.json's 'real' entry is merged)")
+parser.add_argument("first", type=int, nargs="?", default=25)
+parser.add_argument("n", type=int, nargs="?", default=30)
+args = parser.parse_args()
+src, work, out, first, n = args.src, args.work, args.out, args.first, args.n
 labels = json.loads((Path(__file__).parent / "labels" / "nuscenes_moving.json").read_text())
 crop = work / "crop"
 crop.mkdir(parents=True, exist_ok=True)
