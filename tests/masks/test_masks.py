@@ -466,3 +466,16 @@ def test_transient_opening_drops_thin_strokes_keeps_blobs():
     t = fr.transient_from_residual(res, 0.5, min_area=20, open_px=2)
     assert not t[:, 8:14].any() and bool(t[22:33, 32:53].all())
     assert fr.transient_from_residual(res, 0.5, min_area=20)[:, 10:12].all()  # without the opening the pole stays
+
+
+@pytest.mark.parametrize("size", [0, 3, 4, 9])
+def test_median_compare_is_the_sorted_median_compared(size):
+    """The ground mask's window medians are counted, not sorted: the same answer as sorting each
+    window, ties at the threshold, the border and a NaN (its windows are False) included."""
+    g = torch.Generator().manual_seed(size)
+    x = torch.round(torch.rand(37, 53, generator=g) * 8) / 8
+    x[4, 50] = float("nan")
+    for t in (0.5, 0.125):
+        med = fr.median_filter(x, size)
+        assert torch.equal(fr.median_compare(x, t, size), med < t)
+        assert torch.equal(fr.median_compare(x, t, size, below=False), med >= t)
