@@ -361,8 +361,15 @@ def test_make_masks_auto_with_a_very_short_reference(tmp_path):
     assert set(outs.mask_filenames) == {"sky", "ground", "transient"}
     assert all(p is not None for p in outs.mask_filenames["sky"])
     assert (data / "masks" / "sky" / "bev_1_000.png").is_file()  # every split
-    make_masks(MasksConfig(data=data, reference=ref, overwrite=True, progress=False), log=logs.append)
+    assert summary["render_seconds"] >= 0 and summary["render_cpu_seconds"] > 0
+    # again from renders at half the size per side: the masks are still written at the images' size
+    again = make_masks(MasksConfig(data=data, reference=ref, overwrite=True, render_downscale=2.0, progress=False), log=logs.append)
     assert any("reusing reference" in line for line in logs)
+    assert again["render_cpu_seconds"] < summary["render_cpu_seconds"]
+    img = load_mask(outs.image_filenames[0].parent.parent / "masks" / "sky" / f"{outs.image_filenames[0].stem}.png")
+    assert tuple(img.shape[:2]) == (int(outs.cameras.height[0]), int(outs.cameras.width[0]))
+    with pytest.raises(ConfigError, match="render-downscale"):
+        make_masks(MasksConfig(data=data, reference=ref, overwrite=True, render_downscale=0.5, progress=False), log=logs.append)
 
 
 def _street_scene(wall_h: float = 6.0, pitch_deg: float = 10.0):
