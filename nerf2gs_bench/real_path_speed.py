@@ -54,15 +54,19 @@ def cpu_seconds() -> float:
 
 
 class Stages:
-    """Wall and CPU seconds per named stage, in the order run."""
+    """Wall and CPU seconds per named stage, in the order run; ``on_stage`` is called after each (a
+    long bench writes what it has so far)."""
 
-    def __init__(self) -> None:
+    def __init__(self, on_stage: Optional[Callable[[], None]] = None) -> None:
         self.rows: dict[str, dict[str, float]] = {}
+        self.on_stage = on_stage
 
     def run(self, name: str, fn: Callable):
         w0, c0 = time.perf_counter(), cpu_seconds()
         out = fn()
         self.add(name, time.perf_counter() - w0, cpu_seconds() - c0)
+        if self.on_stage:
+            self.on_stage()
         return out
 
     def add(self, name: str, wall: float, cpu: float) -> None:
@@ -131,9 +135,17 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
     for stale in ("capture", "masks-reference", "streetnerf", "splatfacto-nerf-views"):
         shutil.rmtree(root / stale, ignore_errors=True)
     data, ref = root / "capture", root / "masks-reference"
-    stages = Stages()
+    doc: dict = {"options": dict(dataclasses.asdict(opts)), "machine": machine_info(), "complete": False}
+
+    def record(final: bool = False) -> None:
+        doc.update({"stage_seconds": stages.rows, "total_wall_s": stages.total("wall_s"), "total_cpu_s": stages.total("cpu_s"),
+                    "target_minutes": TARGET_MINUTES, "load_average": _load_average(), "complete": final})
+        write_results(out_dir, doc)
+
+    stages = Stages(on_stage=record)
     report = stages.run("process (frames, SfM)", lambda: process_capture(video, data, opts.frames, fov, cam_height))
     log(f"[bench] process: {report.registered}/{report.frames} registered")
+    doc["registered"] = report.registered
     stages.run("masks: first reference", lambda: ensure_reference(data, ref, opts.reference_steps, progress=False, log=log))
     summary = stages.run("masks: mask maths", lambda: make_masks(MasksConfig(
         data=data, reference=ref, render_downscale=opts.render_downscale, splits=("train",), overwrite=True, progress=False), log=log))
@@ -143,18 +155,8 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
     _train(stages, "Splatfacto + NeRF views: training", _trainer_config("splatfacto", data, root / "splatfacto-nerf-views",
                                                                         opts.splatfacto_steps, augment_from=sn),
            setup_part="Splatfacto + NeRF views: reference renders")
-    doc = {
-        "options": {k: v for k, v in dataclasses.asdict(opts).items()},
-        "machine": machine_info(),
-        "registered": report.registered,
-        "masks_coverage": summary.get("coverage"),
-        "stage_seconds": stages.rows,
-        "total_wall_s": stages.total("wall_s"),
-        "total_cpu_s": stages.total("cpu_s"),
-        "target_minutes": TARGET_MINUTES,
-        "load_average": _load_average(),
-    }
-    write_results(out_dir, doc)
+    doc["masks_coverage"] = summary.get("coverage")
+    record(final=True)
     return doc
 
 
@@ -176,7 +178,7 @@ def results_md(doc: dict) -> str:
              f"its forward drive as a video; masks' reference {o['reference_steps']} steps, StreetNeRF "
              f"{o['streetnerf_steps'] or 'default'} steps ({'warm-started from the masks reference' if o['warm_start'] else 'from scratch'}), "
              f"Splatfacto {o['splatfacto_steps'] or 'default'} steps with NeRF views; masks' renders at 1/{o['render_downscale']:g}. "
-             f"Registered {doc['registered']}/{o['frames']}.", "",
+             f"Registered {doc.get('registered', '?')}/{o['frames']}.", "",
              "CPU seconds are user + system of the bench's process (one thread: the time the stage takes alone on one "
              "core); wall seconds depend on the machine's other load.", "",
              "| stage | CPU s | wall s |", "|---|---|---|"]
@@ -184,6 +186,8 @@ def results_md(doc: dict) -> str:
         lines.append(f"| {name} | {v['cpu_s']:.1f} | {v['wall_s']:.1f} |")
     lines.append(f"| **total** | **{doc['total_cpu_s']:.0f} ({doc['total_cpu_s'] / 60:.1f} min)** | "
                  f"**{doc['total_wall_s']:.0f} ({doc['total_wall_s'] / 60:.1f} min)** |")
+    if not doc.get("complete", True):
+        lines += ["", "**Incomplete: the bench stopped (or is still running) after the stages above.**"]
     lines += ["", f"Target: <= {doc['target_minutes']:g} min for the whole path on 2 cores."]
     return "\n".join(lines) + "\n"
 
