@@ -64,7 +64,7 @@ def test_warm_start_refused_on_other_frames(street_and_reference, tmp_path):
 def test_warm_start_refused_on_another_downscale_model_or_length(street_and_reference, tmp_path):
     data, ref = street_and_reference
     cfg = _streetnerf(data, tmp_path / "a", warm_start=ref)
-    dm = dataclasses.replace(cfg.pipeline.datamanager, downscale=2.0)
+    dm = dataclasses.replace(cfg.pipeline.datamanager, dataparser=dataclasses.replace(cfg.pipeline.datamanager.dataparser, downscale=2.0))
     with pytest.raises(CheckpointError, match="another size"):
         Trainer(dataclasses.replace(cfg, pipeline=dataclasses.replace(cfg.pipeline, datamanager=dm))).setup()
     model = dataclasses.replace(cfg.pipeline.model, num_levels=8)
