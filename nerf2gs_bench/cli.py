@@ -1,5 +1,5 @@
 """ns2gs-bench demo | quick | paper-table | ablation | speed-quality | stability | model-size | raster | field | faults | real |
-real-photos | scale | blocks
+real-photos | real-captures | real-path-speed | scale | blocks
 
 Results (JSON + Markdown + PNG, with the machine) go to benchmarks/results/; trained runs are kept
 under benchmarks/runs/ and reused when nothing that matters changed. ``demo`` (what make demo runs)
@@ -15,6 +15,7 @@ from typing import Literal, Optional
 import tyro
 
 from nerf2gs_plugin.cli.common import run_cli
+from nerf2gs_bench.real_path_speed import RealPathOptions
 from nerf2gs_bench.real_photos import RealPhotosOptions
 
 RESULTS = Path("benchmarks/results")
@@ -385,6 +386,23 @@ class RealCaptures:
 
 
 @dataclass
+class RealPathSpeed(RealPathOptions):
+    """The real path of a 100-frame 480x360 dashcam stand-in (process -> masks -> StreetNeRF -> Splatfacto +
+    NeRF views) timed stage by stage, CPU and wall seconds (``real_path_speed.*``)."""
+
+    out: Path = RESULTS
+    runs: Path = RUNS
+
+    def main(self) -> None:
+        from nerf2gs_bench.real_path_speed import results_md, run
+
+        opts = RealPathOptions(**{f.name: getattr(self, f.name) for f in fields(RealPathOptions)})
+        doc = run(self.runs / "real_path_speed", self.out, opts)
+        print(results_md(doc))
+        print(f"results: {self.out}/real_path_speed.md")
+
+
+@dataclass
 class Scale:
     """How cost grows: time per step, peak memory and model size against images and resolution for
     StreetNeRF and Splatfacto, a fitted law and a 1 km projection, one run vs blocks (``scale.*``)."""
@@ -420,7 +438,7 @@ def main() -> None:
     cmd = tyro.extras.subcommand_cli_from_dict(
         {"demo": Demo, "quick": Quick, "paper-table": PaperTable, "ablation": Ablation, "speed-quality": SpeedQuality,
          "stability": Stability, "model-size": ModelSize, "raster": Raster, "field": Field, "faults": Faults,
-         "real": Real, "real-photos": RealPhotos, "real-captures": RealCaptures, "scale": Scale, "blocks": Blocks},
+         "real": Real, "real-photos": RealPhotos, "real-captures": RealCaptures, "real-path-speed": RealPathSpeed, "scale": Scale, "blocks": Blocks},
         description=__doc__,
     )
     cmd.main()

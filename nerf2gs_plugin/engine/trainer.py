@@ -93,6 +93,8 @@ class Trainer:
         self.callbacks = self.pipeline.model.get_training_callbacks(attrs)
         if self.config.load_checkpoint is not None:
             self._resume(self.config.load_checkpoint)
+        elif self.config.warm_start is not None:
+            self._warm_start(self.config.warm_start)
 
     def _augmentation(self):
         """With ``--augment-from``: the factory that wraps the method's DataManager in an
@@ -142,6 +144,28 @@ class Trainer:
         here = dataset_fingerprint(self.pipeline.datamanager.train_data.image_filenames)
         if ckpt.get("dataset") is not None and ckpt["dataset"] != here:
             raise CheckpointError(f"was trained on another dataset than {self.config.data} (its training images differ)", ckpt_file)
+        self._load_state(ckpt)
+        self.train_seconds = float(ckpt.get("train_seconds", 0.0))
+        self.last_good_checkpoint = ckpt_file
+
+    def _warm_start(self, path: Path) -> None:
+        """Continue another run of the same model on the same data in this new run (``--warm-start``):
+        its weights, optimiser moments, sampling stream and step; refused unless they match."""
+        from nerf2gs_plugin.engine.warm_start import warm_start_refusal
+        from nerf2gs_plugin.utils.config import to_plain
+
+        run_dir, ckpt_file = resolve_checkpoint(path)
+        ckpt = load_checkpoint(ckpt_file, map_location=self.device)
+        train = self.pipeline.datamanager.train_data
+        why = warm_start_refusal(ckpt, run_dir, self.config.method_name, dataset_fingerprint(train.image_filenames), train.cameras,
+                                 to_plain(self.config.pipeline.model), self.pipeline.model.state_dict(), self.config.max_num_iterations)
+        if why:
+            raise CheckpointError(f"--warm-start refused: {why}", ckpt_file)
+        self._load_state(ckpt)
+        self.run_files["warm_start.json"] = json.dumps({"from": str(Path(ckpt_file).absolute()), "step": int(ckpt["step"])})
+
+    def _load_state(self, ckpt: dict) -> None:
+        """Model, training statistics, optimisers, sampling streams, RNG and step from a checkpoint."""
         self.pipeline.model.load_model_state(ckpt["model"])
         # with several ranks the statistics saved are rank 0's: the others start theirs afresh (no double count)
         self.pipeline.model.load_training_state(ckpt.get("training_state", {}) if self.rank == 0 else {})
@@ -154,8 +178,6 @@ class Trainer:
         if "torch_rng" in ckpt:
             torch.set_rng_state(ckpt["torch_rng"].cpu())
         self.step = int(ckpt["step"]) + 1
-        self.train_seconds = float(ckpt.get("train_seconds", 0.0))
-        self.last_good_checkpoint = ckpt_file
 
     def _write_run_files(self) -> None:
         """Rank 0 writes the run folder; every rank learns its name."""

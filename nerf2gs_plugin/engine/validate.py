@@ -22,6 +22,8 @@ def check_trainer_config(cfg: Any) -> None:
     if getattr(cfg, "run_dir", None) is not None and (cfg.experiment_name is not None or cfg.timestamp != "{timestamp}"):
         raise ConfigError("names the run folder itself: leave out --experiment-name and --timestamp (they name "
                           "output-dir/experiment/method/timestamp)", "--run-dir")
+    if getattr(cfg, "warm_start", None) is not None and getattr(cfg, "load_checkpoint", None) is not None:
+        raise ConfigError("starts a new run from another one; --load-checkpoint resumes this one: pass one of them", "--warm-start")
     if cfg.max_num_iterations <= 0:
         raise ConfigError(f"must be a positive number of steps, got {cfg.max_num_iterations}", _flag("max_num_iterations"))
     if cfg.steps_per_save <= 0:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 import warnings
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Optional
 
 import torch
 import torch.nn.functional as F
@@ -64,9 +64,11 @@ def check_reference_dataset(checkpoint: Path, image_filenames: list[Path]) -> No
         raise CheckpointError(f"reference was trained on a different dataset (fingerprint {ckpt.get('dataset')} vs {ours})", checkpoint)
 
 
-def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[str], None] = print, progress: bool = True) -> Renders:
-    """Render every frame of ``splits`` with the reference. ``view``: the dataset (its mask-less
-    view) the reference was trained on."""
+def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[str], None] = print, progress: bool = True,
+                 render_downscale: float = 1.0) -> Renders:
+    """Render every frame of ``splits`` with the reference, at 1/``render_downscale`` of the
+    reference's image size per side. ``view``: the dataset (its mask-less view) the reference was
+    trained on."""
     from nerf2gs_plugin.data import parse_dataset
     from nerf2gs_plugin.data.images import load_image
     from nerf2gs_plugin.runs.load import load_run
@@ -84,7 +86,7 @@ def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[
     parser = run.config.pipeline.datamanager.dataparser
     data = {s: train if s == "train" else parse_dataset(view, s, downscale=parser.downscale, cache_dir=parser.cache_dir)
             for s in splits}
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     views: dict[str, list[dict[str, Tensor]]] = {s: [] for s in splits}
     total = sum(len(d) for d in data.values())
     with make_progress(progress) as prog, torch.no_grad():
@@ -92,6 +94,8 @@ def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[
         for s, d in data.items():
             for i in range(len(d)):
                 cam = d.cameras[i : i + 1]
+                if render_downscale != 1.0:
+                    cam = cam.scaled(1.0 / render_downscale)
                 out = model.render_camera(cam)
                 for key in ("rgb", "accumulation"):  # masks are never made from a NaN render
                     check_finite(out[key], run.checkpoint, f"reference render '{key}' of {s} view {i}")
@@ -105,20 +109,24 @@ def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[
                                  "c2w": cam.camera_to_worlds[0].cpu(), "intr": torch.stack([cam.fx[0], cam.fy[0], cam.cx[0], cam.cy[0]]).cpu(),
                                  "name": d.image_filenames[i].name})
                 prog.advance(task)
-    seconds = time.perf_counter() - t0
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     log(f"masks: rendered {total} views in {seconds:.1f} s")
     pts = ((fr.surface_points(r["origin"], r["dirs"], r["depth"]), r["acc"]) for r in views.get("train", []))
     up, height = ground_plane(train, pts)
     box = train.scene_box.float()
     extent = float((box[1] - box[0]).max()) / 2
-    return Renders(views, up, height, train.metres_to_world(1.0), seconds, extent)
+    return Renders(views, up, height, train.metres_to_world(1.0), seconds, extent, cpu)
 
 
 def auto_masks(view: Path, reference: Path, splits: list[str], opts: AutoOptions,
-               log: Callable[[str], None] = print, progress: bool = True, motion=None) -> dict[str, list[FrameMasks]]:
+               log: Callable[[str], None] = print, progress: bool = True, motion=None, render_downscale: float = 1.0,
+               stats: Optional[dict] = None) -> dict[str, list[FrameMasks]]:
     """:func:`render_views` then :func:`~nerf2gs_plugin.masks.auto.masks_from_renders`, plus what
-    moves against the static scene's flow (``motion``: :class:`~nerf2gs_plugin.masks.motion.MotionOptions`)."""
-    renders = render_views(view, reference, splits, log, progress)
+    moves against the static scene's flow (``motion``: :class:`~nerf2gs_plugin.masks.motion.MotionOptions`);
+    ``stats`` receives ``render_seconds`` and ``render_cpu_seconds``."""
+    renders = render_views(view, reference, splits, log, progress, render_downscale)
+    if stats is not None:
+        stats["render_seconds"], stats["render_cpu_seconds"] = round(renders.seconds, 1), round(renders.cpu_seconds, 1)
     result = masks_from_renders(renders, opts, log)
     if motion is not None:
         from nerf2gs_plugin.masks.motion import add_motion

@@ -114,6 +114,28 @@ def median_filter(x: Tensor, size: int) -> Tensor:
     return F.unfold(p, size)[0].median(0).values.reshape(x.shape)
 
 
+def box_count(mask: Tensor, size: int) -> Tensor:
+    """``[H, W]`` number of true pixels in each ``size`` x ``size`` window (replicated border, odd
+    ``size``), exact in integers through a summed-area table."""
+    p = F.pad(mask.float()[None, None], (size // 2,) * 4, mode="replicate")[0, 0].to(torch.int32)
+    s = F.pad(p.cumsum(0).cumsum(1), (1, 0, 1, 0))
+    h, w = mask.shape
+    return s[size:size + h, size:size + w] - s[:h, size:size + w] - s[size:size + h, :w] + s[:h, :w]
+
+
+def median_compare(x: Tensor, threshold: float, size: int, below: bool = True) -> Tensor:
+    """``median_filter(x, size) < threshold`` (``below``) or ``>= threshold``, exactly, without sorting
+    a window: with an odd count n per window, the median is on a side of the threshold iff at least
+    (n + 1) / 2 values are. A window holding a NaN has a NaN median: False either way."""
+    side = (x < threshold) if below else (x >= threshold)
+    if size < 2:
+        return side
+    size += 1 - size % 2
+    held = box_count(side, size) >= (size * size + 1) // 2
+    nan = torch.isnan(x)
+    return held & (box_count(nan, size) == 0) if bool(nan.any()) else held
+
+
 def ground_from_render(origin: Tensor, directions: Tensor, depth: Tensor, acc: Tensor, up: Tensor, height: float, tol: float,
                        acc_min: float = 0.5, normals: Optional[Tensor] = None, max_normal_deg: float = 30.0,
                        smooth_px: int = 0, empty_is_ground: bool = False) -> Tensor:
@@ -122,11 +144,12 @@ def ground_from_render(origin: Tensor, directions: Tensor, depth: Tensor, acc: T
     accumulation) are ``smooth_px``-wide medians first, so a floater's speckle in front of the road
     or a see-through hole in a facade does not flip a pixel. ``empty_is_ground``: a downward ray
     whose (median) accumulation is below ``acc_min`` counts as ground as well."""
-    h = median_filter(surface_points(origin, directions, depth) @ up - height, smooth_px)
-    acc = median_filter(acc, smooth_px)
-    solid = acc >= acc_min
+    h = surface_points(origin, directions, depth) @ up - height
+    # the medians are only compared with a threshold: counted per window, as exact as the sort and
+    # two orders of magnitude faster at the default window (29 px at 360 rows)
+    solid = median_compare(acc, acc_min, smooth_px, below=False)
     # one-sided: nothing is below the road, a surface rendered below the plane is a depth error on the road
-    g = (h < tol) & solid
+    g = median_compare(h, tol, smooth_px) & solid
     if empty_is_ground:
         g |= ~solid
     g &= (directions @ up) < 0

@@ -44,6 +44,9 @@ class MasksConfig:
     """auto: training steps of a new reference."""
     downscale: float = 1.0
     """auto: image downscale of a new reference (renders are upsampled to the image size)."""
+    render_downscale: float = 1.0
+    """auto: the reference renders each frame at 1/d of its size per side for the mask maths (d^2 fewer
+    rays; the masks are upsampled to the image size)."""
     auto: AutoOptions = field(default_factory=AutoOptions)
     motion: MotionOptions = field(default_factory=MotionOptions)
     """auto: moving objects from optical flow against the static scene's (docs/masks-motion.md)."""
@@ -165,6 +168,8 @@ def _segment(cfg: MasksConfig, data: Path, frames: list, groups: dict, out: Path
         from nerf2gs_plugin.masks.auto_masks import auto_masks
         from nerf2gs_plugin.masks.mask_reference import ensure_reference
 
+        if cfg.render_downscale < 1.0:  # before a reference is trained for nothing
+            raise ConfigError(f"--render-downscale must be >= 1, got {cfg.render_downscale}")
         distorted = [f.image.name for _, f in frames if f.intr.distorted]
         if distorted:
             raise DataError(f"--segmenter auto needs undistorted (pinhole) images; {distorted[0]} has distortion "
@@ -174,7 +179,10 @@ def _segment(cfg: MasksConfig, data: Path, frames: list, groups: dict, out: Path
         summary["reference"] = str(ref)
         summary["reference_seconds"] = round(time.perf_counter() - t_ref, 1)
         t_m = time.perf_counter()
-        result = auto_masks(maskless_view(data), ref, list(groups), cfg.auto, log, cfg.progress, motion=cfg.motion)
+        timings: dict = {}
+        result = auto_masks(maskless_view(data), ref, list(groups), cfg.auto, log, cfg.progress, motion=cfg.motion,
+                            render_downscale=cfg.render_downscale, stats=timings)
+        summary.update(timings)
         for split, fs in groups.items():
             for f, m in zip(fs, result[split]):
                 ms = {"sky": m.sky, "ground": m.ground, "transient": m.transient}

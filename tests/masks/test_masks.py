@@ -361,8 +361,15 @@ def test_make_masks_auto_with_a_very_short_reference(tmp_path):
     assert set(outs.mask_filenames) == {"sky", "ground", "transient"}
     assert all(p is not None for p in outs.mask_filenames["sky"])
     assert (data / "masks" / "sky" / "bev_1_000.png").is_file()  # every split
-    make_masks(MasksConfig(data=data, reference=ref, overwrite=True, progress=False), log=logs.append)
+    assert summary["render_seconds"] >= 0 and summary["render_cpu_seconds"] > 0
+    # again from renders at half the size per side: the masks are still written at the images' size
+    again = make_masks(MasksConfig(data=data, reference=ref, overwrite=True, render_downscale=2.0, progress=False), log=logs.append)
     assert any("reusing reference" in line for line in logs)
+    assert again["render_cpu_seconds"] < summary["render_cpu_seconds"]
+    img = load_mask(outs.image_filenames[0].parent.parent / "masks" / "sky" / f"{outs.image_filenames[0].stem}.png")
+    assert tuple(img.shape[:2]) == (int(outs.cameras.height[0]), int(outs.cameras.width[0]))
+    with pytest.raises(ConfigError, match="render-downscale"):
+        make_masks(MasksConfig(data=data, reference=ref, overwrite=True, render_downscale=0.5, progress=False), log=logs.append)
 
 
 def _street_scene(wall_h: float = 6.0, pitch_deg: float = 10.0):
@@ -466,3 +473,16 @@ def test_transient_opening_drops_thin_strokes_keeps_blobs():
     t = fr.transient_from_residual(res, 0.5, min_area=20, open_px=2)
     assert not t[:, 8:14].any() and bool(t[22:33, 32:53].all())
     assert fr.transient_from_residual(res, 0.5, min_area=20)[:, 10:12].all()  # without the opening the pole stays
+
+
+@pytest.mark.parametrize("size", [0, 3, 4, 9])
+def test_median_compare_is_the_sorted_median_compared(size):
+    """The ground mask's window medians are counted, not sorted: the same answer as sorting each
+    window, ties at the threshold, the border and a NaN (its windows are False) included."""
+    g = torch.Generator().manual_seed(size)
+    x = torch.round(torch.rand(37, 53, generator=g) * 8) / 8
+    x[4, 50] = float("nan")
+    for t in (0.5, 0.125):
+        med = fr.median_filter(x, size)
+        assert torch.equal(fr.median_compare(x, t, size), med < t)
+        assert torch.equal(fr.median_compare(x, t, size, below=False), med >= t)

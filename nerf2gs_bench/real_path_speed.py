@@ -1,0 +1,199 @@
+"""``ns2gs-bench real-path-speed``: the real path of a dashcam capture timed stage by stage.
+
+Stand-in for a 100-frame 480x360 dashcam clip: the synthetic street with movers (a car and a cyclist
+riding ahead at the drive's speed, pedestrians, parked cars) rendered at 480x360, its forward drive
+written as a video. The path is what a user runs with default configs: ``process video`` ->
+``masks`` (auto: first reference, its renders, the mask maths) -> StreetNeRF (``--warm-start`` from
+the masks' reference unless ``--no-warm-start``) -> Splatfacto ``--augment-from`` StreetNeRF (the
+reference's renders, then the training). Every stage gets wall seconds and CPU seconds (user + sys of
+this process and its children: robust to other load on a shared machine, and with one thread the
+time the stage takes alone on one core). Writes ``real_path_speed.{json,md}``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import resource
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Optional
+
+from nerf2gs_plugin.utils.io import atomic_write_text
+
+STEM = "real_path_speed"
+TARGET_MINUTES = 12.0
+
+
+@dataclass
+class RealPathOptions:
+    frames: int = 100
+    """Frames of the forward drive in the video."""
+    width: int = 480
+    height: int = 360
+    street_seed: int = 0
+    movers: bool = True
+    """Objects moving with the camera and across it (what a dashcam sees)."""
+    reference_steps: int = 1000
+    """The masks' first reference (the masks stage's default)."""
+    streetnerf_steps: Optional[int] = None
+    """None: StreetNeRF's default."""
+    splatfacto_steps: Optional[int] = None
+    """None: Splatfacto's default."""
+    warm_start: bool = True
+    """StreetNeRF continues from the masks' reference (its first steps are the reference's)."""
+    render_downscale: float = 1.0
+    """The masks' renders at 1/d per side (``ns2gs-data masks --render-downscale``)."""
+
+
+def cpu_seconds() -> float:
+    """User + system seconds of this process and its finished children."""
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
+class Stages:
+    """Wall and CPU seconds per named stage, in the order run; ``on_stage`` is called after each (a
+    long bench writes what it has so far)."""
+
+    def __init__(self, on_stage: Optional[Callable[[], None]] = None) -> None:
+        self.rows: dict[str, dict[str, float]] = {}
+        self.on_stage = on_stage
+
+    def run(self, name: str, fn: Callable):
+        w0, c0 = time.perf_counter(), cpu_seconds()
+        out = fn()
+        self.add(name, time.perf_counter() - w0, cpu_seconds() - c0)
+        if self.on_stage:
+            self.on_stage()
+        return out
+
+    def add(self, name: str, wall: float, cpu: float) -> None:
+        self.rows[name] = {"wall_s": round(wall, 1), "cpu_s": round(cpu, 1)}
+
+    def split(self, name: str, part: str, wall: float, cpu: float) -> None:
+        """Take ``part``'s share (measured inside stage ``name``) out of it into its own row, just before it."""
+        rows, self.rows = self.rows, {}
+        for k, v in rows.items():
+            if k == name:
+                self.add(part, wall, cpu)
+                v = {"wall_s": round(v["wall_s"] - wall, 1), "cpu_s": round(v["cpu_s"] - cpu, 1)}
+            self.rows[k] = v
+
+    def total(self, key: str) -> float:
+        return round(sum(v[key] for v in self.rows.values()), 1)
+
+
+def make_capture(root: Path, opts: RealPathOptions) -> tuple[Path, float, float]:
+    """The stand-in street and its forward drive as a video; ``(video, fov_deg, camera_height)``."""
+    from nerf2gs_bench.real import write_video
+    from nerf2gs_plugin.data.synthetic_street import GENERATOR_VERSION, SynthStreetConfig, generate_street, read_generator_version
+
+    street = root / "street"
+    cfg = SynthStreetConfig(out=street, seed=opts.street_seed, width=opts.width, height=opts.height, num_train=2 * opts.frames,
+                            num_street=4, num_bev=4, num_val_street=0, num_val_bev=0, num_lane=0, num_val_lane=0,
+                            movers=opts.movers, progress=False, overwrite=True)
+    if not (street / "transforms.json").is_file() or read_generator_version(street) != GENERATOR_VERSION:
+        generate_street(cfg)
+    frames = json.loads((street / "transforms.json").read_text())["frames"][: opts.frames]  # the forward drive
+    video = write_video(root / "drive.avi", [street / f["file_path"] for f in frames])
+    return video, cfg.fov_deg, cfg.cam_height
+
+
+def _trainer_config(method: str, data: Path, run_dir: Path, steps: Optional[int], **kw):
+    from nerf2gs_plugin.registry import get_method
+
+    spec = get_method(method)
+    cfg = spec.with_steps(steps) if steps else spec.config
+    return dataclasses.replace(cfg, data=data, run_dir=run_dir, steps_per_eval_image=0, progress=False, **kw)
+
+
+def _train(stages: Stages, name: str, cfg, setup_part: Optional[str] = None) -> Path:
+    """Set up and train one run; ``setup_part`` names the setup's own row (the augmentation's renders)."""
+    from nerf2gs_plugin.engine.trainer import Trainer
+
+    trainer = Trainer(cfg)
+    if setup_part:
+        stages.run(setup_part, trainer.setup)
+    else:
+        trainer.setup()
+    return stages.run(name, trainer.train)
+
+
+def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), log: Callable[[str], None] = print) -> dict:
+    """The whole path in ``root`` (made afresh: nothing is reused); writes the results and returns them."""
+    import shutil
+
+    from nerf2gs_bench.machine import machine_info
+    from nerf2gs_bench.real import process_capture
+    from nerf2gs_plugin.masks.make_masks import MasksConfig, make_masks
+    from nerf2gs_plugin.masks.mask_reference import ensure_reference
+
+    root = Path(root)
+    video, fov, cam_height = make_capture(root, opts)
+    for stale in ("capture", "masks-reference", "streetnerf", "splatfacto-nerf-views"):
+        shutil.rmtree(root / stale, ignore_errors=True)
+    data, ref = root / "capture", root / "masks-reference"
+    doc: dict = {"options": dict(dataclasses.asdict(opts)), "machine": machine_info(), "complete": False}
+
+    def record(final: bool = False) -> None:
+        doc.update({"stage_seconds": stages.rows, "total_wall_s": stages.total("wall_s"), "total_cpu_s": stages.total("cpu_s"),
+                    "target_minutes": TARGET_MINUTES, "load_average": _load_average(), "complete": final})
+        write_results(out_dir, doc)
+
+    stages = Stages(on_stage=record)
+    report = stages.run("process (frames, SfM)", lambda: process_capture(video, data, opts.frames, fov, cam_height))
+    log(f"[bench] process: {report.registered}/{report.frames} registered")
+    doc["registered"] = report.registered
+    stages.run("masks: first reference", lambda: ensure_reference(data, ref, opts.reference_steps, progress=False, log=log))
+    summary = stages.run("masks: mask maths", lambda: make_masks(MasksConfig(
+        data=data, reference=ref, render_downscale=opts.render_downscale, splits=("train",), overwrite=True, progress=False), log=log))
+    stages.split("masks: mask maths", "masks: renders", summary["render_seconds"], summary["render_cpu_seconds"])
+    sn = _train(stages, "StreetNeRF", _trainer_config("streetnerf", data, root / "streetnerf", opts.streetnerf_steps,
+                                                      warm_start=ref if opts.warm_start else None))
+    _train(stages, "Splatfacto + NeRF views: training", _trainer_config("splatfacto", data, root / "splatfacto-nerf-views",
+                                                                        opts.splatfacto_steps, augment_from=sn),
+           setup_part="Splatfacto + NeRF views: reference renders")
+    doc["masks_coverage"] = summary.get("coverage")
+    record(final=True)
+    return doc
+
+
+def _load_average() -> Optional[list[float]]:
+    try:
+        return [float(x) for x in Path("/proc/loadavg").read_text().split()[:3]]
+    except OSError:
+        return None
+
+
+def results_md(doc: dict) -> str:
+    from nerf2gs_bench.machine import machine_line
+
+    o = doc["options"]
+    lines = [f"# The real path, stage by stage ({o['frames']} frames, {o['width']}x{o['height']})", "",
+             f"Machine: {machine_line(doc['machine'])}; torch threads {doc['machine'].get('torch_threads')}; "
+             f"load average at the end {doc.get('load_average')}.",
+             f"Stand-in: the synthetic street (seed {o['street_seed']}{', movers' if o['movers'] else ''}) at {o['width']}x{o['height']}, "
+             f"its forward drive as a video; masks' reference {o['reference_steps']} steps, StreetNeRF "
+             f"{o['streetnerf_steps'] or 'default'} steps ({'warm-started from the masks reference' if o['warm_start'] else 'from scratch'}), "
+             f"Splatfacto {o['splatfacto_steps'] or 'default'} steps with NeRF views; masks' renders at 1/{o['render_downscale']:g}. "
+             f"Registered {doc.get('registered', '?')}/{o['frames']}.", "",
+             "CPU seconds are user + system of the bench's process (one thread: the time the stage takes alone on one "
+             "core); wall seconds depend on the machine's other load.", "",
+             "| stage | CPU s | wall s |", "|---|---|---|"]
+    for name, v in doc["stage_seconds"].items():
+        lines.append(f"| {name} | {v['cpu_s']:.1f} | {v['wall_s']:.1f} |")
+    lines.append(f"| **total** | **{doc['total_cpu_s']:.0f} ({doc['total_cpu_s'] / 60:.1f} min)** | "
+                 f"**{doc['total_wall_s']:.0f} ({doc['total_wall_s'] / 60:.1f} min)** |")
+    if not doc.get("complete", True):
+        lines += ["", "**Incomplete: the bench stopped (or is still running) after the stages above.**"]
+    lines += ["", f"Target: <= {doc['target_minutes']:g} min for the whole path on 2 cores."]
+    return "\n".join(lines) + "\n"
+
+
+def write_results(out_dir: Path, doc: dict) -> None:
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out_dir / f"{STEM}.json", json.dumps(doc, indent=1, default=str))
+    atomic_write_text(out_dir / f"{STEM}.md", results_md(doc))
