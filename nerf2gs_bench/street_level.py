@@ -34,6 +34,7 @@ VARIANTS: dict[str, dict] = {
     "extra_prob 0.2": {"augment": {"extra_prob": 0.2}},
     "extra_weight 0.3": {"augment": {"extra_weight": 0.3}},
     "real_only_from 0.6": {"augment": {"real_only_from": 0.6}},
+    "real_only_from 0.75": {"augment": {"real_only_from": 0.75}},
     "confidence visibility": {"augment": {"confidence": "visibility"}},
 }
 """Label -> the augment overrides of a Splatfacto run (no ``augment`` key: the target alone)."""
