@@ -1,5 +1,5 @@
 """ns2gs-bench demo | quick | paper-table | ablation | speed-quality | stability | model-size | raster | field | faults | real |
-real-photos | real-captures | real-path-speed | scale | blocks
+real-photos | real-captures | real-path-speed | street-level | scale | blocks
 
 Results (JSON + Markdown + PNG, with the machine) go to benchmarks/results/; trained runs are kept
 under benchmarks/runs/ and reused when nothing that matters changed. ``demo`` (what make demo runs)
@@ -403,6 +403,34 @@ class RealPathSpeed(RealPathOptions):
 
 
 @dataclass
+class StreetLevel:
+    """What the NeRF's views cost the target at street level on real captures, per region and frame, and
+    which ``--augment.*`` lever keeps it (``street_level_lever.*``); reads ``real-captures``' runs."""
+
+    from_runs: Path = RUNS
+    """The --runs of an ``ns2gs-bench real-captures`` run (its processed captures and StreetNeRF references)."""
+    captures: tuple[str, ...] = ("kitti", "lund")
+    variants: tuple[str, ...] = ("default", "composites only", "bev only")
+    """Names from nerf2gs_bench.street_level.VARIANTS (the target alone always runs)."""
+    steps: int = 700
+    """Splatfacto's steps (the real-captures quick scale's)."""
+    seeds: tuple[int, ...] = (42, 43)
+    """Each variant trained once per seed (one run's street-level PSNR moves by tenths of a dB with the seed)."""
+    street: Optional[Path] = None
+    """Also a synthetic street (``ns2gs-data synth-street``) at the quick bench's steps: the gain from above kept?"""
+    name: str = "street_level_lever"
+    """Results' file stem under --out."""
+    out: Path = RESULTS
+    runs: Path = RUNS
+
+    def main(self) -> None:
+        from nerf2gs_bench.street_level import run
+
+        run(self.captures, self.from_runs, self.runs, self.out, self.variants, self.steps, self.seeds, street=self.street, stem=self.name)
+        print(f"results: {self.out}/{self.name}.md")
+
+
+@dataclass
 class Scale:
     """How cost grows: time per step, peak memory and model size against images and resolution for
     StreetNeRF and Splatfacto, a fitted law and a 1 km projection, one run vs blocks (``scale.*``)."""
@@ -438,7 +466,8 @@ def main() -> None:
     cmd = tyro.extras.subcommand_cli_from_dict(
         {"demo": Demo, "quick": Quick, "paper-table": PaperTable, "ablation": Ablation, "speed-quality": SpeedQuality,
          "stability": Stability, "model-size": ModelSize, "raster": Raster, "field": Field, "faults": Faults,
-         "real": Real, "real-photos": RealPhotos, "real-captures": RealCaptures, "real-path-speed": RealPathSpeed, "scale": Scale, "blocks": Blocks},
+         "real": Real, "real-photos": RealPhotos, "real-captures": RealCaptures, "real-path-speed": RealPathSpeed,
+         "street-level": StreetLevel, "scale": Scale, "blocks": Blocks},
         description=__doc__,
     )
     cmd.main()

@@ -17,6 +17,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("paper", "speed_quality", "size", "stability", "raster", "field", "faults", "faults_capture", "real", "real_photos", "scale",
      "blocks", "enhancer", "demo", "plans"),  # plans: the validation studies' runner
     ("real_captures",),  # each capture through the real-photos bench
+    ("street_level",),  # levers of the augmentation on the real captures' runs
     ("cli",),
 ]
 RANK = {name: i for i, names in enumerate(LAYERS) for name in names}

@@ -1,0 +1,56 @@
+"""``ns2gs-bench street-level``'s pure parts: the validation / test split of the held-out frames, the regions
+of a frame from a reference render, and where the extra squared error sits."""
+
+import math
+
+import pytest
+import torch
+
+from nerf2gs_bench import street_level as sl
+from nerf2gs_plugin.errors import DataError
+
+
+def test_held_out_frames_alternate_between_validation_and_test_in_name_order():
+    roles = sl.split_roles(["0016.png", "0000.png", "0008.png", "0024.png", "0032.png"])
+    assert [roles[n] for n in sorted(roles)] == ["val", "test", "val", "test", "val"]
+
+
+def test_regions_split_sky_ground_rest_and_near_far():
+    # a camera 1 unit above the plane z=0 looking along +x: top row up into the sky, bottom rows down to the road
+    h, w = 4, 2
+    dirs = torch.zeros(h, w, 3)
+    dirs[..., 0] = 1.0
+    dirs[0, :, 2], dirs[1, :, 2], dirs[2, :, 2], dirs[3, :, 2] = 0.5, -0.05, -0.5, -0.5
+    dirs = dirs / dirs.norm(dim=-1, keepdim=True)
+    acc = torch.ones(h, w)
+    acc[0] = 0.0  # nothing rendered above the horizon: sky
+    depth = torch.full((h, w), 5.0)  # row 1: a wall 5 units ahead, 0.75 above the road
+    depth[2:] = 1.0 / float(-dirs[2, 0, 2])
+    view = {"acc": acc, "dirs": dirs, "depth": depth, "origin": torch.tensor([0.0, 0.0, 1.0])}
+    m = sl.region_masks(view, torch.tensor([0.0, 0.0, 1.0]), 0.0, camera_height=1.0)
+    assert m["sky"][0].all() and not m["sky"][1:].any()
+    assert m["ground"][2:].all() and not m["ground"][:2].any()  
+    assert m["rest"][1].all() and not m["rest"][2:].any()
+    assert m["near"][2:].all() and m["far"][1].all() and not (m["near"] | m["far"])[0].any()
+    parts = m["sky"].int() + m["ground"].int() + m["rest"].int()
+    assert (parts == 1).all()
+
+
+def test_loss_shares_of_sky_ground_rest_sum_to_one():
+    target = {"all": {"sse": 10.0}, "sky": {"sse": 2.0}, "ground": {"sse": 5.0}, "rest": {"sse": 3.0}}
+    variant = {"all": {"sse": 14.0}, "sky": {"sse": 2.0}, "ground": {"sse": 8.0}, "rest": {"sse": 4.0}}
+    s = sl.loss_shares(variant, target)
+    assert s == {"sky": 0.0, "ground": 0.75, "rest": 0.25}
+
+
+def test_summary_psnr_is_the_mean_over_the_role_s_frames():
+    errs = {"a": {"all": [0.01 * 4, 4]}, "b": {"all": [0.0001 * 4, 4]}, "c": {"all": [1.0 * 4, 4]}}
+    s = sl.summarise(errs, {"a": "val", "b": "test", "c": "val"}, "val")
+    assert s["all"]["psnr"] == pytest.approx((20.0 + 0.0) / 2)
+    assert s["all"]["sse"] == pytest.approx(4.04)
+
+
+def test_missing_real_captures_runs_are_named(tmp_path):
+    with pytest.raises(DataError) as e:
+        sl.find_reference(tmp_path, "kitti")
+    assert "real-captures" in str(e.value)
