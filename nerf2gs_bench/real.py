@@ -253,7 +253,7 @@ def reference_dir(root: Path, est: Path, steps: int, options: str = "") -> Path:
     must not reuse a reference trained on the old one."""
     import hashlib
 
-    from nerf2gs_plugin.masks.mask_reference import REFERENCE_OVERRIDES
+    from nerf2gs_plugin.masking.mask_reference import REFERENCE_OVERRIDES
     from nerf2gs_plugin.masks.maskless import strip_frame_keys
     from nerf2gs_bench.code_version import model_code_hash
 
@@ -320,7 +320,7 @@ def run_real_bench(runs_root: Path, out_dir: Path, opts: RealBenchOptions = Real
     """The whole bench; writes ``real.{json,md,png}`` into ``out_dir`` and returns the JSON document.
     ``train=False`` stops after the capture figures, ``street`` replaces the generated street (the
     test's plumbing run on a smaller one)."""
-    from nerf2gs_plugin.masks.make_masks import MasksConfig, make_masks
+    from nerf2gs_plugin.masking.make_masks import MasksConfig, make_masks
     from nerf2gs_plugin.data.process.export import DOWNSCALES
     from nerf2gs_plugin.masks.evaluate import paired_mask_iou
 

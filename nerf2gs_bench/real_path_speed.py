@@ -127,8 +127,8 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
 
     from nerf2gs_bench.machine import machine_info
     from nerf2gs_bench.real import process_capture
-    from nerf2gs_plugin.masks.make_masks import MasksConfig, make_masks
-    from nerf2gs_plugin.masks.mask_reference import ensure_reference
+    from nerf2gs_plugin.masking.make_masks import MasksConfig, make_masks
+    from nerf2gs_plugin.masking.mask_reference import ensure_reference
 
     root = Path(root)
     video, fov, cam_height = make_capture(root, opts)

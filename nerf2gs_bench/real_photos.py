@@ -98,7 +98,7 @@ def process_photos(opts: RealPhotosOptions, out: Path):
 def run_real_photos(opts: RealPhotosOptions, runs_root: Path, out_dir: Path, rerun: bool = False,
                     log: Callable[[str], None] = print, name: Optional[str] = None) -> dict:
     """The whole bench; writes ``real_photos.{json,md,png}`` into ``out_dir``; returns the JSON document."""
-    from nerf2gs_plugin.masks.make_masks import MasksConfig, make_masks
+    from nerf2gs_plugin.masking.make_masks import MasksConfig, make_masks
     from nerf2gs_bench.runner import BenchRunner, failure_reason
     from nerf2gs_bench.runs import RunSpec
     from nerf2gs_plugin.eval.reference_check import reference_report

@@ -27,8 +27,8 @@ LAYERS: list[tuple[str, ...]] = [
     ("registry", "runs"),
     ("methods",),
     # the features that train or load runs: the augmentation (its reference is a run), the enhancer,
-    # and the masks made from a first reference of the capture itself
-    ("augment", "enhancer", "masks.auto_masks", "masks.make_masks", "masks.mask_reference"),
+    # and masking (ns2gs-data masks: a segmenter's masks, or masks from a first reference of the capture)
+    ("augment", "enhancer", "masking"),
     ("eval", "render", "blocks"),  # blocks: city-block partition of a capture and merge of the block runs;
     # render: camera paths, videos and the measures from above (eval reports them)
     ("viewer", "cli"),
@@ -40,7 +40,7 @@ ALLOWED_UPWARD: set[tuple[str, str]] = set()  # none: every arrow points down
 # packages whose modules sit on more than one floor (a layer above names some of their modules); every
 # other package is one room on one floor, so a feature that needs a lower part of it means that part
 # belongs lower (the image metrics the enhancer trains with live in utils, not eval)
-SPLIT_PACKAGES = {"masks"}
+SPLIT_PACKAGES: set[str] = set()
 
 
 def module_name(path: Path) -> str:
@@ -152,7 +152,7 @@ def test_the_checker_sees_function_level_imports(tmp_path):
                    "def f():\n    from nerf2gs_plugin.eval import metrics\n    import nerf2gs_plugin.cli.train\n")
     found = imports_of("nerf2gs_plugin.data.m", src, {"nerf2gs_plugin.eval.metrics": src, "nerf2gs_plugin.viewer.server": src})
     assert found == {"nerf2gs_plugin.eval.metrics", "nerf2gs_plugin.cli.train", "nerf2gs_plugin.viewer.server"}
-    assert layer_of("nerf2gs_plugin.masks.make_masks") > layer_of("nerf2gs_plugin.methods.x") > layer_of("nerf2gs_plugin.masks.auto")
+    assert layer_of("nerf2gs_plugin.masking.make_masks") > layer_of("nerf2gs_plugin.methods.x") > layer_of("nerf2gs_plugin.masks.auto")
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 

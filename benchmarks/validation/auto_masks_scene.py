@@ -23,8 +23,8 @@ from pathlib import Path
 import torch
 
 torch.set_num_threads(1)
-from nerf2gs_plugin.masks.auto_masks import ground_plane, render_views  # noqa: E402
-from nerf2gs_plugin.masks.mask_reference import ensure_reference  # noqa: E402
+from nerf2gs_plugin.masking.auto_masks import ground_plane, render_views  # noqa: E402
+from nerf2gs_plugin.masking.mask_reference import ensure_reference  # noqa: E402
 from nerf2gs_plugin.data import parse_dataset  # noqa: E402
 from nerf2gs_plugin.data.images import load_mask  # noqa: E402
 from nerf2gs_plugin.masks.auto import AutoOptions, masks_from_renders  # noqa: E402

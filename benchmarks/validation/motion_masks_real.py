@@ -46,8 +46,8 @@ if not (capture / "transforms.json").is_file():
     br.process_capture(br.write_video(work / "drive.avi", files), capture, n, FOV, CAM_H)
 from nerf2gs_plugin.data import parse_dataset  # noqa: E402
 from nerf2gs_plugin.masks.auto import AutoOptions, masks_from_renders  # noqa: E402
-from nerf2gs_plugin.masks.auto_masks import ground_plane, render_views  # noqa: E402
-from nerf2gs_plugin.masks.mask_reference import ensure_reference  # noqa: E402
+from nerf2gs_plugin.masking.auto_masks import ground_plane, render_views  # noqa: E402
+from nerf2gs_plugin.masking.mask_reference import ensure_reference  # noqa: E402
 from nerf2gs_plugin.masks.maskless import maskless_view  # noqa: E402
 from nerf2gs_plugin.masks.motion import MotionOptions, add_motion  # noqa: E402
 

@@ -102,8 +102,8 @@ def run_gt() -> dict:
 
 def run_est() -> dict:
     """process video -> reference -> renders -> masks, with and without the motion route."""
-    from nerf2gs_plugin.masks.auto_masks import ground_plane, render_views
-    from nerf2gs_plugin.masks.mask_reference import ensure_reference
+    from nerf2gs_plugin.masking.auto_masks import ground_plane, render_views
+    from nerf2gs_plugin.masking.mask_reference import ensure_reference
     from nerf2gs_plugin.data import parse_dataset
     from nerf2gs_plugin.masks.auto import AutoOptions, masks_from_renders
     from nerf2gs_plugin.masks.maskless import maskless_view

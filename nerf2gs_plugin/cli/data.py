@@ -17,7 +17,7 @@ from typing import Optional, Sequence
 import tyro
 
 from nerf2gs_plugin.blocks.partition import PartitionConfig
-from nerf2gs_plugin.masks.make_masks import MasksConfig
+from nerf2gs_plugin.masking.make_masks import MasksConfig
 from nerf2gs_plugin.cli.common import run_cli
 from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig
 
@@ -67,7 +67,7 @@ class Masks(MasksConfig):
     reference NeRF trained without masks, no weights) or onnx:PATH (any segmentation model)."""
 
     def main(self) -> None:
-        from nerf2gs_plugin.masks.make_masks import make_masks
+        from nerf2gs_plugin.masking.make_masks import make_masks
 
         make_masks(self)
 

@@ -18,8 +18,8 @@ import torch
 
 from nerf2gs_plugin.cameras import Cameras
 
-RENDER_ONLY = frozenset({"eval_chunk", "render_min_weight", "eval_appearance", "encoding_backend"})
-"""Model settings that change no trained parameter (rendering, kernels): free to differ."""
+RENDER_ONLY = frozenset({"eval_chunk", "render_min_weight", "eval_appearance", "encoding_backend", "expect_masks"})
+"""Model settings that change no trained parameter (rendering, kernels, warnings): free to differ."""
 
 
 def free_to_differ(key: str) -> bool:

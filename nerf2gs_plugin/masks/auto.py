@@ -1,7 +1,7 @@
 """``--segmenter auto``: masks derived from the capture itself through a first reference (no weights).
 
-The reference (``nerf2gs_plugin.masks.mask_reference``: a short StreetNeRF trained without masks)
-renders every frame (``nerf2gs_plugin.masks.auto_masks``); this module turns those renders (rgb /
+The reference (``nerf2gs_plugin.masking.mask_reference``: a short StreetNeRF trained without masks)
+renders every frame (``nerf2gs_plugin.masking.auto_masks``); this module turns those renders (rgb /
 depth / accumulation and the photometric residual, :class:`Renders`) into masks with the pure
 functions of ``from_renders.py``. The ground plane is ``data/ground.py``'s RANSAC fit.
 """

@@ -292,7 +292,7 @@ def test_masks_reference_keyed_by_the_model_code(tmp_path, monkeypatch):
     monkeypatch.setattr(cv, "model_code_hash", lambda root=None: "another model")
     b = br.reference_dir(tmp_path, tmp_path, 1000)
     assert b != a
-    import nerf2gs_plugin.masks.mask_reference as mr  # and by what the reference changes of StreetNeRF
+    import nerf2gs_plugin.masking.mask_reference as mr  # and by what the reference changes of StreetNeRF
 
     monkeypatch.setattr(mr, "REFERENCE_OVERRIDES", {"pipeline": {"model": {"appearance_reg_weight": 0.5}}})
     assert br.reference_dir(tmp_path, tmp_path, 1000) not in (a, b)

@@ -18,7 +18,7 @@ from nerf2gs_plugin.data.images import load_mask, write_image_atomic
 from nerf2gs_plugin.masks import from_renders as fr
 from nerf2gs_plugin.masks.class_maps import CITYSCAPES
 from nerf2gs_plugin.masks.onnx_segmenter import OnnxSegmenter
-from nerf2gs_plugin.masks.make_masks import MasksConfig, make_masks
+from nerf2gs_plugin.masking.make_masks import MasksConfig, make_masks
 from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.masks.evaluate import dataset_mask_iou, hide_ground_truth, mask_iou
 

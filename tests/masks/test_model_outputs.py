@@ -141,7 +141,7 @@ def test_masks_cli_with_a_nan_segmenter_writes_no_masks(tmp_path, monkeypatch, c
 
 def test_masks_stop_on_a_model_failing_halfway_without_a_partial_set(tmp_path, monkeypatch):
     """The segmenter fails on the second image only: the first one's masks are not left behind."""
-    from nerf2gs_plugin.masks.make_masks import MasksConfig, make_masks
+    from nerf2gs_plugin.masking.make_masks import MasksConfig, make_masks
     from nerf2gs_plugin.masks.onnx_segmenter import OnnxSegmenter
 
     data = tmp_path / "d"

@@ -15,7 +15,7 @@ from nerf2gs_plugin.engine.checkpoints import list_checkpoints, load_checkpoint
 from nerf2gs_plugin.engine.trainer import Trainer
 from nerf2gs_plugin.engine.warm_start import config_difference
 from nerf2gs_plugin.errors import CheckpointError, ConfigError
-from nerf2gs_plugin.masks.mask_reference import ensure_reference
+from nerf2gs_plugin.masking.mask_reference import ensure_reference
 from nerf2gs_plugin.registry import get_method
 from street_fixtures import small_config
 

@@ -97,6 +97,9 @@ class StreetNeRFModelConfig(ModelConfig):
     """Exclude transient-mask pixels from the colour loss."""
     appearance: bool = True
     """Per-image affine colour transform."""
+    expect_masks: bool = True
+    """Warn when the dataset lacks sky, ground or transient masks. Off for a run trained without masks
+    on purpose (the masks stage's first reference), where their absence is not news."""
     eval_appearance: Literal["mean", "identity", "nearest"] = "mean"
     """Colour transform of a rendered camera (render_camera: eval, held-out photos, views from above,
     the augmentation's renders): the mean of the per-image transforms (default), the identity, or
@@ -208,9 +211,9 @@ class StreetNeRFModel(Model):
             for r in c.proposal_max_res
         )
         kinds = set(train_data.mask_filenames)
-        self.use_sky_loss = c.sky and self._mask_available("sky", kinds, "sky accumulation loss")
-        self.use_ground = c.ground_reg and self._mask_available("ground", kinds, "ground plane regularisation")
-        self.use_transient = c.transient_mask and self._mask_available("transient", kinds, "transient exclusion")
+        self.use_sky_loss = c.sky and self._mask_available("sky", kinds, "sky accumulation loss", c.expect_masks)
+        self.use_ground = c.ground_reg and self._mask_available("ground", kinds, "ground plane regularisation", c.expect_masks)
+        self.use_transient = c.transient_mask and self._mask_available("transient", kinds, "transient exclusion", c.expect_masks)
         self.sky_model = SkyModel() if c.sky else None
         self.bg_logit = None if c.sky else nn.Parameter(torch.logit(torch.tensor(c.background).clamp(0.01, 0.99)))
         self.appearance = AppearanceTransforms(self.num_train_images) if c.appearance else None
@@ -251,9 +254,10 @@ class StreetNeRFModel(Model):
         self.use_point_depth = True
 
     @staticmethod
-    def _mask_available(kind: str, kinds: set[str], term: str) -> bool:
+    def _mask_available(kind: str, kinds: set[str], term: str, expected: bool = True) -> bool:
         if kind not in kinds:
-            warn(f"the dataset has no {kind} masks", f"StreetNeRF trains without the {term}", stacklevel=3)
+            if expected:
+                warn(f"the dataset has no {kind} masks", f"StreetNeRF trains without the {term}", stacklevel=3)
             return False
         return True
 

@@ -165,8 +165,8 @@ def _segment(cfg: MasksConfig, data: Path, frames: list, groups: dict, out: Path
                 prog.advance(task)
         summary["class_ids"] = seg._ids
     elif cfg.segmenter == "auto":
-        from nerf2gs_plugin.masks.auto_masks import auto_masks
-        from nerf2gs_plugin.masks.mask_reference import ensure_reference
+        from nerf2gs_plugin.masking.auto_masks import auto_masks
+        from nerf2gs_plugin.masking.mask_reference import ensure_reference
 
         if cfg.render_downscale < 1.0:  # before a reference is trained for nothing
             raise ConfigError(f"--render-downscale must be >= 1, got {cfg.render_downscale}")

@@ -6,7 +6,6 @@ WITHOUT masks (a plain NeRF with a direction-only sky model) on the dataset's ma
 from __future__ import annotations
 
 import dataclasses
-import warnings
 from pathlib import Path
 from typing import Callable, Optional
 
@@ -53,6 +52,8 @@ def ensure_reference(data: Path, run: Optional[Path], steps: int = DEFAULT_STEPS
             return run
     cfg = apply_plain(get_method("streetnerf").with_steps(steps),
                       {"steps_per_eval_image": 0, "steps_per_save": max(1, steps // 4), **REFERENCE_OVERRIDES}, where="masks reference")
+    # trained on the mask-less view on purpose: its missing masks are not worth a warning
+    cfg = apply_plain(cfg, {"pipeline": {"model": {"expect_masks": False}}}, where="masks reference")
     dm = cfg.pipeline.datamanager
     dm = dataclasses.replace(dm, dataparser=dataclasses.replace(dm.dataparser, downscale=downscale))
     cfg = dataclasses.replace(cfg, data=maskless_view(data), progress=progress, run_dir=run,
@@ -60,9 +61,7 @@ def ensure_reference(data: Path, run: Optional[Path], steps: int = DEFAULT_STEPS
                               load_checkpoint=ckpts[-1] if ckpts else None)
     log(f"masks: training a {steps}-step StreetNeRF reference without masks -> {run}")
     trainer = Trainer(cfg)  # in the reference's own folder, not outputs/<data>/<method>/<stamp>
-    with warnings.catch_warnings():  # "the dataset has no sky masks": intended here, not news
-        warnings.filterwarnings("ignore", message="StreetNeRF: the dataset has no .* masks")
-        trainer.setup()
+    trainer.setup()
     if not progress:  # a line every tenth of the run instead of the bar
         every = max(1, steps // 10)
         trainer.step_hooks.append(lambda step, *_: log(f"masks: reference step {step + 1}/{steps}") if (step + 1) % every == 0 else None)
