@@ -6,19 +6,9 @@ import json
 
 import numpy as np
 import pytest
-import torch
 
 from nerf2gs_bench import real_captures as rc
 from nerf2gs_plugin.errors import DataError
-
-
-def test_hole_fraction_counts_pixels_below_half_accumulation():
-    a = torch.ones(4, 5, 1)
-    a[0, :2] = 0.49  # 2 holes
-    b = torch.zeros(2, 5)  # 10 holes, no channel axis
-    b[0, 0] = 0.5  # exactly 0.5 is covered
-    assert rc.hole_fraction([a, b]) == pytest.approx(11 / 30)
-    assert rc.hole_fraction([]) == 0.0
 
 
 def test_missing_frames_name_the_capture_and_the_source(tmp_path):
@@ -71,7 +61,8 @@ def test_stage_frames_crops_the_bonnet_and_keeps_the_order(tmp_path):
 
 def test_bench_keys_and_holes_on_a_stand_in_capture(tiny_scene, tmp_path, monkeypatch):
     """The bench end to end on a synthetic stand-in: run_real_photos replaced by two tiny runs, the holes
-    from above rendered from them; the JSON carries the issue's keys, the Markdown and picture are written."""
+    from above rendered from them by ns2gs-render compare; the JSON carries the issue's keys, the Markdown,
+    the picture and the docs' side by side are written."""
     import dataclasses
 
     from nerf2gs_plugin.engine.trainer import Trainer
@@ -99,7 +90,8 @@ def test_bench_keys_and_holes_on_a_stand_in_capture(tiny_scene, tmp_path, monkey
     monkeypatch.setattr(rc, "CAPTURES", (cap,))
     monkeypatch.setattr(rc, "SCALES", {"quick": dataclasses.replace(rc.SCALES["quick"], above_views=3)})
     _frames(tmp_path / "data" / "standin")
-    doc = rc.run(["standin"], tmp_path / "data", tmp_path / "runs", tmp_path / "out", "quick", log=lambda s: None)
+    doc = rc.run(["standin"], tmp_path / "data", tmp_path / "runs", tmp_path / "out", "quick", log=lambda s: None,
+                 docs_picture=tmp_path / "docs.png")
 
     saved = json.loads((tmp_path / "out" / "real_captures.json").read_text())
     c = saved["captures"][0]
@@ -115,15 +107,18 @@ def test_bench_keys_and_holes_on_a_stand_in_capture(tiny_scene, tmp_path, monkey
     assert "Quick scale" in md and "synthetic stand-in" in md and "CC0" in md
     assert (tmp_path / "out" / "real_captures.png").stat().st_size > 1000
 
-    # the hole measure is the renders' own accumulation: recomputed directly it agrees
-    from nerf2gs_plugin.runs.load import load_run
+    # holes and picture come from ns2gs-render compare: its labelled frames, its measures
+    views = sorted((tmp_path / "runs" / rc.STEM / "standin" / "compare-birds-eye").glob("*.png"))
+    measures = json.loads((tmp_path / "runs" / rc.STEM / "standin" / "compare-birds-eye.measures.json").read_text())
+    assert views and {m["label"]: m["bev_hole_fraction"] for m in measures} == {
+        rc.COMPARE_LABELS[rc.TARGET]: holes["target"], rc.COMPARE_LABELS[rc.AUGMENTED]: holes["augmented"]}
+    assert (tmp_path / "docs.png").stat().st_size <= 300_000
 
-    run = load_run(runs[rc.TARGET])
-    cams = rc.above_cameras(run, 10.0, 30.0, 3)
-    with torch.no_grad():
-        accs = [run.model.render_camera(cams[i:i + 1])["accumulation"] for i in range(len(cams))]
-    direct = sum(int((a < 0.5).sum()) for a in accs) / sum(a.numel() for a in accs)
-    assert holes["target"] == pytest.approx(direct)
+    # a rerun reuses the compare (same runs, same render code) and reports the same holes
+    lines: list[str] = []
+    again = rc.run(["standin"], tmp_path / "data", tmp_path / "runs", tmp_path / "out", "quick", log=lines.append)
+    assert any("reusing the compare from above" in line for line in lines)
+    assert again["captures"][0]["bev_hole_fraction"] == holes
 
 
 def test_unknown_capture_is_refused_before_any_work(tmp_path):
