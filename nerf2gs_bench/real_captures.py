@@ -366,6 +366,23 @@ def target_lines(captures: Sequence[dict]) -> list[str]:
     return ["Targets (street level keeps its quality; holes from above at most a fifth):", ""] + out if out else []
 
 
+def truth_lines(captures: Sequence[dict]) -> list[str]:
+    """Captures with surveyed cameras: our SfM against them (ATE after Sim(3), the metric scale's error)."""
+    out = []
+    for c in captures:
+        t = c.get("pose_truth")
+        if not t:
+            continue
+        if "error" in t:
+            out.append(f"- {c['capture']}: not compared ({t['error']}).")
+            continue
+        out.append(f"- {c['capture']}: {t['frames_compared']} registered photos against their surveyed cameras: ATE "
+                   f"{100 * t['ate_m']:.1f} cm ({t['ate_percent']:.2f}% of the path), rotation {t['rotation_error_deg']:.2f} deg, "
+                   f"up {t['up_error_deg']:.1f} deg (against the mean camera up); metric scale from the camera height "
+                   f"{t['scale_error_percent']:+.1f}% off.")
+    return ["", "SfM against ground truth (metres; Sim(3)-aligned):", ""] + out if out else []
+
+
 def _load_note(load: Optional[dict]) -> str:
     if not load:
         return ""
@@ -396,6 +413,7 @@ def results_md(doc: dict) -> str:
                      f"{_f(h['target'] and 100 * h['target'], '{:.1f}%')} | {_f(h['augmented'] and 100 * h['augmented'], '{:.1f}%')} | "
                      f"{_f(h['reference'] and 100 * h['reference'], '{:.1f}%')} | {_f(c['moving_iou'], '{:.2f}')} |")
     lines += [""] + target_lines(doc["captures"])
+    lines += truth_lines(doc["captures"])
     lines += ["", "Static delta: PSNR outside the moving-object masks of the held-out frames (masks/transient/); the "
               "masks stage makes them for the training frames only, so it is n/a unless the held-out frames are labelled. "
               "Moving-object IoU needs hand labels (n/a without).", "", "## Captures, provenance and licence", ""]
@@ -404,12 +422,16 @@ def results_md(doc: dict) -> str:
             lines += [f"- **{c['capture']}** ({c['mount']}): {c['provenance']}. Source: {c['fetch']}. Licence: {c['licence']}. "
                       f"Stopped: {c['failed']}"]
             continue
-        st = ", ".join(f"{k} {_f(v, '{:.0f}')}" for k, v in c["stage_seconds"].items())
+        saved = set(c.get("reused_stages", []))
+        st = ", ".join(f"{k} {_f(v, '{:.0f}')}" + (" (saved)" if k in saved else "") for k, v in c["stage_seconds"].items())
         cov = ", ".join(f"{k} {100 * v:.1f}%" for k, v in (c.get("masks_coverage") or {}).items())
         lines += [f"- **{c['capture']}** ({c['mount']}): {c['provenance']}. Source: {c['fetch']}. Licence: {c['licence']}. "
                   f"{c['options']['frames_used']} frames used, downscale {c['options']['downscale']:g}; "
                   f"{c['metres_per_unit']:.4g} m per SfM unit ({c['scale_source']}). Seconds: {st}. Masks' coverage: {cov or 'n/a'}."]
     lines += [f"- {n}" for n in doc.get("notes", [])]
-    lines += ["", f"Picture: `{STEM}.png`: holes from above per capture; renders only of captures whose licence allows "
-              "(KITTI and nuScenes are non-commercial, share-alike: no images or renders of them are committed)."]
+    lines += ["", "Seconds marked (saved) are those of the stage when it ran: this run reused its output (made by the "
+              "same code from the same inputs), so it took ~0 s here.", "",
+              f"Picture: `{STEM}.png`: holes from above per capture, then frames of `ns2gs-render compare` (the runs side by "
+              "side on the augmentation's bird's-eye views, labelled) of captures whose licence allows renders (Lund, BSD-2; "
+              "KITTI and nuScenes are non-commercial share-alike, Herz-Jesu states no licence: measured, not shown)."]
     return "\n".join(lines) + "\n"
