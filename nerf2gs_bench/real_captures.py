@@ -143,6 +143,54 @@ def downscale_for(width_px: int, scale: BenchScale) -> float:
 
 
 # ----------------------------------------------------------------------------- measures from above
+# ----------------------------------------------------------------------------- holes on a few views from above
+# (the street-level bench's quick measure; this bench measures through ns2gs-render compare below)
+def hole_fraction(accumulations: Sequence) -> float:
+    """Share of all pixels of the renders that are holes (``ns2gs-render``'s measure: accumulation below 0.5)."""
+    from nerf2gs_plugin.render.measures import hole_mask
+
+    holes = pixels = 0
+    for acc in accumulations:
+        h = hole_mask(acc if acc.dim() == 3 else acc[..., None])
+        holes += int(h.sum())
+        pixels += h.numel()
+    return holes / max(pixels, 1)
+
+
+def above_cameras(run, delta_h: float, theta_pitch: float, views: int):
+    """``views`` of the augmentation's own bird's-eye cameras (over the training cameras), evenly spread."""
+    import dataclasses
+
+    import torch
+
+    from nerf2gs_plugin.augment.config import AugmentConfig
+    from nerf2gs_plugin.augment.geometry import ViewGeometry
+
+    td = run.pipeline.datamanager.train_data
+    geometry = ViewGeometry.of(dataclasses.replace(AugmentConfig(), delta_h=delta_h, theta_pitch=theta_pitch))
+    cams = geometry.cameras(td.cameras, td)
+    idx = torch.linspace(0, len(cams) - 1, min(views, len(cams))).round().long().unique()
+    return cams[idx]
+
+
+def holes_from_above(run_dir: Path, delta_h: float, theta_pitch: float, views: int) -> tuple[float, list]:
+    """A run's hole fraction on the bird's-eye cameras, and its RGB renders (for the picture)."""
+    import torch
+
+    from nerf2gs_plugin.runs.load import load_run
+
+    run = load_run(run_dir)
+    run.model.eval()
+    cams = above_cameras(run, delta_h, theta_pitch, views)
+    accs, rgbs = [], []
+    with torch.no_grad():
+        for i in range(len(cams)):
+            out = run.model.render_camera(cams[i:i + 1])
+            accs.append(out["accumulation"].cpu())
+            rgbs.append(out["rgb"].clamp(0, 1).cpu())
+    return hole_fraction(accs), rgbs
+
+
 COMPARE_LABELS = {TARGET: "splatfacto (target alone)", AUGMENTED: "splatfacto + NeRF views", REFERENCE: "StreetNeRF (reference)"}
 """How each run is labelled in its compare frames."""
 COMPARE_RECORD = "bench_compare.json"

@@ -6,9 +6,19 @@ import json
 
 import numpy as np
 import pytest
+import torch
 
 from nerf2gs_bench import real_captures as rc
 from nerf2gs_plugin.errors import DataError
+
+
+def test_hole_fraction_counts_pixels_below_half_accumulation():
+    a = torch.ones(4, 5, 1)
+    a[0, :2] = 0.49  # 2 holes
+    b = torch.zeros(2, 5)  # 10 holes, no channel axis
+    b[0, 0] = 0.5  # exactly 0.5 is covered
+    assert rc.hole_fraction([a, b]) == pytest.approx(11 / 30)
+    assert rc.hole_fraction([]) == 0.0
 
 
 def test_missing_frames_name_the_capture_and_the_source(tmp_path):
