@@ -30,10 +30,19 @@ def read_strecha_camera(path: Path) -> np.ndarray:
     return np.concatenate([R @ OPENCV_TO_OPENGL, centre[:, None]], axis=1)
 
 
+def vertical_axis(mean_up: np.ndarray) -> np.ndarray:
+    """The signed world axis (x, y or z) nearest ``mean_up``."""
+    k = int(np.argmax(np.abs(mean_up)))
+    axis = np.zeros(3)
+    axis[k] = np.sign(mean_up[k])
+    return axis
+
+
 def truth_report(dataset: Path, truth: Path) -> dict:
     """ATE, rotation error, scale error (the dataset's metres per SfM unit against the Sim(3)'s) and
     up error of the dataset's registered cameras against ``truth/<image name>.camera``. True up: the
-    mean of the true cameras' up axes (the photos are taken level)."""
+    surveyed frame's axis nearest the true cameras' mean up (photos of a facade look up a little: their
+    mean up is not the vertical)."""
     from nerf2gs_plugin.eval.pose_eval import capture_report
 
     meta = json.loads((Path(dataset) / "transforms.json").read_text())
@@ -46,7 +55,7 @@ def truth_report(dataset: Path, truth: Path) -> dict:
     if len(est) < 3:
         raise DataError(f"{len(est)} registered frames have a ground-truth camera (need 3): names must match <image>.camera", truth)
     true_arr = np.stack(true)
-    up = true_arr[:, :, 1].mean(0)
+    up = vertical_axis(true_arr[:, :, 1].mean(0))
     total = len(list(Path(truth).glob("*.camera")))
     report = capture_report(np.stack(est), true_arr, float(meta["metres_per_unit"]), np.asarray(meta.get("up", [0, 0, 1])),
                             up, len(est), total)

@@ -426,7 +426,7 @@ def truth_lines(captures: Sequence[dict]) -> list[str]:
             continue
         out.append(f"- {c['capture']}: {t['frames_compared']} registered photos against their surveyed cameras: ATE "
                    f"{100 * t['ate_m']:.1f} cm ({t['ate_percent']:.2f}% of the path), rotation {t['rotation_error_deg']:.2f} deg, "
-                   f"up {t['up_error_deg']:.1f} deg (against the mean camera up); metric scale from the camera height "
+                   f"up {t['up_error_deg']:.1f} deg (against the surveyed vertical); metric scale from the camera height "
                    f"{t['scale_error_percent']:+.1f}% off.")
     return ["", "SfM against ground truth (metres; Sim(3)-aligned):", ""] + out if out else []
 

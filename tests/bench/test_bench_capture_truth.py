@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from nerf2gs_bench.capture_truth import read_strecha_camera, truth_report
+from nerf2gs_bench.capture_truth import read_strecha_camera, truth_report, vertical_axis
 from nerf2gs_plugin.errors import DataError
 
 
@@ -74,3 +74,8 @@ def test_too_few_matching_names_is_one_clear_error(tmp_path):
         f.rename(f.with_name(f.name.replace(".jpg", ".png")))
     with pytest.raises(DataError, match="registered frames have a ground-truth camera"):
         truth_report(data, truth)
+
+
+def test_true_up_is_the_surveyed_axis_nearest_the_cameras_mean_up():
+    assert np.allclose(vertical_axis(np.array([-0.13, 0.12, -0.98])), [0, 0, -1])  # cameras pitched up at a facade
+    assert np.allclose(vertical_axis(np.array([0.1, 0.9, 0.2])), [0, 1, 0])
