@@ -106,7 +106,10 @@ def capture_frames(cap: Capture, data_root: Path) -> list[Path]:
     folder = Path(data_root) / cap.folder
     names = sorted(p for p in folder.glob("*") if p.suffix.lower() in IMAGE_EXTS) if folder.is_dir() else []
     names = names[cap.first:cap.last]
-    if len(names) < MIN_FRAMES or (cap.truth and not (Path(data_root) / cap.truth).is_dir()):
+    if cap.truth and len(names) >= MIN_FRAMES and not (Path(data_root) / cap.truth).is_dir():
+        raise DataError(f"capture '{cap.name}': ground-truth cameras missing; fetch {cap.fetch} (the bench does not download)",
+                        Path(data_root) / cap.truth)
+    if len(names) < MIN_FRAMES:
         raise DataError(f"capture '{cap.name}': frames missing ({len(names)} found); fetch {cap.fetch} into this folder (the bench does not download)",
                         folder)
     return names

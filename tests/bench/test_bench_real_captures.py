@@ -29,6 +29,16 @@ def test_missing_frames_name_the_capture_and_the_source(tmp_path):
     assert f"capture '{cap.name}'" in msg and cap.fetch in msg and str(tmp_path / cap.folder) in msg
 
 
+def test_missing_ground_truth_is_named_apart_from_the_frames(tmp_path):
+    cap = next(c for c in rc.CAPTURES if c.truth)
+    _frames(tmp_path / cap.folder, n=4)
+    with pytest.raises(DataError, match="ground-truth cameras missing") as e:
+        rc.capture_frames(cap, tmp_path)
+    assert cap.fetch in str(e.value) and cap.truth in str(e.value)
+    (tmp_path / cap.truth).mkdir(parents=True)
+    assert len(rc.capture_frames(cap, tmp_path)) == 4
+
+
 def _frames(folder, n=10, h=20, w=40):
     import cv2
 
