@@ -200,9 +200,10 @@ COMPARE_RECORD = "bench_compare.json"
 
 
 def compare_or_reuse(cap: Capture, doc: dict, output: Path, rerun: bool,
-                     log: Callable[[str], None]) -> tuple[dict[str, Optional[float]], list[Path]]:
-    """Holes from above per run and the compare frames: ``ns2gs-render compare`` of the capture's runs
-    on the augmentation's bird's-eye views (reused when the same runs were compared by the same code)."""
+                     log: Callable[[str], None]) -> tuple[dict[str, Optional[float]], list[Path], float, bool]:
+    """Holes from above per run, the compare frames, the stage's seconds and whether they are the saved
+    ones: ``ns2gs-render compare`` of the capture's runs on the augmentation's bird's-eye views (reused
+    when the same runs were compared by the same code)."""
     from nerf2gs_bench.capture_compare import compare_frames, compare_from_above
     from nerf2gs_bench.code_version import source_hash
     from nerf2gs_bench.stage_record import read_stage, stage_key, write_stage
@@ -211,21 +212,21 @@ def compare_or_reuse(cap: Capture, doc: dict, output: Path, rerun: bool,
     holes: dict[str, Optional[float]] = {label: None for label in (TARGET, AUGMENTED, REFERENCE)}
     if TARGET not in done or AUGMENTED not in done:  # the views from above are the augmented run's
         log(f"[bench] {cap.name}: no holes from above (the target or its augmented twin failed)")
-        return holes, []
+        return holes, [], 0.0, False
     labels = [label for label in (TARGET, AUGMENTED, REFERENCE) if label in done]
     key = stage_key("compare", [done[label] for label in labels], source_hash(("render", "cli/render.py")))
     record = None if rerun else read_stage(output.parent / COMPARE_RECORD, key)
     if record is not None and output.is_dir():
-        measures = record["measures"]
+        measures, seconds, reused = record["measures"], record["seconds"], True
         log(f"[bench] {cap.name}: reusing the compare from above in {output}")
     else:
         t0 = time.perf_counter()
         measures = compare_from_above([done[label] for label in labels], [COMPARE_LABELS[label] for label in labels], output)
-        write_stage(output.parent / COMPARE_RECORD, key, time.perf_counter() - t0, measures=measures)
+        seconds, reused = write_stage(output.parent / COMPARE_RECORD, key, time.perf_counter() - t0, measures=measures)["seconds"], False
     for label in labels:
         holes[label] = measures[COMPARE_LABELS[label]]["bev_hole_fraction"]
         log(f"[bench] {cap.name}: {label} holes from above {100 * holes[label]:.1f}%")
-    return holes, compare_frames(output)
+    return holes, compare_frames(output), seconds, reused
 
 
 # ----------------------------------------------------------------------------- one capture
@@ -286,12 +287,13 @@ def run_capture(cap: Capture, data_root: Path, runs_root: Path, scale: BenchScal
                              reference_steps=scale.reference_steps, streetnerf_steps=scale.streetnerf_steps,
                              splatfacto_steps=scale.splatfacto_steps, delta_h=aug.delta_h, theta_pitch=aug.theta_pitch)
     doc = run_real_photos(opts, runs_root / STEM, root / "results", rerun=rerun, log=log, name=cap.name)
-    t0 = time.perf_counter()
-    holes, views = compare_or_reuse(cap, doc, root / "compare-birds-eye", rerun, log)
-    doc["stage_seconds"]["holes from above"] = round(time.perf_counter() - t0, 1)
+    holes, views, seconds, reused = compare_or_reuse(cap, doc, root / "compare-birds-eye", rerun, log)
+    doc["stage_seconds"]["holes from above"] = seconds
     summary = capture_summary(cap, doc, holes)
     summary["stage_seconds"]["holes from above"] = doc["stage_seconds"]["holes from above"]
-    summary["reused_stages"] = doc.get("reused_stages", [])
+    # named as in the record's stage_seconds (runs by their label)
+    summary["reused_stages"] = [k.removeprefix("train + eval: ") for k in doc.get("reused_stages", [])] + (
+        ["holes from above"] if reused else [])
     summary["options"] = {"frames_used": len(staged), "downscale": opts.downscale, "delta_h": opts.delta_h,
                           "theta_pitch": opts.theta_pitch, "steps": {"reference": scale.reference_steps,
                                                                      REFERENCE: scale.streetnerf_steps, TARGET: scale.splatfacto_steps}}

@@ -138,7 +138,9 @@ def test_bench_keys_and_holes_on_a_stand_in_capture(tiny_scene, tmp_path, monkey
     lines: list[str] = []
     again = rc.run(["standin"], tmp_path / "data", tmp_path / "runs", tmp_path / "out", "quick", log=lines.append)
     assert any("reusing the compare from above" in line for line in lines)
-    assert again["captures"][0]["bev_hole_fraction"] == holes
+    c2 = again["captures"][0]
+    assert c2["bev_hole_fraction"] == holes and "holes from above" in c2["reused_stages"]
+    assert c2["stage_seconds"]["holes from above"] == c["stage_seconds"]["holes from above"]  # the saved seconds
 
 
 def test_unknown_capture_is_refused_before_any_work(tmp_path):
