@@ -15,7 +15,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("runs",),  # run specs, keys and reuse of trained runs
     ("runner",),  # training, evaluating and writing a bench's results
     ("paper", "speed_quality", "size", "stability", "raster", "field", "faults", "faults_capture", "real", "real_photos", "scale",
-     "capture_truth", "capture_compare",
+     "capture_truth", "capture_compare", "real_path_speed",
      "blocks", "enhancer", "demo", "plans"),  # plans: the validation studies' runner
     ("real_captures",),  # each capture through the real-photos bench
     ("cli",),
