@@ -363,11 +363,11 @@ class RealPhotos(RealPhotosOptions):
 
 @dataclass
 class RealCaptures:
-    """Public real captures (KITTI, Lund, nuScenes CAM_FRONT; fetched beforehand into --data-root) through
+    """Public real captures (KITTI, Lund, nuScenes CAM_FRONT, Herz-Jesu-P25; fetched beforehand into --data-root) through
     process -> masks (auto) -> StreetNeRF -> Splatfacto +- NeRF views: held-out PSNR, holes from above,
     stage times (``real_captures.*``)."""
 
-    captures: tuple[str, ...] = ("kitti", "lund")
+    captures: tuple[str, ...] = ("kitti", "lund", "nuscenes", "herzjesu")
     """Names from nerf2gs_bench.real_captures.CAPTURES."""
     scale: Literal["quick", "full"] = "quick"
     """quick: 40 frames at ~400 px, a few hundred steps per method; full: every frame, the real-photos steps."""
@@ -376,11 +376,14 @@ class RealCaptures:
     out: Path = RESULTS
     runs: Path = RUNS
     rerun: bool = False
+    docs_picture: Optional[Path] = None
+    """Also write one side-by-side frame from above of the first capture whose licence allows it (<= 300 KB PNG)."""
 
     def main(self) -> None:
         from nerf2gs_bench.real_captures import default_data_root, results_md, run
 
-        doc = run(self.captures, self.data_root or default_data_root(), self.runs, self.out, self.scale, rerun=self.rerun)
+        doc = run(self.captures, self.data_root or default_data_root(), self.runs, self.out, self.scale, rerun=self.rerun,
+                  docs_picture=self.docs_picture)
         print(results_md(doc))
         print(f"results: {self.out}/real_captures.md")
 

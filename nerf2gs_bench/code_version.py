@@ -73,3 +73,15 @@ def device_label(device) -> str:
     if device.type == "cuda" and torch.cuda.is_available():
         return f"cuda:{torch.cuda.get_device_name(device)}"
     return device.type
+
+
+def source_hash(parts: tuple[str, ...], root: Path | None = None) -> str:
+    """Hash of the package's source under ``parts`` (folders or files relative to the package): what
+    keys a stage that is no trained model (``data/process`` for the SfM, ``masks`` for the masks)."""
+    root = Path(root or SOURCE_ROOT)
+    files = set()
+    for part in parts:
+        p = root / part
+        found = [p] if p.is_file() else p.rglob("*")
+        files |= {f for f in found if f.suffix in SOURCE_SUFFIXES and f.is_file() and "__pycache__" not in f.parts}
+    return _hash(root, sorted(files))

@@ -52,6 +52,8 @@ class Capture:
     """Whether the licence lets the bench's picture show renders of it."""
     labels: Optional[str] = None
     """Folder of hand-labelled moving-object masks (same names as the frames), when any exist."""
+    truth: Optional[str] = None
+    """Folder (under the data root) of ground-truth cameras ``<image name>.camera`` (Strecha's format), when surveyed."""
 
 
 CAPTURES: tuple[Capture, ...] = (
@@ -64,6 +66,11 @@ CAPTURES: tuple[Capture, ...] = (
     Capture("nuscenes", "nuscenes/image_2", "github:youngibby/nuscene, image_2/ (nuScenes CAM_FRONT)",
             "CC BY-NC-SA 4.0 (nuScenes)", "nuScenes CAM_FRONT 1600x900, first shot (frames 0-52), bonnet cropped",
             camera_height=1.5, fov_deg=64.0, last=53, crop_bottom=0.1),
+    Capture("herzjesu", "herzjesu/images", "github:openMVG/SfM_quality_evaluation, Benchmarking_Camera_Calibration_2008/"
+            "Herz-Jesus-P25/ (images/ and gt_dense_cameras/, commit 348a981)",
+            "no licence stated in the repository (Strecha et al. 2008, EPFL CVLab: research use)",
+            "Strecha's Herz-Jesu-P25: 25 photos 3072x2048 of a church courtyard with surveyed metric cameras",
+            camera_height=1.6, fov_deg=58.2, mount="hand-held", truth="herzjesu/gt_dense_cameras"),
 )
 
 
@@ -99,6 +106,9 @@ def capture_frames(cap: Capture, data_root: Path) -> list[Path]:
     folder = Path(data_root) / cap.folder
     names = sorted(p for p in folder.glob("*") if p.suffix.lower() in IMAGE_EXTS) if folder.is_dir() else []
     names = names[cap.first:cap.last]
+    if cap.truth and len(names) >= MIN_FRAMES and not (Path(data_root) / cap.truth).is_dir():
+        raise DataError(f"capture '{cap.name}': ground-truth cameras missing; fetch {cap.fetch} (the bench does not download)",
+                        Path(data_root) / cap.truth)
     if len(names) < MIN_FRAMES:
         raise DataError(f"capture '{cap.name}': frames missing ({len(names)} found); fetch {cap.fetch} into this folder (the bench does not download)",
                         folder)
@@ -136,6 +146,8 @@ def downscale_for(width_px: int, scale: BenchScale) -> float:
 
 
 # ----------------------------------------------------------------------------- measures from above
+# ----------------------------------------------------------------------------- holes on a few views from above
+# (the street-level bench's quick measure; this bench measures through ns2gs-render compare below)
 def hole_fraction(accumulations: Sequence) -> float:
     """Share of all pixels of the renders that are holes (``ns2gs-render``'s measure: accumulation below 0.5)."""
     from nerf2gs_plugin.render.measures import hole_mask
@@ -182,6 +194,41 @@ def holes_from_above(run_dir: Path, delta_h: float, theta_pitch: float, views: i
     return hole_fraction(accs), rgbs
 
 
+COMPARE_LABELS = {TARGET: "splatfacto (target alone)", AUGMENTED: "splatfacto + NeRF views", REFERENCE: "StreetNeRF (reference)"}
+"""How each run is labelled in its compare frames."""
+COMPARE_RECORD = "bench_compare.json"
+
+
+def compare_or_reuse(cap: Capture, doc: dict, output: Path, rerun: bool,
+                     log: Callable[[str], None]) -> tuple[dict[str, Optional[float]], list[Path], float, bool]:
+    """Holes from above per run, the compare frames, the stage's seconds and whether they are the saved
+    ones: ``ns2gs-render compare`` of the capture's runs on the augmentation's bird's-eye views (reused
+    when the same runs were compared by the same code)."""
+    from nerf2gs_bench.capture_compare import compare_frames, compare_from_above
+    from nerf2gs_bench.code_version import source_hash
+    from nerf2gs_bench.stage_record import read_stage, stage_key, write_stage
+
+    done = {label: r["run_dir"] for label, r in doc["results"].items() if not r.get("failed") and r.get("run_dir")}
+    holes: dict[str, Optional[float]] = {label: None for label in (TARGET, AUGMENTED, REFERENCE)}
+    if TARGET not in done or AUGMENTED not in done:  # the views from above are the augmented run's
+        log(f"[bench] {cap.name}: no holes from above (the target or its augmented twin failed)")
+        return holes, [], 0.0, False
+    labels = [label for label in (TARGET, AUGMENTED, REFERENCE) if label in done]
+    key = stage_key("compare", [done[label] for label in labels], source_hash(("render", "cli/render.py")))
+    record = None if rerun else read_stage(output.parent / COMPARE_RECORD, key)
+    if record is not None and output.is_dir():
+        measures, seconds, reused = record["measures"], record["seconds"], True
+        log(f"[bench] {cap.name}: reusing the compare from above in {output}")
+    else:
+        t0 = time.perf_counter()
+        measures = compare_from_above([done[label] for label in labels], [COMPARE_LABELS[label] for label in labels], output)
+        seconds, reused = write_stage(output.parent / COMPARE_RECORD, key, time.perf_counter() - t0, measures=measures)["seconds"], False
+    for label in labels:
+        holes[label] = measures[COMPARE_LABELS[label]]["bev_hole_fraction"]
+        log(f"[bench] {cap.name}: {label} holes from above {100 * holes[label]:.1f}%")
+    return holes, compare_frames(output), seconds, reused
+
+
 # ----------------------------------------------------------------------------- one capture
 def capture_summary(cap: Capture, doc: dict, holes: dict[str, Optional[float]]) -> dict:
     """The per-capture record of the bench from ``run_real_photos``' document and the holes from above."""
@@ -223,8 +270,8 @@ def failed_record(cap: Capture, why: str) -> dict:
 
 
 def run_capture(cap: Capture, data_root: Path, runs_root: Path, scale: BenchScale, rerun: bool = False,
-                log: Callable[[str], None] = print) -> tuple[dict, dict]:
-    """One capture through the whole path; its record and the renders from above per run."""
+                log: Callable[[str], None] = print) -> tuple[dict, list[Path]]:
+    """One capture through the whole path; its record and its compare frames from above (PNG, labelled)."""
     import cv2
 
     from nerf2gs_bench.real_photos import RealPhotosOptions, run_real_photos
@@ -240,29 +287,36 @@ def run_capture(cap: Capture, data_root: Path, runs_root: Path, scale: BenchScal
                              reference_steps=scale.reference_steps, streetnerf_steps=scale.streetnerf_steps,
                              splatfacto_steps=scale.splatfacto_steps, delta_h=aug.delta_h, theta_pitch=aug.theta_pitch)
     doc = run_real_photos(opts, runs_root / STEM, root / "results", rerun=rerun, log=log, name=cap.name)
-    holes: dict[str, Optional[float]] = {}
-    renders: dict[str, list] = {}
-    t0 = time.perf_counter()
-    for label in (TARGET, AUGMENTED, REFERENCE):
-        r = doc["results"].get(label) or {}
-        if r.get("failed") or not r.get("run_dir"):
-            holes[label] = None
-            continue
-        holes[label], renders[label] = holes_from_above(Path(r["run_dir"]), opts.delta_h, opts.theta_pitch, scale.above_views)
-        log(f"[bench] {cap.name}: {label} holes from above {100 * holes[label]:.1f}%")
-    doc["stage_seconds"]["holes from above"] = round(time.perf_counter() - t0, 1)
+    holes, views, seconds, reused = compare_or_reuse(cap, doc, root / "compare-birds-eye", rerun, log)
+    doc["stage_seconds"]["holes from above"] = seconds
     summary = capture_summary(cap, doc, holes)
     summary["stage_seconds"]["holes from above"] = doc["stage_seconds"]["holes from above"]
+    # named as in the record's stage_seconds (runs by their label)
+    summary["reused_stages"] = [k.removeprefix("train + eval: ") for k in doc.get("reused_stages", [])] + (
+        ["holes from above"] if reused else [])
     summary["options"] = {"frames_used": len(staged), "downscale": opts.downscale, "delta_h": opts.delta_h,
                           "theta_pitch": opts.theta_pitch, "steps": {"reference": scale.reference_steps,
                                                                      REFERENCE: scale.streetnerf_steps, TARGET: scale.splatfacto_steps}}
-    return summary, renders
+    if cap.truth:
+        from nerf2gs_bench.capture_truth import truth_report
+        from nerf2gs_plugin.errors import DataError
+
+        try:
+            summary["pose_truth"] = truth_report(Path(doc["data"]), Path(data_root) / cap.truth)
+        except DataError as e:  # the runs' figures stand without it
+            summary["pose_truth"] = {"error": str(e)}
+            log(f"[bench] {cap.name}: no comparison with the surveyed cameras: {e}")
+        else:
+            log(f"[bench] {cap.name}: against the surveyed cameras ATE {summary['pose_truth']['ate_m']:.3f} m, "
+                f"scale error {summary['pose_truth']['scale_error_percent']:+.1f}%")
+    return summary, views
 
 
 # ----------------------------------------------------------------------------- the bench
 def run(names: Sequence[str], data_root: Path, runs_root: Path, out_dir: Path, scale_name: str = "quick",
-        rerun: bool = False, log: Callable[[str], None] = print) -> dict:
-    """Every named capture; writes ``real_captures.{json,md,png}`` into ``out_dir``; returns the document."""
+        rerun: bool = False, log: Callable[[str], None] = print, docs_picture: Optional[Path] = None) -> dict:
+    """Every named capture; writes ``real_captures.{json,md,png}`` into ``out_dir`` (and, with ``docs_picture``,
+    one compare frame of the first capture whose licence allows renders there); returns the document."""
     from nerf2gs_plugin.errors import ConfigError, UserError
 
     by_name = {c.name: c for c in CAPTURES}
@@ -275,23 +329,29 @@ def run(names: Sequence[str], data_root: Path, runs_root: Path, out_dir: Path, s
     scale = SCALES[scale_name]
     load_start = os.getloadavg()[0]  # the seconds mean little on a shared machine without it
     records, pictures = [], {}
+    doc = {"scale": scale_name, "scale_settings": scale.__dict__, "captures": records,
+           "load_average": {"start": load_start, "end": load_start}}
     for cap in caps:
         try:
             record, renders = run_capture(cap, data_root, runs_root, scale, rerun=rerun, log=log)
         except UserError as e:  # a capture SfM cannot register is a result of the bench, not its end
             log(f"[bench] {cap.name}: failed: {e}")
             records.append(failed_record(cap, str(e)))
-            continue
-        records.append(record)
-        if cap.show_renders:
-            pictures[cap.name] = renders
-    doc = {"scale": scale_name, "scale_settings": scale.__dict__, "captures": records,
-           "load_average": {"start": load_start, "end": os.getloadavg()[0]}}
-    write_results(Path(out_dir), doc, pictures)
+        else:
+            records.append(record)
+            if cap.show_renders and renders:
+                pictures[cap.name] = renders
+        doc["load_average"]["end"] = os.getloadavg()[0]
+        write_results(Path(out_dir), doc, pictures)  # after each capture: hours of work are never all lost
+        if docs_picture is not None and cap.name in pictures and next(iter(pictures)) == cap.name:
+            from nerf2gs_bench.capture_compare import save_small_png
+
+            # the docs' side by side: the first capture whose licence allows renders
+            log(f"[bench] {cap.name}'s side by side from above -> {save_small_png(pictures[cap.name][:1], docs_picture)}")
     return doc
 
 
-def write_results(out_dir: Path, doc: dict, pictures: dict[str, dict[str, list]]) -> None:
+def write_results(out_dir: Path, doc: dict, pictures: dict[str, list[Path]]) -> None:
     from nerf2gs_bench.machine import machine_info
 
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -301,17 +361,19 @@ def write_results(out_dir: Path, doc: dict, pictures: dict[str, dict[str, list]]
     atomic_write_text(out_dir / f"{STEM}.md", results_md(doc))
 
 
-def figure(doc: dict, pictures: dict[str, dict[str, list]], path: Path) -> str:
-    """Holes from above per capture (bars), then, for captures whose licence allows it, the target alone
-    and with NeRF views side by side from the same bird's-eye cameras."""
+def figure(doc: dict, pictures: dict[str, list[Path]], path: Path) -> str:
+    """Holes from above per capture (bars), then, for captures whose licence allows it, frames of
+    ``ns2gs-render compare``: the target alone and with NeRF views (and StreetNeRF) from the same
+    bird's-eye cameras, each under its label."""
+    import cv2
+
     from nerf2gs_plugin.utils.plotting import pyplot, save_figure
 
     plt = pyplot()
-    rows = [(name, r) for name, r in pictures.items() if r.get(TARGET) and r.get(AUGMENTED)]
-    n_views = 2
-    fig = plt.figure(figsize=(3.2 * n_views * 2, 2.6 + 2.0 * len(rows)))
-    grid = fig.add_gridspec(1 + len(rows), n_views * 2, height_ratios=[1.3] + [1.0] * len(rows))
-    ax = fig.add_subplot(grid[0, :])
+    rows = [(name, f) for name, frames in pictures.items() for f in frames]
+    fig = plt.figure(figsize=(11, 2.6 + 2.4 * len(rows)))
+    grid = fig.add_gridspec(1 + len(rows), 1, height_ratios=[1.3] + [1.0] * len(rows))
+    ax = fig.add_subplot(grid[0, 0])
     caps = doc["captures"]
     xs = range(len(caps))
     for off, key, label, colour in ((-0.25, "target", TARGET, "tab:red"), (0.0, "augmented", AUGMENTED, "tab:blue"),
@@ -323,16 +385,12 @@ def figure(doc: dict, pictures: dict[str, dict[str, list]], path: Path) -> str:
     ax.set_ylabel("holes from above (%)", fontsize=8)
     ax.legend(fontsize=8, loc="upper right")
     ax.set_title("share of pixels with accumulation < 0.5 from the augmentation's bird's-eye cameras", fontsize=8)
-    for r, (name, renders) in enumerate(rows, start=1):
-        views = renders[TARGET]
-        pick = sorted({0, len(views) // 2})[:n_views]
-        for k, v in enumerate(pick):
-            for j, label in enumerate((TARGET, AUGMENTED)):
-                a = fig.add_subplot(grid[r, 2 * k + j])
-                a.imshow(renders[label][v].numpy())
-                a.set_xticks([])
-                a.set_yticks([])
-                a.set_title(f"{name}: {label}", fontsize=8)
+    for r, (name, frame) in enumerate(rows, start=1):
+        a = fig.add_subplot(grid[r, 0])
+        a.imshow(cv2.imread(str(frame))[..., ::-1])
+        a.set_xticks([])
+        a.set_yticks([])
+        a.set_title(f"{name} from above (ns2gs-render compare, view {frame.stem})", fontsize=8)
     fig.suptitle(f"Real captures from above ({doc['scale']} scale); renders shown only where the licence allows", fontsize=10)
     fig.tight_layout()
     save_figure(fig, path)
@@ -359,6 +417,23 @@ def target_lines(captures: Sequence[dict]) -> list[str]:
         if parts:
             out.append(f"- {c['capture']}: " + "; ".join(parts) + ".")
     return ["Targets (street level keeps its quality; holes from above at most a fifth):", ""] + out if out else []
+
+
+def truth_lines(captures: Sequence[dict]) -> list[str]:
+    """Captures with surveyed cameras: our SfM against them (ATE after Sim(3), the metric scale's error)."""
+    out = []
+    for c in captures:
+        t = c.get("pose_truth")
+        if not t:
+            continue
+        if "error" in t:
+            out.append(f"- {c['capture']}: not compared ({t['error']}).")
+            continue
+        out.append(f"- {c['capture']}: {t['frames_compared']} registered photos against their surveyed cameras: ATE "
+                   f"{100 * t['ate_m']:.1f} cm ({t['ate_percent']:.2f}% of the path), rotation {t['rotation_error_deg']:.2f} deg, "
+                   f"up {t['up_error_deg']:.1f} deg (against the surveyed vertical); metric scale from the camera height "
+                   f"{t['scale_error_percent']:+.1f}% off.")
+    return ["", "SfM against ground truth (metres; Sim(3)-aligned):", ""] + out if out else []
 
 
 def _load_note(load: Optional[dict]) -> str:
@@ -391,6 +466,7 @@ def results_md(doc: dict) -> str:
                      f"{_f(h['target'] and 100 * h['target'], '{:.1f}%')} | {_f(h['augmented'] and 100 * h['augmented'], '{:.1f}%')} | "
                      f"{_f(h['reference'] and 100 * h['reference'], '{:.1f}%')} | {_f(c['moving_iou'], '{:.2f}')} |")
     lines += [""] + target_lines(doc["captures"])
+    lines += truth_lines(doc["captures"])
     lines += ["", "Static delta: PSNR outside the moving-object masks of the held-out frames (masks/transient/); the "
               "masks stage makes them for the training frames only, so it is n/a unless the held-out frames are labelled. "
               "Moving-object IoU needs hand labels (n/a without).", "", "## Captures, provenance and licence", ""]
@@ -399,12 +475,16 @@ def results_md(doc: dict) -> str:
             lines += [f"- **{c['capture']}** ({c['mount']}): {c['provenance']}. Source: {c['fetch']}. Licence: {c['licence']}. "
                       f"Stopped: {c['failed']}"]
             continue
-        st = ", ".join(f"{k} {_f(v, '{:.0f}')}" for k, v in c["stage_seconds"].items())
+        saved = set(c.get("reused_stages", []))
+        st = ", ".join(f"{k} {_f(v, '{:.0f}')}" + (" (saved)" if k in saved else "") for k, v in c["stage_seconds"].items())
         cov = ", ".join(f"{k} {100 * v:.1f}%" for k, v in (c.get("masks_coverage") or {}).items())
         lines += [f"- **{c['capture']}** ({c['mount']}): {c['provenance']}. Source: {c['fetch']}. Licence: {c['licence']}. "
                   f"{c['options']['frames_used']} frames used, downscale {c['options']['downscale']:g}; "
                   f"{c['metres_per_unit']:.4g} m per SfM unit ({c['scale_source']}). Seconds: {st}. Masks' coverage: {cov or 'n/a'}."]
     lines += [f"- {n}" for n in doc.get("notes", [])]
-    lines += ["", f"Picture: `{STEM}.png`: holes from above per capture; renders only of captures whose licence allows "
-              "(KITTI and nuScenes are non-commercial, share-alike: no images or renders of them are committed)."]
+    lines += ["", "Seconds marked (saved) are those of the stage when it ran: this run reused its output (made by the "
+              "same code from the same inputs), so it took ~0 s here.", "",
+              f"Picture: `{STEM}.png`: holes from above per capture, then frames of `ns2gs-render compare` (the runs side by "
+              "side on the augmentation's bird's-eye views, labelled) of captures whose licence allows renders (Lund, BSD-2; "
+              "KITTI and nuScenes are non-commercial share-alike, Herz-Jesu states no licence: measured, not shown)."]
     return "\n".join(lines) + "\n"

@@ -196,10 +196,12 @@ class BenchRunner:
                 if not names and self.splits != EVAL_SPLITS:
                     return {"results": {}}  # asked for splits (validation views) this dataset does not have
                 names = names or None
+                t0 = time.perf_counter()
                 res = evaluate_run(run, names, render_dir=run_dir / "eval_renders", lpips_model=self.lpips())
                 res["eval_key"] = want
                 res["measured"] = {"machine": machine_line(), "device": device_label(self.device),
-                                   "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+                                   "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+                                   "seconds": round(time.perf_counter() - t0, 1)}
                 atomic_write_text(eval_path, json.dumps(res, indent=1))
         trained = run_dir / "bench_run.json"
         if trained.is_file():

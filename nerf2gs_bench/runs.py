@@ -125,6 +125,7 @@ def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, ref
     else:
         log(f"[bench] train {spec.label} ({spec.method}, {cfg.max_num_iterations} steps)")
     trainer = Trainer(cfg)
+    t_setup = time.perf_counter()
     try:
         trainer.setup()
     except ConfigError as e:
@@ -135,10 +136,14 @@ def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, ref
         log(f"[bench] {spec.label}: another process started training it; waiting to reuse it")
         wait_for_other_training(run_dir, log)
         return train_or_reuse(spec, data, runs_root, dataset, reference, progress, log, step_hook, device, False, _wait_on_lock=False)
+    setup_seconds = time.perf_counter() - t_setup  # an augmented run renders its NeRF views here
     if step_hook is not None:
         trainer.step_hooks.append(step_hook)
+    t0 = time.perf_counter()
     trainer.train()
-    trained = {"machine": machine_line(), "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "device": device_label(torch_device)}
+    # saved with the run: a bench reusing it reports these seconds, not the ~0 s of the reuse
+    trained = {"machine": machine_line(), "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "device": device_label(torch_device),
+               "seconds": round(time.perf_counter() - t0 + setup_seconds, 1), "resumed": bool(ckpts)}
     atomic_write_text(run_dir / "bench_run.json", json.dumps({"label": spec.label, **dataclasses.asdict(spec), "key": key,
                                                              "trained": trained}, indent=1, default=str))
     return run_dir, key

@@ -305,7 +305,11 @@ def page_real_capture() -> str:
         "drive rendered at 800x448:", "", *mask_rows(), "",
         "## A real outdoor photo set (`ns2gs-bench real-photos`)", "",
         f"Source: {source('real_photos.json')}.", "", demote(photos.results_md(load("real_photos.json"))), "",
-        "![held-out photos and renders from above](../../benchmarks/results/real_photos_renders.png)", ""])
+        "![held-out photos and renders from above](../../benchmarks/results/real_photos_renders.png)", "",
+        "## Public real captures (`ns2gs-bench real-captures`)", "",
+        f"Source: {source('real_captures.json')}; how to get the frames: [docs/real-captures.md](../real-captures.md).", "",
+        demote(bench_module("bench_real_captures").results_md(load("real_captures.json"))), "",
+        "![holes from above per capture and the runs side by side from above](../../benchmarks/results/real_captures.png)", ""])
 
 
 # ----------------------------------------------------------------------------- large scenes, robustness, speed

@@ -92,6 +92,9 @@ def test_bench_retrains_after_a_loss_change_reevaluates_after_a_metric_change_an
     again = runner().run(spec, tiny_scene)
     assert again.key == first.key and any(line.startswith("[bench] reuse vox") for line in lines)
     assert again.result["measured"] == res["measured"]  # cached evaluation served
+    # the run's own seconds travel with it: a reuse reports what training and evaluation took, not ~0 s
+    assert res["trained"]["seconds"] > 0 and res["measured"]["seconds"] > 0
+    assert again.result["trained"]["seconds"] == res["trained"]["seconds"]
 
     _edit(source_copy / "eval" / "evaluate.py", "\n", "\n# a metric fix\n")
     lines.clear()

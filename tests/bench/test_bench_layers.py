@@ -11,10 +11,11 @@ BENCH = "nerf2gs_bench"
 ROOT = Path(__file__).resolve().parents[2] / BENCH
 
 LAYERS: list[tuple[str, ...]] = [
-    ("", "machine", "code_version", "perturb", "breaking_point", "stability_levels", "fault_models"),
+    ("", "machine", "code_version", "stage_record", "perturb", "breaking_point", "stability_levels", "fault_models"),
     ("runs",),  # run specs, keys and reuse of trained runs
     ("runner",),  # training, evaluating and writing a bench's results
     ("paper", "speed_quality", "size", "stability", "raster", "field", "faults", "faults_capture", "real", "real_photos", "scale",
+     "capture_truth", "capture_compare", "real_path_speed",
      "blocks", "enhancer", "demo", "plans"),  # plans: the validation studies' runner
     ("real_captures",),  # each capture through the real-photos bench
     ("street_level",),  # levers of the augmentation on the real captures' runs

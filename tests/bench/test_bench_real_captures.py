@@ -29,6 +29,16 @@ def test_missing_frames_name_the_capture_and_the_source(tmp_path):
     assert f"capture '{cap.name}'" in msg and cap.fetch in msg and str(tmp_path / cap.folder) in msg
 
 
+def test_missing_ground_truth_is_named_apart_from_the_frames(tmp_path):
+    cap = next(c for c in rc.CAPTURES if c.truth)
+    _frames(tmp_path / cap.folder, n=4)
+    with pytest.raises(DataError, match="ground-truth cameras missing") as e:
+        rc.capture_frames(cap, tmp_path)
+    assert cap.fetch in str(e.value) and cap.truth in str(e.value)
+    (tmp_path / cap.truth).mkdir(parents=True)
+    assert len(rc.capture_frames(cap, tmp_path)) == 4
+
+
 def _frames(folder, n=10, h=20, w=40):
     import cv2
 
@@ -71,7 +81,8 @@ def test_stage_frames_crops_the_bonnet_and_keeps_the_order(tmp_path):
 
 def test_bench_keys_and_holes_on_a_stand_in_capture(tiny_scene, tmp_path, monkeypatch):
     """The bench end to end on a synthetic stand-in: run_real_photos replaced by two tiny runs, the holes
-    from above rendered from them; the JSON carries the issue's keys, the Markdown and picture are written."""
+    from above rendered from them by ns2gs-render compare; the JSON carries the issue's keys, the Markdown,
+    the picture and the docs' side by side are written."""
     import dataclasses
 
     from nerf2gs_plugin.engine.trainer import Trainer
@@ -99,7 +110,8 @@ def test_bench_keys_and_holes_on_a_stand_in_capture(tiny_scene, tmp_path, monkey
     monkeypatch.setattr(rc, "CAPTURES", (cap,))
     monkeypatch.setattr(rc, "SCALES", {"quick": dataclasses.replace(rc.SCALES["quick"], above_views=3)})
     _frames(tmp_path / "data" / "standin")
-    doc = rc.run(["standin"], tmp_path / "data", tmp_path / "runs", tmp_path / "out", "quick", log=lambda s: None)
+    doc = rc.run(["standin"], tmp_path / "data", tmp_path / "runs", tmp_path / "out", "quick", log=lambda s: None,
+                 docs_picture=tmp_path / "docs.png")
 
     saved = json.loads((tmp_path / "out" / "real_captures.json").read_text())
     c = saved["captures"][0]
@@ -115,15 +127,20 @@ def test_bench_keys_and_holes_on_a_stand_in_capture(tiny_scene, tmp_path, monkey
     assert "Quick scale" in md and "synthetic stand-in" in md and "CC0" in md
     assert (tmp_path / "out" / "real_captures.png").stat().st_size > 1000
 
-    # the hole measure is the renders' own accumulation: recomputed directly it agrees
-    from nerf2gs_plugin.runs.load import load_run
+    # holes and picture come from ns2gs-render compare: its labelled frames, its measures
+    views = sorted((tmp_path / "runs" / rc.STEM / "standin" / "compare-birds-eye").glob("*.png"))
+    measures = json.loads((tmp_path / "runs" / rc.STEM / "standin" / "compare-birds-eye.measures.json").read_text())
+    assert views and {m["label"]: m["bev_hole_fraction"] for m in measures} == {
+        rc.COMPARE_LABELS[rc.TARGET]: holes["target"], rc.COMPARE_LABELS[rc.AUGMENTED]: holes["augmented"]}
+    assert (tmp_path / "docs.png").stat().st_size <= 300_000
 
-    run = load_run(runs[rc.TARGET])
-    cams = rc.above_cameras(run, 10.0, 30.0, 3)
-    with torch.no_grad():
-        accs = [run.model.render_camera(cams[i:i + 1])["accumulation"] for i in range(len(cams))]
-    direct = sum(int((a < 0.5).sum()) for a in accs) / sum(a.numel() for a in accs)
-    assert holes["target"] == pytest.approx(direct)
+    # a rerun reuses the compare (same runs, same render code) and reports the same holes
+    lines: list[str] = []
+    again = rc.run(["standin"], tmp_path / "data", tmp_path / "runs", tmp_path / "out", "quick", log=lines.append)
+    assert any("reusing the compare from above" in line for line in lines)
+    c2 = again["captures"][0]
+    assert c2["bev_hole_fraction"] == holes and "holes from above" in c2["reused_stages"]
+    assert c2["stage_seconds"]["holes from above"] == c["stage_seconds"]["holes from above"]  # the saved seconds
 
 
 def test_unknown_capture_is_refused_before_any_work(tmp_path):
