@@ -230,9 +230,9 @@ def masks_or_reuse(opts: RealPhotosOptions, data: Path, reference: Path, stages:
     by the same mask code."""
     from nerf2gs_bench.code_version import source_hash
     from nerf2gs_bench.stage_record import read_stage, stage_key, write_stage
-    from nerf2gs_plugin.masks.make_masks import MasksConfig, make_masks
+    from nerf2gs_plugin.masking.make_masks import MasksConfig, make_masks
 
-    key = stage_key("masks", str(reference), opts.reference_steps, opts.downscale, source_hash(("masks",)))
+    key = stage_key("masks", str(reference), opts.reference_steps, opts.downscale, source_hash(("masks", "masking")))
     masks_json = data / "masks" / "masks.json"
     done = json.loads(masks_json.read_text()) if masks_json.is_file() else {}
     record = read_stage(data / "masks" / MASKS_RECORD, key)

@@ -89,7 +89,7 @@ def region_masks(view: dict, up, height: float, camera_height: float) -> dict:
 
 def reference_regions(ref: Reference, log: Callable[[str], None] = print) -> dict[str, dict]:
     """Held-out frame name -> {'image', 'masks'} (regions from the reference's render)."""
-    from nerf2gs_plugin.masks.auto_masks import render_views
+    from nerf2gs_plugin.masking.auto_masks import render_views
 
     renders = render_views(ref.data, ref.run_dir, ["test"], log=log, progress=False)
     up = renders.up.float()

@@ -82,7 +82,7 @@ def test_process_is_reused_with_its_saved_seconds_until_the_sfm_code_changes(tmp
 
 
 def test_masks_are_reused_only_from_the_same_reference_and_mask_code(tmp_path, monkeypatch):
-    import nerf2gs_plugin.masks.make_masks as mm
+    import nerf2gs_plugin.masking.make_masks as mm
 
     data = tmp_path / "data"
     made = []
