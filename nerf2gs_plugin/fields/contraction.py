@@ -43,3 +43,19 @@ def contraction_scale(x: Tensor) -> Tensor:
 def to_grid_unit(xc: Tensor) -> Tensor:
     """Contracted ``[-2,2]^3`` -> ``[0,1]^3`` (the hash grid's domain)."""
     return (xc + 2.0) / 4.0
+
+
+@torch.no_grad()
+def render_grid_coords(x: Tensor, scene_box: Tensor) -> tuple[Tensor, Tensor]:
+    """``to_grid_unit(contract(to_box_frame(x)))`` and ``contraction_scale(to_box_frame(x))`` for renders
+    (no gradient): the norm is taken once and the arithmetic runs in place, the same maths to float rounding."""
+    lo, hi = scene_box[0].to(x), scene_box[1].to(x)
+    xb = (x - (lo + hi) / 2).div_((hi - lo) / 2)
+    n = xb.abs().amax(-1, keepdim=True).clamp_min_(1e-9)
+    inside = n <= 1.0
+    inv = torch.where(inside, torch.ones_like(n), n).reciprocal_()  # 1/|x| outside, 1 inside
+    k = (2.0 - inv).mul_(inv)  # outside: (2 - 1/|x|)/|x|, the factor of x
+    xg = torch.where(inside, xb, xb * k).add_(2.0).div_(4.0)
+    # outside: (1/|x|^2 * ((2 - 1/|x|)/|x|)^2)^(1/3); inside 1
+    scale = inv.square_().mul_(k.square_()).pow_(1.0 / 3.0).masked_fill_(inside, 1.0)
+    return xg, scale.reshape(x.shape[:-1])

@@ -12,7 +12,7 @@ from typing import Optional
 import torch
 from torch import Tensor, nn
 
-from nerf2gs_plugin.fields.contraction import contract, contraction_scale, to_box_frame, to_grid_unit
+from nerf2gs_plugin.fields.contraction import contract, contraction_scale, render_grid_coords, to_box_frame, to_grid_unit
 from nerf2gs_plugin.fields.hash_encoding import HashEncoding, HashGridSpec
 from nerf2gs_plugin.fields.mlp import MLP, trunc_exp
 from nerf2gs_plugin.utils.sh import num_sh_bases, sh_basis
@@ -26,6 +26,10 @@ class _GridPositions(nn.Module):
         self.register_buffer("scene_box", scene_box.clone().float())
 
     def grid_coords(self, x: Tensor, radius: Optional[Tensor]) -> tuple[Tensor, Optional[Tensor]]:
+        if radius is not None and not torch.is_grad_enabled():  # a render: the one-pass form (training keeps its ops)
+            xg, scale = render_grid_coords(x, self.scene_box)
+            half = ((self.scene_box[1] - self.scene_box[0]) / 2).mean()
+            return xg, (radius / half).mul_(scale).div_(4.0)
         xb = to_box_frame(x, self.scene_box)
         xg = to_grid_unit(contract(xb))
         if radius is None:
