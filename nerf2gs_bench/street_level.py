@@ -36,8 +36,17 @@ VARIANTS: dict[str, dict] = {
     "real_only_from 0.6": {"augment": {"real_only_from": 0.6}},
     "real_only_from 0.75": {"augment": {"real_only_from": 0.75}},
     "confidence visibility": {"augment": {"confidence": "visibility"}},
+    "sky_alpha 0.5": {"augment": {}, "model": {"sky_alpha_weight": 0.5}},
 }
-"""Label -> the augment overrides of a Splatfacto run (no ``augment`` key: the target alone)."""
+"""Label -> the augment overrides of a Splatfacto run (no ``augment`` key: the target alone) and
+``model``: overrides of its model config (the sky / far levers live there)."""
+
+
+def variant_overrides(base: dict, variant: dict) -> dict:
+    """``base`` run overrides with the variant's ``model`` overrides merged into ``pipeline.model``."""
+    from nerf2gs_bench.paper import _merge
+
+    return _merge(base, {"pipeline": {"model": variant["model"]}}) if variant.get("model") else base
 
 
 @dataclass(frozen=True)
@@ -191,7 +200,7 @@ def run(captures: Sequence[str], from_runs: Path, runs_root: Path, out_dir: Path
             v = VARIANTS[label]
             errs, holes, run_dirs = [], [], []
             for seed in seeds:
-                overrides = {**run_overrides(opts, "splatfacto", steps), "seed": seed}
+                overrides = variant_overrides({**run_overrides(opts, "splatfacto", steps), "seed": seed}, v)
                 spec = RunSpec(label, "splatfacto", overrides, augment_from="StreetNeRF" if "augment" in v else None,
                                augment={"delta_h": aug.delta_h, "theta_pitch": aug.theta_pitch, **v.get("augment", {})})
                 log(f"[street-level] {name}: {label}, seed {seed}")
@@ -291,7 +300,8 @@ def synthetic(data: Path, runs_root: Path, variants: Sequence[str], seeds: Seque
     plan = [RunSpec("StreetNeRF", "streetnerf", step_overrides("streetnerf", SYNTHETIC_STEPS["streetnerf"]))]
     for label in [TARGET] + [v for v in variants if v != TARGET]:
         v = VARIANTS[label]
-        plan += [RunSpec(f"{label}, seed {seed}", "splatfacto", {**step_overrides("splatfacto", SYNTHETIC_STEPS["splatfacto"]), "seed": seed},
+        plan += [RunSpec(f"{label}, seed {seed}", "splatfacto",
+                         variant_overrides({**step_overrides("splatfacto", SYNTHETIC_STEPS["splatfacto"]), "seed": seed}, v),
                          augment_from="StreetNeRF" if "augment" in v else None, augment=v.get("augment", {})) for seed in seeds]
     results = run_plan(plan, Path(data), Path(runs_root), log=log, name=STEM)
     out: dict[str, dict] = {}

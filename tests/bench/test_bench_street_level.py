@@ -54,3 +54,17 @@ def test_missing_real_captures_runs_are_named(tmp_path):
     with pytest.raises(DataError) as e:
         sl.find_reference(tmp_path, "kitti")
     assert "real-captures" in str(e.value)
+
+
+def test_a_variant_s_model_overrides_reach_the_splatfacto_config_beside_the_step_schedule():
+    from nerf2gs_bench.paper import step_overrides
+    from nerf2gs_plugin.registry import get_method
+    from nerf2gs_plugin.utils.config import apply_plain
+
+    base = {**step_overrides("splatfacto", 700), "seed": 42}
+    ov = sl.variant_overrides(base, sl.VARIANTS["sky_alpha 0.5"])
+    cfg = apply_plain(get_method("splatfacto").config, ov, where="test")
+    assert cfg.pipeline.model.sky_alpha_weight == 0.5
+    assert ov["pipeline"]["model"]["strategy"] == base["pipeline"]["model"]["strategy"]
+    assert sl.variant_overrides(base, sl.VARIANTS["default"]) == base
+    assert get_method("splatfacto").config.pipeline.model.sky_alpha_weight != 0.5
