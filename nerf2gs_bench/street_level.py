@@ -37,6 +37,10 @@ VARIANTS: dict[str, dict] = {
     "real_only_from 0.75": {"augment": {"real_only_from": 0.75}},
     "confidence visibility": {"augment": {"confidence": "visibility"}},
     "sky_alpha 0.5": {"augment": {}, "model": {"sky_alpha_weight": 0.5}},
+    "sky_alpha 0": {"augment": {}, "model": {"sky_alpha_weight": 0.0}},
+    "target sky_alpha 0.5": {"model": {"sky_alpha_weight": 0.5}},
+    "target sky_alpha 0": {"model": {"sky_alpha_weight": 0.0}},
+    "sky_alpha 0 + real_only_from 0.6": {"augment": {"real_only_from": 0.6}, "model": {"sky_alpha_weight": 0.0}},
 }
 """Label -> the augment overrides of a Splatfacto run (no ``augment`` key: the target alone) and
 ``model``: overrides of its model config (the sky / far levers live there)."""

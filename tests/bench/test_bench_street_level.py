@@ -68,3 +68,4 @@ def test_a_variant_s_model_overrides_reach_the_splatfacto_config_beside_the_step
     assert ov["pipeline"]["model"]["strategy"] == base["pipeline"]["model"]["strategy"]
     assert sl.variant_overrides(base, sl.VARIANTS["default"]) == base
     assert get_method("splatfacto").config.pipeline.model.sky_alpha_weight != 0.5
+    assert "augment" not in sl.VARIANTS["target sky_alpha 0"]  # the target alone, its sky weight changed
