@@ -201,7 +201,7 @@ class BenchRunner:
                 res["eval_key"] = want
                 res["measured"] = {"machine": machine_line(), "device": device_label(self.device),
                                    "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-                                   "seconds": round(time.perf_counter() - t0, 1)}
+                                   "seconds": round(time.perf_counter() - t0, 3)}
                 atomic_write_text(eval_path, json.dumps(res, indent=1))
         trained = run_dir / "bench_run.json"
         if trained.is_file():

@@ -143,7 +143,7 @@ def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, ref
     trainer.train()
     # saved with the run: a bench reusing it reports these seconds, not the ~0 s of the reuse
     trained = {"machine": machine_line(), "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "device": device_label(torch_device),
-               "seconds": round(time.perf_counter() - t0 + setup_seconds, 1), "resumed": bool(ckpts)}
+               "seconds": round(time.perf_counter() - t0 + setup_seconds, 3), "resumed": bool(ckpts)}
     atomic_write_text(run_dir / "bench_run.json", json.dumps({"label": spec.label, **dataclasses.asdict(spec), "key": key,
                                                              "trained": trained}, indent=1, default=str))
     return run_dir, key
