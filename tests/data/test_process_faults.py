@@ -223,34 +223,32 @@ def test_a_crash_with_the_disk_full_names_the_disk(tmp_path, monkeypatch):
     assert "MB free on" not in sfm_worker.crash_line("matching", -6, tmp_path, err)
 
 
-def test_sigterm_exits_143(tmp_path):
-    """SIGTERM is not SIGINT: 143 (128 + 15), after the same clean-up as Ctrl-C."""
+def _sigterm_run(tmp_path, setup: str = "") -> subprocess.CompletedProcess:
+    """A CLI main that runs SETUP, then gets SIGTERM; its Ctrl-C clean-up prints 'cleaned up'."""
     code = ("import os, signal, time\n"
+            "from pathlib import Path\n"
             "from nerf2gs_plugin.cli.common import run_cli\n"
             "def main():\n"
+            f"    {setup or 'pass'}\n"
             "    try:\n"
             "        os.kill(os.getpid(), signal.SIGTERM); time.sleep(5)\n"
             "    except KeyboardInterrupt:\n"
             "        print('cleaned up', flush=True); raise\n"
             "run_cli(main)\n")
-    r = subprocess.run([sys.executable, "-c", code], env=_env(tmp_path), capture_output=True, text=True, timeout=60)
+    return subprocess.run([sys.executable, "-c", code], env=_env(tmp_path), capture_output=True, text=True, timeout=60)
+
+
+def test_sigterm_exits_143(tmp_path):
+    """SIGTERM is not SIGINT: 143 (128 + 15), after the same clean-up as Ctrl-C."""
+    r = _sigterm_run(tmp_path)
     assert r.returncode == 143 and "cleaned up" in r.stdout and r.stderr.strip() == "terminated", (r.returncode, r.stderr)
 
 
 def test_sigterm_after_pycolmap_is_imported_still_cleans_up(tmp_path):
     """pycolmap's import put glog's failure handler over SIGTERM: a stack dump and no clean-up."""
-    code = ("import os, signal, time\n"
-            "from pathlib import Path\n"
-            "from nerf2gs_plugin.cli.common import run_cli\n"
-            "from nerf2gs_plugin.data.process.output import silence_colmap\n"
-            "def main():\n"
-            f"    silence_colmap(Path({str(tmp_path / 'logs')!r}))\n"
-            "    try:\n"
-            "        os.kill(os.getpid(), signal.SIGTERM); time.sleep(5)\n"
-            "    except KeyboardInterrupt:\n"
-            "        print('cleaned up', flush=True); raise\n"
-            "run_cli(main)\n")
-    r = subprocess.run([sys.executable, "-c", code], env=_env(tmp_path), capture_output=True, text=True, timeout=60)
+    setup = ("from nerf2gs_plugin.data.process.output import silence_colmap; "
+             f"silence_colmap(Path({str(tmp_path / 'logs')!r}))")
+    r = _sigterm_run(tmp_path, setup)
     assert r.returncode == 143 and "cleaned up" in r.stdout and r.stderr.strip() == "terminated", (r.returncode, r.stderr[-800:])
 
 
