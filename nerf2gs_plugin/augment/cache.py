@@ -151,9 +151,9 @@ def cache_key(ref_key: str, dataset: str, config: dict[str, Any], bev: Optional[
         relevant["views"] = views
     if relevant.get("confidence", "none") == "none":  # no confidence maps: the entries of runs before the option
         relevant = {k: v for k, v in relevant.items() if not k.startswith("confidence")}
-    for spread in ("delta_h_spread", "theta_pitch_spread"):  # no spread: the entries of runs before the option
-        if not relevant.get(spread):
-            relevant.pop(spread, None)
+    for off in ("delta_h_spread", "theta_pitch_spread", "drop_outside_box"):  # off: the entries of runs before the option
+        if not relevant.get(off):
+            relevant.pop(off, None)
     h = hashlib.sha1()
     h.update(json.dumps({"v": CACHE_FORMAT_VERSION, "ref": ref_key, "data": dataset, "cfg": relevant, "enh": enhancer_key}, sort_keys=True, default=str).encode())
     for cams in (train, bev):

@@ -135,3 +135,23 @@ def visibility_confidence(depth: Tensor, camera: Cameras, along: DepthAlong, tra
     if accumulation is not None:
         conf = conf * accumulation.float().clamp(0.0, 1.0).to(conf)
     return conf
+
+
+SKY_ACCUMULATION = 0.5
+"""A reference pixel with less accumulation than this shows sky (the masks stage's rule)."""
+
+
+def inside_box_weight(depth: Tensor, accumulation: Optional[Tensor], camera: Cameras, along: DepthAlong,
+                      box: Optional[Tensor]) -> Tensor:
+    """``[H, W, 1]``: 1 where a reference render at ``camera`` shows a surface inside the scene ``box``
+    ``[2, 3]`` (the pixel's depth lifted to the point it shows), 0 where that point lies outside the box
+    or the pixel shows sky (``accumulation`` < :data:`SKY_ACCUMULATION`); no box: only the sky is 0."""
+    h, w = depth.shape[:2]
+    keep = torch.ones(h * w, dtype=torch.bool, device=depth.device)
+    if box is not None:
+        pts = lift(depth, camera, along).to(depth.device)
+        b = box.to(pts)
+        keep &= torch.isfinite(pts).all(-1) & ((pts >= b[0]) & (pts <= b[1])).all(-1)
+    if accumulation is not None:
+        keep &= accumulation.reshape(-1).to(depth.device) >= SKY_ACCUMULATION
+    return keep.reshape(h, w, 1).float()

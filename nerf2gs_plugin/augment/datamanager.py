@@ -181,6 +181,20 @@ def _warped_source(out: dict[str, Tensor], camera: Cameras, train: ImageSet, ren
                             clear_mask(train.mask("transient", k), *train.hw(k)), depth_along)
 
 
+def _extra_confidence(out: dict[str, Tensor], camera: Cameras, vis: Optional[_Visibility], config: AugmentConfig,
+                      scene_box: Optional[Tensor], depth_along: str) -> Tensor:
+    """``[H, W, 1]`` loss weight of one additional view's pixels: the visibility confidence (1 without one),
+    times 0 outside the scene box and on sky with ``drop_outside_box``."""
+    conf = vis.confidence(out, camera) if vis is not None else torch.ones(*out["rgb"].shape[:2], 1)
+    if config.drop_outside_box:
+        from nerf2gs_plugin.augment.confidence import inside_box_weight
+
+        if "depth" not in out:
+            raise ConfigError("--augment.drop-outside-box needs a reference that renders depth; this one does not")
+        conf = conf * inside_box_weight(out["depth"].cpu(), out.get("accumulation"), camera.to("cpu"), depth_along, scene_box)
+    return conf
+
+
 def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn: RenderFn, config: AugmentConfig,
                   enhancer: Optional[ViewEnhancer], comp_idx: list[int], scene_box: Optional[Tensor],
                   depth_along: str = "z", sources: Optional[list[int]] = None, render_pixels: Optional[PixelRenderFn] = None,
@@ -245,7 +259,7 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
                 progress.update(task, advance=1, stats=f"bird's-eye {j} outside the box")
                 continue
             stored = store.get(bev[j]) if store is not None else None
-            if stored is not None and stored.usable(config.min_coverage, with_conf):
+            if stored is not None and stored.usable(config.min_coverage, with_conf or config.drop_outside_box):
                 out, view = stored.out, stored
                 reused += 1
             else:
@@ -264,8 +278,9 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
             save_png(work / "extra_raw" / f"{k:05d}.png", rgb)
             if "depth" in out:
                 np.save(work / "extra_raw" / f"{k:05d}_depth.npy", out["depth"].cpu().numpy().astype(np.float16))
-            if vis is not None:
-                _save_confidence(confidence_path(work / "extra" / f"{k:05d}.png"), vis.confidence(out, bev[j]))
+            if vis is not None or config.drop_outside_box:
+                _save_confidence(confidence_path(work / "extra" / f"{k:05d}.png"),
+                                 _extra_confidence(out, bev[j], vis, config, scene_box, depth_along))
             if enhancer is not None:
                 if getattr(enhancer, "reference_kind", "image") == "warped":
                     src = _warped_source(out, bev[j], train, render_fn, {} if partial else renders, source_depths, depth_along)
@@ -353,7 +368,7 @@ def render_augmented_views(train: ImageSet, world: WorldFrame, render_fn: Render
         extra_raw = [load_png(manifest.extra_png(j, raw=True)) for j in range(manifest.num_extra)]
         extra = ImageSet.from_images(bev.to("cpu"), imgs, weights=torch.full((len(imgs),), float(config.extra_weight)),
                                      names=_extra_names(manifest))
-        if with_conf:
+        if with_conf or config.drop_outside_box:
             extra = extra.with_confidence([load_confidence(manifest.extra_png(j)) for j in range(manifest.num_extra)])
     return AugmentedViews(composites, extra, extra_raw, cache_dir, reused, manifest)
 

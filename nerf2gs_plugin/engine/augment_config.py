@@ -131,6 +131,11 @@ class AugmentConfig:
     """Fraction of the run after which only the input views (composites) are sampled: 0.9 gives the last
     10% of the steps to the target's own street evidence (1.0: the additional views to the end; 0.9 was
     chosen on validation views of two streets and a real capture: benchmarks/results/augment_variants.md)."""
+    drop_outside_box: bool = False
+    """Zero the loss weight of the additional views' pixels whose reference surface lies outside the scene
+    box (the far background a NeRF contracts) or that show sky (accumulation < 0.5): the target learns from
+    above only the scene inside the box, and fits nothing in the air that street views would then see in
+    front of their sky and far facades (augment/confidence.py:inside_box_weight)."""
 
 
 def share_flag(family: str) -> str:
