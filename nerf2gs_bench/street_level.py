@@ -43,6 +43,7 @@ VARIANTS: dict[str, dict] = {
     "sky_alpha 0 + real_only_from 0.6": {"augment": {"real_only_from": 0.6}, "model": {"sky_alpha_weight": 0.0}},
     "drop_outside_box": {"augment": {"drop_outside_box": True}},
     "drop_outside_box + sky_alpha 0": {"augment": {"drop_outside_box": True}, "model": {"sky_alpha_weight": 0.0}},
+    "densify from input views": {"augment": {}, "model": {"densify_from_extra_views": False}},
 }
 """Label -> the augment overrides of a Splatfacto run (no ``augment`` key: the target alone) and
 ``model``: overrides of its model config (the sky / far levers live there)."""

@@ -79,6 +79,10 @@ class SplatfactoModelConfig(SplatModelConfig):
     D short of z.
     0.1 chosen on the validation views of two streets and castle-P30 (benchmarks/results/depth_loss.md; it
     lifts the veil of near-camera Gaussians over one photo); the paper scale keeps the same value."""
+    densify_from_extra_views: bool = True
+    """False: the default strategy's clone / split statistics (screen-space gradients) come from the input
+    views only; the additional views (from above) still move the Gaussians but do not decide where new ones
+    grow (what only a NeRF's render shows, e.g. the far background from above, seeds no Gaussians)."""
     mcmc: MCMCStrategyConfig = field(default_factory=lambda: MCMCStrategyConfig(
         cap_max=30000, refine_start_iter=300, refine_stop_iter=2500))
     """The MCMC strategy at CPU scale (with --pipeline.model.strategy-type mcmc): 30k-Gaussian hard budget."""
@@ -114,6 +118,7 @@ class SplatfactoModel(Model):
         self.background = Background(cfg.background, cfg.sky_sh_degree)
         self.register_buffer("step", torch.zeros((), dtype=torch.long))
         self._meta: Optional[dict[str, Any]] = None
+        self._extra_batch = False  # the last training batch was an additional view (set by get_loss_dict)
         self._sparse_points = len(train_data.points3D_xyz) if train_data.points3D_xyz is not None else 0
         self._path = self._capture_path(train_data, means if train_data.points3D_xyz is not None else None)
         self._depth_targets = self._sparse_depth_targets(train_data) if cfg.depth_loss_weight > 0 else None
@@ -314,6 +319,7 @@ class SplatfactoModel(Model):
         c = self.config
         sky_bg = outputs.get("background") if c.background == "random" else None
         losses = image_loss(outputs, batch, c.ssim_lambda, c.mask_transients, c.sky_alpha_weight, sky_bg)
+        self._extra_batch = self.training and "image_idx" in batch and int(batch["image_idx"]) >= self.num_train_images
         depth = self._depth_loss(outputs, int(batch["image_idx"])) if self.training and "image_idx" in batch else None
         if depth is not None:
             losses["depth_loss"] = depth
@@ -331,12 +337,16 @@ class SplatfactoModel(Model):
         def set_step(step: int) -> None:
             self.step.fill_(step)
 
-        def after_step(step: int) -> None:
+        def densify_info() -> Optional[dict[str, Any]]:
+            """The rasterizer's meta of this batch, or None when its statistics must not count."""
             info, self._meta = self._meta, None
-            self.strategy.step_post_backward(self.gauss, optimizers, step, info)
+            return None if self._extra_batch and not self.config.densify_from_extra_views else info
+
+        def after_step(step: int) -> None:
+            self.strategy.step_post_backward(self.gauss, optimizers, step, densify_info())
 
         def after_batch(step: int) -> None:  # a batch of several in this step: its statistics only
-            info, self._meta = self._meta, None
+            info = densify_info()
             if info is not None:
                 self.strategy.accumulate(self.gauss, step, info)
 
