@@ -115,6 +115,13 @@ def reference_regions(ref: Reference, log: Callable[[str], None] = print) -> dic
             for v in renders.views["test"]}
 
 
+def run_downscale(config) -> float:
+    """The image downscale a run trained at (its dataparser's; a config from before the dataparser's
+    own section: the datamanager's)."""
+    dm = config.pipeline.datamanager
+    return float(getattr(getattr(dm, "dataparser", None), "downscale", None) or getattr(dm, "downscale", None) or 1.0)
+
+
 def frame_errors(run_dir: Path, data: Path, frames: dict[str, dict]) -> dict[str, dict[str, list[float]]]:
     """Frame name -> region -> [sum of squared error, pixels] of one run's render."""
     import torch
@@ -125,7 +132,7 @@ def frame_errors(run_dir: Path, data: Path, frames: dict[str, dict]) -> dict[str
 
     run = load_run(run_dir, data=data)
     run.model.eval()
-    downscale = float(getattr(run.config.pipeline.datamanager, "downscale", 1.0))
+    downscale = run_downscale(run.config)
     test = parse_dataset(data, "test", downscale=downscale)
     out: dict[str, dict[str, list[float]]] = {}
     with torch.no_grad():

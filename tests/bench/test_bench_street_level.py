@@ -69,3 +69,15 @@ def test_a_variant_s_model_overrides_reach_the_splatfacto_config_beside_the_step
     assert sl.variant_overrides(base, sl.VARIANTS["default"]) == base
     assert get_method("splatfacto").config.pipeline.model.sky_alpha_weight != 0.5
     assert "augment" not in sl.VARIANTS["target sky_alpha 0"]  # the target alone, its sky weight changed
+
+
+def test_frames_are_scored_at_the_downscale_the_run_trained_at():
+    """The held-out frames' names carry the downscale (undistorted copies): a run read at another size matches no frame."""
+    from nerf2gs_bench.real_photos import RealPhotosOptions, run_overrides
+    from nerf2gs_plugin.registry import get_method
+    from nerf2gs_plugin.utils.config import apply_plain
+
+    ov = run_overrides(RealPhotosOptions(images=".", downscale=2.0, holdout_every=8), "splatfacto", 700)
+    cfg = apply_plain(get_method("splatfacto").config, ov, where="test")
+    assert sl.run_downscale(cfg) == 2.0
+    assert sl.run_downscale(get_method("splatfacto").config) == 1.0
