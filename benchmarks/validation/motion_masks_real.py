@@ -1,14 +1,20 @@
-"""The motion route on real dashcam frames labelled by hand: nuScenes CAM_FRONT frames (the
-``image_2/`` folder of github:youngibby/nuscene, 1600x900 at 2 Hz; fetch it, nothing is downloaded
-here), the bonnet cropped (rows 0-789) and resized to 480x237, frames FIRST..FIRST+N-1 as a video ->
-``process video`` (64.6 deg FOV, camera 1.5 m up) -> 1000-step mask-less reference -> transient masks
-without / with the motion route, scored against ``labels/nuscenes_moving.json`` (polygons drawn by eye
-on the 480x237 crops: approximate outlines of the clearly moving objects; 'ignore' regions, objects
-whose motion cannot be told, count neither way) on the labelled frames that
+"""The motion route on real dashcam frames labelled by hand, two captures (fetch them, nothing is
+downloaded here):
+
+  * ``nuscenes``: CAM_FRONT frames (the ``image_2/`` folder of github:youngibby/nuscene, 1600x900 at
+    2 Hz), the bonnet cropped (rows 0-789) and resized to 480x237, 64.6 deg FOV, camera 1.5 m up;
+  * ``kitti``: the KITTI excerpt of github:rahulagrawal048/kitti-odometry (``kitti/0001-0133.png``,
+    800x240, video rate), 81 deg FOV, camera 1.65 m up.
+
+Frames FIRST..FIRST+N-1 as a video -> ``process video`` -> 1000-step mask-less reference -> transient
+masks without / with the motion route, scored against ``labels/<capture>_moving.json`` (polygons drawn
+by eye on the frames at the size given there: approximate outlines of the clearly moving objects;
+'ignore' regions, objects whose motion cannot be told, count neither way) on the labelled frames that
 are training frames.
 
-Usage: python benchmarks/validation/motion_masks_real.py NUSCENES_IMAGE_DIR WORK OUT_STEM [FIRST N]
-(WORK keeps the crops, capture, reference and renders). Writes OUT_STEM.json's ``real`` entry (merged).
+Usage: python benchmarks/validation/motion_masks_real.py IMAGE_DIR WORK OUT_STEM [FIRST N] [--capture kitti]
+(WORK keeps the crops, capture, reference and renders). Writes OUT_STEM.json's ``real`` entry (nuScenes)
+or ``real_<capture>`` (merged).
 """
 import argparse
 import json
@@ -23,23 +29,28 @@ torch.set_num_threads(1)
 from nerf2gs_bench import real as br  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
-CROP_ROWS, SIZE, FOV, CAM_H = 790, (480, 237), 64.6, 1.5
+CAPTURES = {  # crop rows (None: all), size, FOV (deg), camera height (m), file name digits, results key
+    "nuscenes": (790, (480, 237), 64.6, 1.5, 6, "real"),
+    "kitti": (None, (800, 240), 81.0, 1.65, 4, "real_kitti"),
+}
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 parser.add_argument("src", type=Path, help="nuScenes image_2/ folder")
 parser.add_argument("work", type=Path, help="work folder (crops, capture, reference, renders)")
 parser.add_argument("out", type=Path, help="results stem (OUT.json's 'real' entry is merged)")
 parser.add_argument("first", type=int, nargs="?", default=25)
 parser.add_argument("n", type=int, nargs="?", default=30)
+parser.add_argument("--capture", choices=sorted(CAPTURES), default="nuscenes")
 args = parser.parse_args()
 src, work, out, first, n = args.src, args.work, args.out, args.first, args.n
-labels = json.loads((Path(__file__).parent / "labels" / "nuscenes_moving.json").read_text())
+CROP_ROWS, SIZE, FOV, CAM_H, DIGITS, KEY = CAPTURES[args.capture]
+labels = json.loads((Path(__file__).parent / "labels" / f"{args.capture}_moving.json").read_text())
 crop = work / "crop"
 crop.mkdir(parents=True, exist_ok=True)
 files = []
 for k in range(first, first + n):
-    p = crop / f"{k:06d}.png"
+    p = crop / f"{k:0{DIGITS}d}.png"
     if not p.is_file():
-        cv2.imwrite(str(p), cv2.resize(cv2.imread(str(src / f"{k:06d}.png"))[:CROP_ROWS], SIZE, interpolation=cv2.INTER_AREA))
+        cv2.imwrite(str(p), cv2.resize(cv2.imread(str(src / f"{k:0{DIGITS}d}.png"))[:CROP_ROWS], SIZE, interpolation=cv2.INTER_AREA))
     files.append(p)
 capture = work / "estimated"
 if not (capture / "transforms.json").is_file():
@@ -71,7 +82,7 @@ rows, used = {}, []
 for label, res in (("without_motion", base), ("with_motion", motion)):
     c = np.zeros(4, dtype=np.int64)
     for name, m in zip(names, res["train"]):
-        key = f"{first + br.frame_index(Path(name)):06d}"  # frame_000004 is the 5th frame of the drive
+        key = f"{first + br.frame_index(Path(name)):0{DIGITS}d}"  # frame_000004 is the 5th frame of the drive
         if key not in labels["frames"]:
             continue
         gt, ignore = np.zeros(SIZE[::-1], np.uint8), np.zeros(SIZE[::-1], np.uint8)
@@ -88,8 +99,7 @@ for label, res in (("without_motion", base), ("with_motion", motion)):
     i, u, p, t = (int(x) for x in c)
     rows[label] = {"iou": round(i / max(u, 1), 4), "precision": round(i / max(p, 1), 4), "recall": round(i / max(t, 1), 4)}
 doc = json.loads(out.with_suffix(".json").read_text()) if out.with_suffix(".json").is_file() else {"seeds": {}}
-doc["real"] = {"capture": "nuScenes CAM_FRONT (github:youngibby/nuscene image_2/), frames "
-               f"{first}-{first + n - 1}, bonnet cropped, {SIZE[0]}x{SIZE[1]}", "registered": len(names) and len(json.loads((capture / "transforms.json").read_text())["frames"]),
+doc[KEY] = {"capture": f"{labels['source']}; frames {first}-{first + n - 1}", "size": list(SIZE), "registered": len(names) and len(json.loads((capture / "transforms.json").read_text())["frames"]),
                "train_views": len(names), "labelled_frames": used, "labels": labels["how"], "motion_s": seconds, **rows}
 atomic_write_text(out.with_suffix(".json"), json.dumps(doc, indent=1))
-print(json.dumps(doc["real"], indent=1))
+print(json.dumps(doc[KEY], indent=1))

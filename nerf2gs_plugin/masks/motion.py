@@ -82,6 +82,19 @@ class MotionOptions:
     the reference rendered far away; it needs the plane right)."""
     min_region_frac: float = 0.002
     """Moving regions smaller than this fraction of the image are dropped."""
+    residual_rel: float = 1.0
+    """A moving pixel must also differ from the reference's render (the residual route's photometric
+    residual, 5x5 means) by more than this multiple of the frame's median residual (0: off): the road
+    beside a mover, where the flow of the mover spills over, matches the reference; the mover does not."""
+    carry: float = 0.5
+    """Carried by the observed flow into the frames just before and after, a moving pixel must land on
+    moving pixels there in at least this share of them (0: off): a mover is found again, a flow error
+    seldom is."""
+    outline: bool = True
+    """Grow / trim the regions to the image's outlines (OpenCV's grabCut, seeded by each region's core as
+    the object, the region as probably object, a ring around it as probably not, the rest as not)."""
+    outline_ring: float = 0.03
+    """The ring's width, as a fraction of the image's shorter side."""
 
 
 @dataclass
@@ -96,6 +109,8 @@ class MotionFrame:
     bound: Optional[Tensor] = None
     """``[H, W]`` the farthest a static surface can be along each ray (the ground plane's distance
     along downward rays, inf elsewhere); None: no bound."""
+    residual: Optional[Tensor] = None
+    """``[H, W]`` the image's difference from the static reference's render of it; None: not gated."""
 
 
 def ray_directions(c2w: Tensor, intr: Intrinsics, h: int, w: int) -> Tensor:
@@ -198,7 +213,7 @@ def pair_moving(fi: "MotionFrame", fj: "MotionFrame", grey_i: np.ndarray, grey_j
       * the neighbour warped by the observed flow differs by ``photo_grey`` grey levels: a small
         mover DIS lost still fails to line up.
 
-    Returns (moving, valid)."""
+    Returns (moving, valid, the observed flow)."""
     rig, ok = rigid_flow(fi.c2w, fi.intr, fi.dist, fj.c2w, fj.intr)
     wj, inside = warp(grey_j, rig.numpy())
     wj = np.where(inside, wj, grey_i)  # outside frame j: nothing to compare, no flow to invent there
@@ -227,17 +242,18 @@ def pair_moving(fi: "MotionFrame", fj: "MotionFrame", grey_i: np.ndarray, grey_j
         wo, _ = warp(grey_j, obs.numpy())  # not by the prior's flow: where the reference's depth is off, that misaligns static texture
         diff = np.abs(cv2.blur(grey_i.astype(np.float32), (3, 3)) - cv2.blur(wo.astype(np.float32), (3, 3)))
         moving |= torch.from_numpy(diff > opts.photo_grey)
-    return moving, ok & torch.from_numpy(inside)
+    return moving, ok & torch.from_numpy(inside), obs
 
 
-def moving_fraction(frames: Sequence[MotionFrame], i: int, opts: MotionOptions, greys: Optional[Sequence[np.ndarray]] = None) -> Tensor:
+def frame_votes(frames: Sequence[MotionFrame], i: int, opts: MotionOptions, greys: Optional[Sequence[np.ndarray]] = None) -> tuple[Tensor, dict[int, Tensor]]:
     """``[H, W]``: the share of frame ``i``'s valid neighbour pairs in which a pixel moves, the
     smaller of the shares before and after it (where both have a valid pair): what a mover hid in
     the frames before (the road it uncovers) is seen moving only on one side, the mover on both.
-    0 where no pair is valid, and where the static scene is at infinity (sky: no parallax to test)."""
+    0 where no pair is valid, and where the static scene is at infinity (sky: no parallax to test).
+    Also the observed flows into the frames just before and after (by index)."""
     greys = greys if greys is not None else [grey(f.image) for f in frames]
     f = frames[i]
-    shares = []
+    shares, flows = [], {}
     for side in (-1, 1):
         votes = torch.zeros(f.dist.shape)
         valid_n = torch.zeros(f.dist.shape)
@@ -245,13 +261,73 @@ def moving_fraction(frames: Sequence[MotionFrame], i: int, opts: MotionOptions, 
             j = i + off
             if off * side <= 0 or j < 0 or j >= len(frames):
                 continue
-            moving, valid = pair_moving(f, frames[j], greys[i], greys[j], opts)
+            moving, valid, obs = pair_moving(f, frames[j], greys[i], greys[j], opts)
             votes += (moving & valid).float()
             valid_n += valid.float()
+            if abs(off) == 1:
+                flows[j] = obs
         shares.append((votes / valid_n.clamp(min=1), valid_n > 0))
     (back, has_b), (fwd, has_f) = shares
     share = torch.where(has_b & has_f, torch.minimum(back, fwd), torch.where(has_b, back, fwd))
-    return torch.where(torch.isfinite(f.dist), share, torch.zeros_like(share))
+    return torch.where(torch.isfinite(f.dist), share, torch.zeros_like(share)), flows
+
+
+def moving_fraction(frames: Sequence[MotionFrame], i: int, opts: MotionOptions, greys: Optional[Sequence[np.ndarray]] = None) -> Tensor:
+    """:func:`frame_votes`' share alone."""
+    return frame_votes(frames, i, opts, greys)[0]
+
+
+def residual_gate(frame: MotionFrame, rel: float) -> Tensor:
+    """Where the frame differs from the static reference's render by more than ``rel`` times its
+    median difference over the pixels with a static surface (5x5 means; all True without a residual)."""
+    if frame.residual is None or rel <= 0:
+        return torch.ones(frame.dist.shape, dtype=torch.bool)
+    import cv2
+
+    r = cv2.blur(frame.residual.float().numpy(), (5, 5))
+    scene = torch.isfinite(frame.dist).numpy()
+    med = float(np.median(r[scene])) if scene.any() else float(np.median(r))
+    return torch.from_numpy(r > rel * max(med, 1e-6))
+
+
+def carried_share(seeds: Tensor, flows: dict[int, Tensor], others: dict[int, Tensor]) -> Tensor:
+    """``[H, W]``: the share of the frames in ``flows`` (index -> observed flow ``[H, W, 2]`` into it)
+    where a pixel, carried by the flow, lands on (or one pixel beside) a seed of that frame
+    (``others``); 1 where it lands in none of them (nothing to check against)."""
+    import cv2
+
+    h, w = seeds.shape
+    hit, n = torch.zeros(h, w), torch.zeros(h, w)
+    ys, xs = torch.meshgrid(torch.arange(h, dtype=torch.float32), torch.arange(w, dtype=torch.float32), indexing="ij")
+    for j, flow in flows.items():
+        near = torch.from_numpy(cv2.dilate(others[j].numpy().astype(np.uint8), np.ones((3, 3), np.uint8)) > 0)
+        x, y = (xs + flow[..., 0]).round().long(), (ys + flow[..., 1]).round().long()
+        inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
+        hit += (near[y.clamp(0, h - 1), x.clamp(0, w - 1)] & inside).float()
+        n += inside.float()
+    return torch.where(n > 0, hit / n.clamp(min=1), torch.ones(h, w))
+
+
+def outline(mask: Tensor, image: Tensor, ring_frac: float) -> Tensor:
+    """``mask``'s regions grown or trimmed to the image's outlines by grabCut: the regions eroded by 2
+    pixels are the object, the rest of them probably the object, a ring ``ring_frac`` of the shorter
+    side wide around them probably not, everything else not."""
+    import cv2
+
+    m = mask.numpy().astype(np.uint8)
+    if not m.any():
+        return mask
+    h, w = m.shape
+    r = max(3, int(round(ring_frac * min(h, w))))
+    g = np.full((h, w), cv2.GC_BGD, np.uint8)
+    g[cv2.dilate(m, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))) > 0] = cv2.GC_PR_BGD
+    if not (g == cv2.GC_BGD).any():
+        return mask  # the regions and their rings cover the frame: no background to learn from
+    g[m > 0] = cv2.GC_PR_FGD
+    g[cv2.erode(m, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))) > 0] = cv2.GC_FGD
+    bgr = np.ascontiguousarray((image.clamp(0, 1).numpy()[..., ::-1] * 255).astype(np.uint8))
+    cv2.grabCut(bgr, g, None, np.zeros((1, 65)), np.zeros((1, 65)), 3, cv2.GC_INIT_WITH_MASK)
+    return torch.from_numpy((g == cv2.GC_FGD) | (g == cv2.GC_PR_FGD))
 
 
 def superpixels(image: Tensor, size_px: int) -> np.ndarray:
@@ -280,28 +356,54 @@ def grow_regions(seeds: Tensor, image: Tensor, opts: MotionOptions) -> Tensor:
 
 
 def motion_masks(frames: Sequence[MotionFrame], opts: MotionOptions, progress: Optional[Callable[[], None]] = None) -> list[Tensor]:
-    """Bool ``[H, W]`` moving-object masks of a sequence (frames in capture order)."""
+    """Bool ``[H, W]`` moving-object masks of a sequence (frames in capture order): per frame the
+    pixels that move in ``vote`` of the pairs (:func:`frame_votes`) and differ from the reference
+    (:func:`residual_gate`), kept where the frames just before and after move there too
+    (:func:`carried_share`), grown to regions (:func:`grow_regions`) and outlines (:func:`outline`).
+    One frame ahead is kept in memory (its seeds and flows), not the sequence."""
     greys = [grey(f.image) for f in frames]
+    seeds: dict[int, Tensor] = {}
+    flows: dict[int, dict[int, Tensor]] = {}
     out = []
-    for i in range(len(frames)):
-        frac = moving_fraction(frames, i, opts, greys)
-        seeds = fr.opening(frac >= opts.vote, 1) if opts.vote > 0 else frac > 0
-        out.append(grow_regions(seeds, frames[i].image, opts))
+
+    def finish(i: int) -> None:
+        m = seeds[i]
+        if opts.carry > 0:
+            m = m & (carried_share(m, flows[i], {j: seeds[j] for j in flows[i]}) >= opts.carry)
+        m = grow_regions(m, frames[i].image, opts)
+        if opts.outline:
+            h, w = m.shape
+            m = fr.clean_regions(outline(m, frames[i].image, opts.outline_ring), max(4, int(opts.min_region_frac * h * w)),
+                                 close_px=max(1, round(0.01 * min(h, w))))
+        out.append(m)
+        for k in [k for k in seeds if k < i]:
+            seeds.pop(k), flows.pop(k, None)
         if progress is not None:
             progress()
+
+    for i in range(len(frames)):
+        frac, flows[i] = frame_votes(frames, i, opts, greys)
+        s = fr.opening(frac >= opts.vote, 1) if opts.vote > 0 else frac > 0
+        seeds[i] = s & residual_gate(frames[i], opts.residual_rel)
+        if i >= 1:
+            finish(i - 1)
+    if frames:
+        finish(len(frames) - 1)
     return out
 
 
 def frames_from_renders(views: Sequence[dict], sky: Sequence[Tensor], up: Tensor, height: float, clamp: bool = True) -> list[MotionFrame]:
-    """The reference's renders (``render_views``: image, depth, c2w, intr) as a motion sequence:
-    the rendered depth, the sky at infinity, clamped to the ground plane."""
+    """The reference's renders (``render_views``: image, rgb, depth, c2w, intr) as a motion sequence:
+    the rendered depth, the sky at infinity, clamped to the ground plane; the residual of the
+    image against the render, after the residual route's colour fit."""
     out = []
     for v, s in zip(views, sky):
         intr = tuple(float(x) for x in v["intr"])
         dist = torch.where(s, torch.full_like(v["depth"], math.inf), v["depth"].float())
         bound = static_distance(torch.full_like(dist, math.inf), v["c2w"], intr, up, height) if clamp else None
         dist = torch.minimum(dist, bound) if bound is not None else dist
-        out.append(MotionFrame(v["image"], dist, v["c2w"], intr, bound))  # type: ignore[arg-type]
+        residual = fr.residual_map(v["image"], fr.fit_colour(v["rgb"], v["image"])) if "rgb" in v else None
+        out.append(MotionFrame(v["image"], dist, v["c2w"], intr, bound, residual))  # type: ignore[arg-type]
     return out
 
 
