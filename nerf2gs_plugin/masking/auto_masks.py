@@ -8,6 +8,7 @@ surface points of the training views.
 
 from __future__ import annotations
 
+import json
 import time
 import warnings
 from pathlib import Path
@@ -129,7 +130,8 @@ def auto_masks(view: Path, reference: Path, splits: list[str], opts: AutoOptions
         stats["render_seconds"], stats["render_cpu_seconds"] = round(renders.seconds, 1), round(renders.cpu_seconds, 1)
     result = masks_from_renders(renders, opts, log)
     if motion is not None:
-        from nerf2gs_plugin.masks.motion import add_motion
+        from nerf2gs_plugin.masks.motion import add_motion, is_sequence
 
-        add_motion(renders, result, motion, log, progress)
+        meta = json.loads((Path(view) / "transforms.json").read_text())
+        add_motion(renders, result, motion, log, progress, sequence=is_sequence(meta))
     return result

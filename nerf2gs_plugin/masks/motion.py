@@ -45,9 +45,12 @@ Intrinsics = tuple[float, float, float, float]  # fx, fy, cx, cy (pixel centres 
 class MotionOptions:
     """``--segmenter auto``'s motion route (see ``masks/motion.py``)."""
 
-    enabled: bool = False
-    """Add what moves against the static scene's flow to the transient masks. Off by default: on
-    estimated poses and depth it still marks much static road (see docs/masks-motion.md)."""
+    enabled: bool = True
+    """Add what moves against the static scene's flow to the transient masks (``--motion.no-enabled``:
+    the residual route alone)."""
+    sequences_only: bool = True
+    """Only for captures processed as a sequence (``process video``, or sequential matching): the
+    route compares neighbouring frames; in a photo set they need not be near each other."""
     neighbours: tuple[int, ...] = (-2, -1, 1, 2)
     """Frames compared with each frame (offsets in the sequence, sorted by file name)."""
     perp_px: float = 1.5
@@ -86,10 +89,11 @@ class MotionOptions:
     """A moving pixel must also differ from the reference's render (the residual route's photometric
     residual, 5x5 means) by more than this multiple of the frame's median residual (0: off): the road
     beside a mover, where the flow of the mover spills over, matches the reference; the mover does not."""
-    carry: float = 0.5
+    carry: float = 0.0
     """Carried by the observed flow into the frames just before and after, a moving pixel must land on
-    moving pixels there in at least this share of them (0: off): a mover is found again, a flow error
-    seldom is."""
+    moving pixels there in at least this share of them (0: off). Off by default: it dropped flow errors
+    on the synthetic streets, but on real frames (walking people, 2 Hz key frames) it dropped more of
+    the movers (docs/masks-motion.md)."""
     outline: bool = True
     """Grow / trim the regions to the image's outlines (OpenCV's grabCut, seeded by each region's core as
     the object, the region as probably object, a ring around it as probably not, the rest as not)."""
@@ -407,14 +411,26 @@ def frames_from_renders(views: Sequence[dict], sky: Sequence[Tensor], up: Tensor
     return out
 
 
-def add_motion(renders, result: dict, opts: MotionOptions, log: Callable[[str], None] = print, progress: bool = True) -> None:
+def is_sequence(meta: dict) -> bool:
+    """Whether a capture's ``transforms.json`` (``meta``) says it was processed as a sequence: from a
+    video, or matched sequentially (its frames in capture order)."""
+    process = meta.get("process") or {}
+    return process.get("source") == "video" or process.get("matching") == "sequential"
+
+
+def add_motion(renders, result: dict, opts: MotionOptions, log: Callable[[str], None] = print, progress: bool = True,
+               sequence: bool = True) -> None:
     """Add the moving objects to ``result``'s transient masks (``masks_from_renders``' masks, in
-    place): every split's frames in one sequence sorted by file name (a video's order). The ground
+    place): every split's frames in one sequence sorted by file name (a video's order); ``sequence``:
+    whether the capture is one (:func:`is_sequence`; see ``sequences_only``). The ground
     and sky masks stay as the residual route made them: with a short reference's depth the motion
     route also marks static road (docs/masks-motion.md), and the ground mask should not pay for it."""
     from nerf2gs_plugin.progress import make_progress
 
     if not opts.enabled:
+        return
+    if opts.sequences_only and not sequence:
+        log("masks: motion route skipped: the capture was not processed as a sequence (a video or sequential matching)")
         return
     order = sorted(((v["name"], s, i) for s, vs in renders.views.items() for i, v in enumerate(vs)))
     frames = frames_from_renders([renders.views[s][i] for _, s, i in order], [result[s][i].sky for _, s, i in order],
