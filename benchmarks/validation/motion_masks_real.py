@@ -76,10 +76,17 @@ names = [q.name for q in train.image_filenames]
 base = masks_from_renders(r, AutoOptions(), log=lambda s: None)
 t0 = time.perf_counter()
 motion = masks_from_renders(r, AutoOptions(), log=lambda s: None)
-add_motion(r, motion, MotionOptions(enabled=True), log=print, progress=False)
+add_motion(r, motion, MotionOptions(), log=print, progress=False)
 seconds = round(time.perf_counter() - t0, 1)
+LEVERS = {  # the route's defaults changed one at a time
+    "no residual gate": {"residual_rel": 0.0}, "no outlines": {"outline": False}, "carry test on (0.5)": {"carry": 0.5},
+    "none of the three (the route before them)": {"residual_rel": 0.0, "outline": False}}
+variants = []
+for label, kw in LEVERS.items():
+    variants.append((label, masks_from_renders(r, AutoOptions(), log=lambda s: None)))
+    add_motion(r, variants[-1][1], MotionOptions(**kw), log=lambda s: None, progress=False)
 rows, used = {}, []
-for label, res in (("without_motion", base), ("with_motion", motion)):
+for label, res in (("without_motion", base), ("with_motion", motion), *variants):
     c = np.zeros(4, dtype=np.int64)
     for name, m in zip(names, res["train"]):
         key = f"{first + br.frame_index(Path(name)):0{DIGITS}d}"  # frame_000004 is the 5th frame of the drive
@@ -100,6 +107,7 @@ for label, res in (("without_motion", base), ("with_motion", motion)):
     rows[label] = {"iou": round(i / max(u, 1), 4), "precision": round(i / max(p, 1), 4), "recall": round(i / max(t, 1), 4)}
 doc = json.loads(out.with_suffix(".json").read_text()) if out.with_suffix(".json").is_file() else {"seeds": {}}
 doc[KEY] = {"capture": f"{labels['source']}; frames {first}-{first + n - 1}", "size": list(SIZE), "registered": len(names) and len(json.loads((capture / "transforms.json").read_text())["frames"]),
-               "train_views": len(names), "labelled_frames": used, "labels": labels["how"], "motion_s": seconds, **rows}
+               "train_views": len(names), "labelled_frames": used, "labels": labels["how"], "motion_s": seconds,
+           "without_motion": rows["without_motion"], "with_motion": rows["with_motion"], "levers": {k: rows[k] for k in LEVERS}}
 atomic_write_text(out.with_suffix(".json"), json.dumps(doc, indent=1))
 print(json.dumps(doc[KEY], indent=1))
