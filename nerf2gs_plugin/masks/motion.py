@@ -19,9 +19,12 @@ how the image actually moved. A pixel moves where no static surface explains its
 
 Each frame is compared with several neighbours before and after it (``neighbours``); a pair counts where
 the pixel's static point lands inside the neighbour, in front of it, and a pixel moves when at least ``vote`` of its valid pairs say so, on both sides (what a mover uncovers
-was hidden only in the frames before it). The votes are grown to object outlines:
-superpixels (SLIC on the image) join where ``grow`` of their pixels move, then the regions are closed,
-their holes filled and small ones dropped (``masks/from_renders.clean_regions``).
+was hidden only in the frames before it). A voted pixel stays where the image also differs from
+the reference's render (``residual_rel``: the road beside a mover, where DIS spreads the mover's flow,
+matches the reference) and, optionally, where the frames just before and after move too
+(``carry``). The votes are grown to object outlines: superpixels (SLIC on the image) join where
+``grow`` of their pixels move, the regions are closed, their holes filled and small ones dropped
+(``masks/from_renders.clean_regions``), then grown / trimmed to the image's edges by grabCut (``outline``).
 
 Memory: one frame's flows at a time, plus the sequence's grey images.
 """
