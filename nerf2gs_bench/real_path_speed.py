@@ -43,8 +43,8 @@ class RealPathOptions:
     """None: Splatfacto's default."""
     warm_start: bool = True
     """StreetNeRF continues from the masks' reference (its first steps are the reference's)."""
-    render_downscale: float = 1.0
-    """The masks' renders at 1/d per side (``ns2gs-data masks --render-downscale``)."""
+    render_downscale: Optional[float] = None
+    """The masks' renders at 1/d per side (``ns2gs-data masks --render-downscale``); None: its default."""
 
 
 def cpu_seconds() -> float:
@@ -135,7 +135,8 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
     for stale in ("capture", "masks-reference", "streetnerf", "splatfacto-nerf-views"):
         shutil.rmtree(root / stale, ignore_errors=True)
     data, ref = root / "capture", root / "masks-reference"
-    doc: dict = {"options": dict(dataclasses.asdict(opts)), "machine": machine_info(), "complete": False}
+    doc: dict = {"options": dict(dataclasses.asdict(opts)), "machine": machine_info(), "complete": False,
+                 "streetnerf_render_nerf_samples": _render_nerf_samples()}
 
     def record(final: bool = False) -> None:
         doc.update({"stage_seconds": stages.rows, "total_wall_s": stages.total("wall_s"), "total_cpu_s": stages.total("cpu_s"),
@@ -147,8 +148,10 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
     log(f"[bench] process: {report.registered}/{report.frames} registered")
     doc["registered"] = report.registered
     stages.run("masks: first reference", lambda: ensure_reference(data, ref, opts.reference_steps, progress=False, log=log))
+    down = {} if opts.render_downscale is None else {"render_downscale": opts.render_downscale}
     summary = stages.run("masks: mask maths", lambda: make_masks(MasksConfig(
-        data=data, reference=ref, render_downscale=opts.render_downscale, splits=("train",), overwrite=True, progress=False), log=log))
+        data=data, reference=ref, splits=("train",), overwrite=True, progress=False, **down), log=log))
+    doc["masks_render_downscale"] = summary.get("render_downscale")
     stages.split("masks: mask maths", "masks: renders", summary["render_seconds"], summary["render_cpu_seconds"])
     sn = _train(stages, "StreetNeRF", _trainer_config("streetnerf", data, root / "streetnerf", opts.streetnerf_steps,
                                                       warm_start=ref if opts.warm_start else None))
@@ -158,6 +161,13 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
     doc["masks_coverage"] = summary.get("coverage")
     record(final=True)
     return doc
+
+
+def _render_nerf_samples() -> Optional[int]:
+    """StreetNeRF's fine samples per ray in a render (the masks' and the augmentation's renders)."""
+    from nerf2gs_plugin.methods.streetnerf.model import StreetNeRFModelConfig
+
+    return StreetNeRFModelConfig().render_nerf_samples
 
 
 def _load_average() -> Optional[list[float]]:
@@ -177,7 +187,8 @@ def results_md(doc: dict) -> str:
              f"Stand-in: the synthetic street (seed {o['street_seed']}{', movers' if o['movers'] else ''}) at {o['width']}x{o['height']}, "
              f"its forward drive as a video; masks' reference {o['reference_steps']} steps, StreetNeRF "
              f"{o['streetnerf_steps'] or 'default'} steps ({'warm-started from the masks reference' if o['warm_start'] else 'from scratch'}), "
-             f"Splatfacto {o['splatfacto_steps'] or 'default'} steps with NeRF views; masks' renders at 1/{o['render_downscale']:g}. "
+             f"Splatfacto {o['splatfacto_steps'] or 'default'} steps with NeRF views; masks' renders at 1/{_downscale(doc):g}; "
+             f"StreetNeRF renders with {doc.get('streetnerf_render_nerf_samples') or 'all'} fine samples per ray. "
              f"Registered {doc.get('registered', '?')}/{o['frames']}.", "",
              "CPU seconds are user + system of the bench's process (one thread: the time the stage takes alone on one "
              "core); wall seconds depend on the machine's other load.", "",
@@ -190,6 +201,11 @@ def results_md(doc: dict) -> str:
         lines += ["", "**Incomplete: the bench stopped (or is still running) after the stages above.**"]
     lines += ["", f"Target: <= {doc['target_minutes']:g} min for the whole path on 2 cores."]
     return "\n".join(lines) + "\n"
+
+
+def _downscale(doc: dict) -> float:
+    """The masks' render downscale of a run (older results: only the option, 1 when unset)."""
+    return doc.get("masks_render_downscale") or doc["options"].get("render_downscale") or 1.0
 
 
 def write_results(out_dir: Path, doc: dict) -> None:

@@ -57,7 +57,9 @@ def load_reference(reference: Path, datamanager, device: torch.device | str, app
     if "appearance" in params:
         render = functools.partial(render, appearance=appearance)
     render_pixels = (lambda camera, pixels: render(camera, pixels=pixels)) if "pixels" in params else None
-    return Reference(render, f"{ref.config.method_name}:{ref.checkpoint_hash}", run_dir, ref.model.depth_along,
+    render_key = getattr(ref.model, "render_key", lambda: "")()  # renders that differ from training's sampling
+    key = f"{ref.config.method_name}:{ref.checkpoint_hash}" + (f":{render_key}" if render_key else "")
+    return Reference(render, key, run_dir, ref.model.depth_along,
                      getattr(ref.model, "refined_train_cameras", None), render_pixels)
 
 

@@ -44,9 +44,10 @@ class MasksConfig:
     """auto: training steps of a new reference."""
     downscale: float = 1.0
     """auto: image downscale of a new reference (renders are upsampled to the image size)."""
-    render_downscale: float = 1.0
+    render_downscale: float = 2.0
     """auto: the reference renders each frame at 1/d of its size per side for the mask maths (d^2 fewer
-    rays; the masks are upsampled to the image size)."""
+    rays; the masks are upsampled to the image size). 2 holds the masks of full-size renders on two
+    synthetic streets and a KITTI drive (docs/speed.md); 1: full size."""
     auto: AutoOptions = field(default_factory=AutoOptions)
     motion: MotionOptions = field(default_factory=MotionOptions)
     """auto: moving objects from optical flow against the static scene's (docs/masks-motion.md)."""
@@ -188,6 +189,7 @@ def _segment(cfg: MasksConfig, data: Path, frames: list, groups: dict, out: Path
                 ms = {"sky": m.sky, "ground": m.ground, "transient": m.transient}
                 count(ms)
                 _write(out, f.image, ms, (f.intr.width, f.intr.height))
+        summary["render_downscale"] = cfg.render_downscale
         summary["auto"] = asdict(cfg.auto)
         summary["motion"] = asdict(cfg.motion)
         summary["mask_seconds"] = round(time.perf_counter() - t_m, 1)

@@ -180,6 +180,11 @@ class StreetNeRFModelConfig(ModelConfig):
     # rendering
     eval_chunk: int = 4096
     """Rays rendered at once when rendering a whole image."""
+    render_nerf_samples: Optional[int] = 16
+    """Renders (no gradient: eval, the masks' reference, the augmentation's views) take this many fine
+    samples per ray; None: ``num_nerf_samples``, as training. The fine round is half a render's time
+    and the proposals still place the samples: 16 of 24 renders a view 1.5x faster, 45 dB from the
+    24-sample render (docs/speed.md)."""
     render_min_weight: float = 1e-4
     """Renders (no gradient: eval, views from above, the augmentation, the masks' reference) run the colour
     network only for samples whose compositing weight exceeds this; the others add at most this much
@@ -201,6 +206,8 @@ class StreetNeRFModel(Model):
         c = self.config
         if len(c.proposal_max_res) != len(c.num_proposal_samples):
             raise ConfigError("proposal_max_res and num_proposal_samples must have the same length (one per proposal round)")
+        if c.render_nerf_samples is not None and c.render_nerf_samples < 1:
+            raise ConfigError(f"render_nerf_samples must be >= 1 (or None), got {c.render_nerf_samples}")
         box = train_data.scene_box.float()
         spec = HashGridSpec(c.num_levels, c.features_per_level, c.log2_hashmap_size, c.base_res, c.max_res)
         self.field = StreetField(box, spec, hidden=c.hidden_dim, geo_feat_dim=c.geo_feat_dim, sh_degree=c.sh_degree,
@@ -315,7 +322,7 @@ class StreetNeRFModel(Model):
             sigma = prop(x, r).reshape(R, -1)
             w = render_weights(sigma, t_edges)
             proposals.append((s_edges, w))
-            n_next = c.num_proposal_samples[i + 1] if i + 1 < len(self.proposals) else c.num_nerf_samples
+            n_next = c.num_proposal_samples[i + 1] if i + 1 < len(self.proposals) else self._fine_samples()
             s_edges = pdf_edges(s_edges, w.detach() ** anneal, n_next, jitter)
         t_edges, x, r = positions(s_edges)
         n = s_edges.shape[1] - 1
@@ -341,6 +348,16 @@ class StreetNeRFModel(Model):
         depth = (w * t_mid).sum(-1, keepdim=True) / acc.clamp_min(1e-6)
         return {"rgb": color, "accumulation": acc, "depth": depth, "weights": w, "s_edges": s_edges, "t_mid": t_mid,
                 "proposals": proposals}  # type: ignore[dict-item]
+
+    def _fine_samples(self) -> int:
+        c = self.config
+        return c.num_nerf_samples if torch.is_grad_enabled() or c.render_nerf_samples is None else c.render_nerf_samples
+
+    def render_key(self) -> str:
+        """What, beyond the weights, makes a render differ from training's sampling ("" when nothing):
+        the augmentation's view store keys a reference's renders by it."""
+        n = self.config.render_nerf_samples
+        return "" if n is None or n == self.config.num_nerf_samples else f"fine{n}"
 
     def get_outputs(self, inputs: RayBundle) -> dict[str, Any]:
         if not isinstance(inputs, RayBundle):

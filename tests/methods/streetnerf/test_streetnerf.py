@@ -340,6 +340,32 @@ def test_render_skips_colour_of_unseen_samples_within_its_bound(trained):
     assert 0 < diff <= base_cfg.num_nerf_samples * 1e-3 * 1.01  # some colour was skipped, never more than the bound
 
 
+def test_render_nerf_samples_changes_renders_only(trained):
+    """render_nerf_samples: a render takes that many fine samples; a training forward keeps
+    num_nerf_samples; render_key names the change (the view store keys renders by it)."""
+    tr, _ = trained
+    model = tr.pipeline.model
+    cam = tr.pipeline.datamanager.eval_split("bev_1")[1].cameras[0]
+    base_cfg = model.config
+    rays = cam.generate_rays(0)[:64]
+    try:
+        assert model.render_key() == ""
+        full = model.render_camera(cam)
+        model.config = dataclasses.replace(base_cfg, render_nerf_samples=base_cfg.num_nerf_samples // 2)
+        assert model.render_key() == f"fine{base_cfg.num_nerf_samples // 2}"
+        fewer = model.render_camera(cam)
+        with torch.no_grad():
+            assert model._render_rays(rays, None)["weights"].shape[1] == base_cfg.num_nerf_samples // 2
+        with torch.enable_grad():
+            assert model._render_rays(rays, None)["weights"].shape[1] == base_cfg.num_nerf_samples
+        model.config = dataclasses.replace(base_cfg, render_nerf_samples=base_cfg.num_nerf_samples)
+        assert model.render_key() == "" and torch.equal(model.render_camera(cam)["rgb"], full["rgb"])
+    finally:
+        model.config = base_cfg
+    diff = (full["rgb"] - fewer["rgb"]).abs()
+    assert float(diff.max()) > 0 and float(diff.mean()) < 0.05  # another render, the same picture
+
+
 def test_render_camera_pixels_renders_only_those(trained):
     tr, _ = trained
     model = tr.pipeline.model
