@@ -48,10 +48,10 @@ def test_a_reference_rendering_with_fewer_samples_keys_its_views_apart(tiny_scen
     than training (render_nerf_samples), by that too: renders made either way are never mixed up."""
     tgt, _ = _train("voxel-grid", tiny_scene, tmp_path / "tgt", steps=1)
     _, ref_dir = _train("streetnerf", tiny_scene, tmp_path / "ref")
-    fewer = load_reference(ref_dir, tgt.pipeline.datamanager, "cpu")
+    every = load_reference(ref_dir, tgt.pipeline.datamanager, "cpu")
     yml = ref_dir / "config.yml"
     text = yml.read_text()
-    assert text.count("render_nerf_samples: 16") == 1
-    yml.write_text(text.replace("render_nerf_samples: 16", "render_nerf_samples: null"))
-    every = load_reference(ref_dir, tgt.pipeline.datamanager, "cpu")
+    assert text.count("render_nerf_samples: null") == 1
+    yml.write_text(text.replace("render_nerf_samples: null", "render_nerf_samples: 16"))
+    fewer = load_reference(ref_dir, tgt.pipeline.datamanager, "cpu")
     assert fewer.key == every.key + ":fine16" and ":" in every.key

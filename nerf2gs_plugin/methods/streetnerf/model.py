@@ -180,11 +180,12 @@ class StreetNeRFModelConfig(ModelConfig):
     # rendering
     eval_chunk: int = 4096
     """Rays rendered at once when rendering a whole image."""
-    render_nerf_samples: Optional[int] = 16
+    render_nerf_samples: Optional[int] = None
     """Renders (no gradient: eval, the masks' reference, the augmentation's views) take this many fine
-    samples per ray; None: ``num_nerf_samples``, as training. The fine round is half a render's time
-    and the proposals still place the samples: 16 of 24 renders a view 1.5x faster, 45 dB from the
-    24-sample render (docs/speed.md)."""
+    samples per ray; None: ``num_nerf_samples``, as training. Fewer make a view faster (16: 1.25-1.5x)
+    but a long-trained reference's bird's-eye views lose surfaces the fewer samples miss (16 on the
+    real path's 3000-step reference: accumulation -0.11 on average, 23 dB from the 24-sample render;
+    docs/speed.md)."""
     render_min_weight: float = 1e-4
     """Renders (no gradient: eval, views from above, the augmentation, the masks' reference) run the colour
     network only for samples whose compositing weight exceeds this; the others add at most this much
