@@ -43,8 +43,8 @@ class RealPathOptions:
     """None: Splatfacto's default."""
     warm_start: bool = True
     """StreetNeRF continues from the masks' reference (its first steps are the reference's)."""
-    render_downscale: Optional[float] = None
-    """The masks' renders at 1/d per side (``ns2gs-data masks --render-downscale``); None: its default."""
+    render_downscale: Optional[int] = None
+    """The masks' renders at every d-th pixel per side (``ns2gs-data masks --render-downscale``); None: its default."""
 
 
 def cpu_seconds() -> float:

@@ -65,10 +65,44 @@ def check_reference_dataset(checkpoint: Path, image_filenames: list[Path]) -> No
         raise CheckpointError(f"reference was trained on a different dataset (fingerprint {ckpt.get('dataset')} vs {ours})", checkpoint)
 
 
+def decimated(camera, d: int) -> tuple[object, Tensor]:
+    """Every ``d``-th pixel of ``camera`` (one camera) per side, the middle one of each d x d block:
+    ``(a camera whose pixels are exactly those, bool [H, W] of them)``."""
+    from dataclasses import replace
+
+    h, w = int(camera.height[0]), int(camera.width[0])
+    rows, cols = torch.arange(h // d) * d + d // 2, torch.arange(w // d) * d + d // 2
+    pixels = torch.zeros(h, w, dtype=torch.bool)
+    pixels[rows[:, None], cols[None, :]] = True
+    # full pixel k*d + d//2 has its centre at u = k*d + d//2 + 0.5, the decimated pixel k at k + 0.5
+    shift = d // 2 + 0.5 - d / 2
+    small = replace(camera.scaled(1.0 / d), cx=(camera.cx - shift) / d, cy=(camera.cy - shift) / d,
+                    width=torch.full_like(camera.width, w // d), height=torch.full_like(camera.height, h // d))
+    return small, pixels
+
+
+def _render(model, cam, d: int) -> tuple[object, dict[str, Tensor], Optional[Tensor]]:
+    """One frame at 1/d per side: ``(the camera of the rendered pixels, the render, which pixels of the
+    frame or None)``. Rays of the full-size camera at every d-th pixel keep its footprint: renders
+    of a smaller camera have d times wider cones, which an anti-aliased field blurs (far facades
+    then read as empty, i.e. sky)."""
+    import inspect
+
+    if d == 1:
+        return cam, model.render_camera(cam), None
+    if "pixels" not in inspect.signature(model.render_camera).parameters:
+        small = cam.scaled(1.0 / d)
+        return small, model.render_camera(small), None
+    small, pixels = decimated(cam, d)
+    out = model.render_camera(cam, pixels=pixels)
+    hh, ww = int(small.height[0]), int(small.width[0])
+    return small, {k: v[pixels].reshape(hh, ww, -1) for k, v in out.items()}, pixels
+
+
 def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[str], None] = print, progress: bool = True,
-                 render_downscale: float = 1.0) -> Renders:
-    """Render every frame of ``splits`` with the reference, at 1/``render_downscale`` of the
-    reference's image size per side. ``view``: the dataset (its mask-less view) the reference was
+                 render_downscale: int = 1) -> Renders:
+    """Render every frame of ``splits`` with the reference at every ``render_downscale``-th pixel per
+    side of the reference's image size. ``view``: the dataset (its mask-less view) the reference was
     trained on."""
     from nerf2gs_plugin.data import parse_dataset
     from nerf2gs_plugin.data.images import load_image
@@ -94,15 +128,14 @@ def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[
         task = prog.add_task("masks: render", total=total, stats="")
         for s, d in data.items():
             for i in range(len(d)):
-                cam = d.cameras[i : i + 1]
-                if render_downscale != 1.0:
-                    cam = cam.scaled(1.0 / render_downscale)
-                out = model.render_camera(cam)
+                cam, out, pixels = _render(model, d.cameras[i : i + 1], int(render_downscale))
                 for key in ("rgb", "accumulation"):  # masks are never made from a NaN render
                     check_finite(out[key], run.checkpoint, f"reference render '{key}' of {s} view {i}")
                 rays = cam.generate_rays(0)
                 h, w = int(cam.height[0]), int(cam.width[0])
                 img = load_image(d.image_filenames[i])
+                if pixels is not None and tuple(img.shape[:2]) == tuple(pixels.shape):
+                    img = img[pixels].reshape(h, w, -1)  # the same pixels as the render
                 if tuple(img.shape[:2]) != (h, w):
                     img = F.interpolate(img.permute(2, 0, 1)[None], size=(h, w), mode="area")[0].permute(1, 2, 0)
                 views[s].append({"rgb": out["rgb"].cpu(), "depth": out["depth"][..., 0].cpu(), "acc": out["accumulation"][..., 0].cpu(),
@@ -120,7 +153,7 @@ def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[
 
 
 def auto_masks(view: Path, reference: Path, splits: list[str], opts: AutoOptions,
-               log: Callable[[str], None] = print, progress: bool = True, motion=None, render_downscale: float = 1.0,
+               log: Callable[[str], None] = print, progress: bool = True, motion=None, render_downscale: int = 1,
                stats: Optional[dict] = None) -> dict[str, list[FrameMasks]]:
     """:func:`render_views` then :func:`~nerf2gs_plugin.masks.auto.masks_from_renders`, plus what
     moves against the static scene's flow (``motion``: :class:`~nerf2gs_plugin.masks.motion.MotionOptions`);

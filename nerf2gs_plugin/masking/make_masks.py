@@ -44,10 +44,10 @@ class MasksConfig:
     """auto: training steps of a new reference."""
     downscale: float = 1.0
     """auto: image downscale of a new reference (renders are upsampled to the image size)."""
-    render_downscale: float = 2.0
-    """auto: the reference renders each frame at 1/d of its size per side for the mask maths (d^2 fewer
+    render_downscale: int = 2
+    """auto: the reference renders every d-th pixel per side of each frame for the mask maths (d^2 fewer
     rays; the masks are upsampled to the image size). 2 holds the masks of full-size renders on two
-    synthetic streets and a KITTI drive (docs/speed.md); 1: full size."""
+    synthetic streets and a KITTI drive (docs/speed.md); 1: every pixel."""
     auto: AutoOptions = field(default_factory=AutoOptions)
     motion: MotionOptions = field(default_factory=MotionOptions)
     """auto: moving objects from optical flow against the static scene's (docs/masks-motion.md)."""
@@ -169,8 +169,8 @@ def _segment(cfg: MasksConfig, data: Path, frames: list, groups: dict, out: Path
         from nerf2gs_plugin.masking.auto_masks import auto_masks
         from nerf2gs_plugin.masking.mask_reference import ensure_reference
 
-        if cfg.render_downscale < 1.0:  # before a reference is trained for nothing
-            raise ConfigError(f"--render-downscale must be >= 1, got {cfg.render_downscale}")
+        if cfg.render_downscale < 1 or cfg.render_downscale != int(cfg.render_downscale):  # before a reference is trained for nothing
+            raise ConfigError(f"--render-downscale must be a whole number >= 1, got {cfg.render_downscale}")
         distorted = [f.image.name for _, f in frames if f.intr.distorted]
         if distorted:
             raise DataError(f"--segmenter auto needs undistorted (pinhole) images; {distorted[0]} has distortion "

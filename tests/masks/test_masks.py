@@ -352,7 +352,7 @@ def test_make_masks_auto_with_a_very_short_reference(tmp_path):
     shutil.rmtree(data / "masks")
     ref = tmp_path / "ref"
     logs: list[str] = []
-    summary = make_masks(MasksConfig(data=data, reference=ref, reference_steps=5, render_downscale=1.0, progress=False), log=logs.append)
+    summary = make_masks(MasksConfig(data=data, reference=ref, reference_steps=5, render_downscale=1, progress=False), log=logs.append)
     assert (ref / "config.yml").is_file() and summary["reference"] == str(ref)
     from nerf2gs_plugin.engine.config import read_config_doc
 
@@ -365,12 +365,28 @@ def test_make_masks_auto_with_a_very_short_reference(tmp_path):
     # again from renders at half the size per side (the default): the masks are still written at the images' size
     again = make_masks(MasksConfig(data=data, reference=ref, overwrite=True, progress=False), log=logs.append)
     assert any("reusing reference" in line for line in logs)
-    assert (summary["render_downscale"], again["render_downscale"]) == (1.0, 2.0)
+    assert (summary["render_downscale"], again["render_downscale"]) == (1, 2)
     assert again["render_cpu_seconds"] < summary["render_cpu_seconds"]
     img = load_mask(outs.image_filenames[0].parent.parent / "masks" / "sky" / f"{outs.image_filenames[0].stem}.png")
     assert tuple(img.shape[:2]) == (int(outs.cameras.height[0]), int(outs.cameras.width[0]))
     with pytest.raises(ConfigError, match="render-downscale"):
         make_masks(MasksConfig(data=data, reference=ref, overwrite=True, render_downscale=0.5, progress=False), log=logs.append)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_decimated_camera_has_exactly_the_chosen_pixels_rays(d):
+    """--render-downscale renders every d-th pixel of the full-size camera (its footprint kept); the
+    mask maths see them as a camera of their own, whose rays must be those very pixels' rays."""
+    from nerf2gs_plugin.cameras import Cameras
+    from nerf2gs_plugin.masking.auto_masks import decimated
+
+    c2w = torch.tensor([[[0.96, 0.0, 0.28, 1.0], [0.0, 1.0, 0.0, 2.0], [-0.28, 0.0, 0.96, 3.0]]])
+    cam = Cameras(c2w, torch.tensor([70.0]), torch.tensor([66.0]), torch.tensor([31.3]), torch.tensor([23.9]),
+                  torch.tensor([61]), torch.tensor([47]))
+    small, pixels = decimated(cam, d)
+    assert (int(small.height[0]), int(small.width[0])) == (47 // d, 61 // d) and int(pixels.sum()) == (47 // d) * (61 // d)
+    full = cam.generate_rays(0)
+    torch.testing.assert_close(small.generate_rays(0).directions, full.directions[pixels.reshape(-1)], atol=1e-6, rtol=0)
 
 
 def _street_scene(wall_h: float = 6.0, pitch_deg: float = 10.0):
