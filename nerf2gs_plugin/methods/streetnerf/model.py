@@ -184,7 +184,7 @@ class StreetNeRFModelConfig(ModelConfig):
     """Renders (no gradient: eval, the masks' reference, the augmentation's views) take this many fine
     samples per ray; None: ``num_nerf_samples``, as training. Fewer make a view faster (16: 1.25-1.5x)
     but a long-trained reference's bird's-eye views lose surfaces the fewer samples miss (16 on the
-    real path's 3000-step reference: accumulation -0.11 on average, 23 dB from the 24-sample render;
+    real path's 3000-step reference: mean accumulation change up to 0.11, 23 dB from the 24-sample render;
     docs/speed.md)."""
     render_min_weight: float = 1e-4
     """Renders (no gradient: eval, views from above, the augmentation, the masks' reference) run the colour
