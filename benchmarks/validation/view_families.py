@@ -22,7 +22,7 @@ from typing import Optional
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig, generate_street, read_generator_version  # noqa: E402
-from nerf2gs_bench.paper import _overrides, ratios_md, run_plan, write_results  # noqa: E402
+from nerf2gs_bench.paper import _overrides, ratios_md, run_plan, step_overrides, write_results  # noqa: E402
 from nerf2gs_bench.runner import EVAL_SPLITS, BenchRunner, failure_reason  # noqa: E402
 from nerf2gs_bench.runs import RunSpec  # noqa: E402
 
@@ -60,13 +60,20 @@ def reference(data: Path, runs: Path, given: Optional[str], evaluate: bool = Tru
     return Path(res["run_dir"]), Path(res["run_dir"]).name, res
 
 
-def run_augmented(runner: BenchRunner, data: Path, ref: tuple[Path, str], label: str, augment: Optional[dict]) -> dict:
-    """One quick target run (+ ``augment``'s views from ``ref``; None: the target alone), evaluated on the runner's splits."""
-    spec = RunSpec(label, TARGET, _overrides("quick", TARGET), augment_from="StreetNeRF" if augment is not None else None,
+def target_overrides(target: str, steps: Optional[int] = None) -> dict:
+    """The bench overrides of ``target``: the quick bench's (None) or ``steps`` with its schedules rescaled."""
+    return _overrides("quick", target) if steps is None else {**step_overrides(target, steps), "steps_per_eval_image": 0}
+
+
+def run_augmented(runner: BenchRunner, data: Path, ref: tuple[Path, str], label: str, augment: Optional[dict],
+                  target: str = TARGET, steps: Optional[int] = None) -> dict:
+    """One ``target`` run at the quick bench's steps or ``steps`` (+ ``augment``'s views from ``ref``; None: the
+    target alone), evaluated on the runner's splits."""
+    spec = RunSpec(label, target, target_overrides(target, steps), augment_from="StreetNeRF" if augment is not None else None,
                    augment=augment or {})
     out = runner.run(spec, data, reference=ref if augment is not None else None)
     reason = failure_reason(out)
-    return out.result if reason is None else {"label": label, "target": TARGET, "failed": True, "error": reason}
+    return out.result if reason is None else {"label": label, "target": target, "failed": True, "error": reason}
 
 
 def chosen_lane_shift() -> tuple[str, dict]:

@@ -462,6 +462,35 @@ def lane_sentence(results: dict[str, dict]) -> str:
             f"bev_1 / bev_2 {db(d['bev_1'])} / {db(d['bev_2'])} (target: within 0.2 dB), street {db(d['street'])}.")
 
 
+LANE_BOUND_ROWS = ("StreetNeRF", "splatfacto", "splatfacto + birds-eye", "splatfacto + birds-eye lane-shift")
+
+
+def lane_bound_section() -> str:
+    """The reference's own PSNR one, two and four metres to the side against the target's, per street: what
+    its views can teach at most, and how much of that the target learnt."""
+    lines = ["| street | split | " + " | ".join(LANE_BOUND_ROWS) + " | StreetNeRF - splatfacto | gain with lane views | share of the gap |",
+             "|---" * (3 + len(LANE_BOUND_ROWS) + 2) + "|"]
+    lane4, street_gap = [], []
+    for rel, street in (("view_families.json", "seed 0"), ("view_families_seed7.json", "seed 7")):
+        res = load(rel)["results"]
+        if any(res.get(r, {}).get("failed", r not in res) for r in LANE_BOUND_ROWS):
+            continue
+        for split in ("street", "lane_1", "lane_2", "lane_4"):
+            p = [psnr(res[r], split) for r in LANE_BOUND_ROWS]
+            gap, got = p[0] - p[1], p[3] - p[1]
+            if split == "lane_4":
+                lane4.append((street, gap, got))
+            if split == "street":
+                street_gap.append(gap)
+            lines.append(f"| {street} | {split} | " + " | ".join(f"{v:.2f}" for v in p) + f" | {db(gap)} | {db(got)} | {got / gap:.0%} |")
+    said = "; ".join(f"{s}: StreetNeRF {db(g)} dB over Splatfacto alone, the lane views bring {db(x)} ({x / g:.0%} of it)" for s, g, x in lane4)
+    return ("The reference bounds what its views can teach: StreetNeRF's own PSNR on the test splits beside Splatfacto "
+            "alone and with its views (same runs as the tables below). At lane_4 " + said + ". The +2 dB target is "
+            "below what the reference holds there, so the reference does not rule it out; but Splatfacto alone is "
+            f"{span(street_gap)} dB below the reference on the held-out street views too, the poses it trains at, so at the quick "
+            "bench's steps the target's own fit, more than the reference, holds the gain back.\n\n" + "\n".join(lines))
+
+
 def sweep_section() -> str:
     doc = load("lane_shift_sweep.json")
     seeds = list(doc["psnr"])
@@ -484,6 +513,7 @@ def page_view_families() -> str:
              "Splatfacto alone, with the bird's-eye views, the lane-shift views (`--augment.views`, each family its own "
              "share of the samples) and both, from one StreetNeRF reference per street at the quick bench's steps, "
              "scored on the test views (lane_2 / lane_4: 2 and 4 m to the side at camera height).", "",
+             "## What the reference holds at the next lanes", "", lane_bound_section(), "",
              "## Choosing the lane-shift options", "", sweep_section()]
     for rel, street in (("view_families.json", "The embedded street (seed 0)"), ("view_families_seed7.json", "A second street (seed 7)")):
         results = load(rel)["results"]
