@@ -8,11 +8,12 @@ the lane-shift views with their own share of the samples (the family's defaults,
 validation views by lane_shift_sweep.py) and, for comparison, with the one share of before
 (every additional view drawn alike: bird's-eye 0.25, lane-shift 0.5 of the samples).
 
-Usage: python benchmarks/validation/view_families.py WORK [SEED] [REFERENCE_RUN]
+Usage: python benchmarks/validation/view_families.py WORK [SEED] [REFERENCE_RUN] [--target METHOD]
   WORK holds the street (WORK/street-seedN) and the runs (WORK/runs); runs already trained are reused.
   REFERENCE_RUN: a finished StreetNeRF bench run of that street to render the views from (else one is
   trained at the quick bench's steps).
-Writes benchmarks/results/view_families.{json,md,png} (seed 0) or view_families_seedN.{json,md,png}.
+  --target: scaffold-gs or 2dgs instead of Splatfacto (alone, + birds-eye, + birds-eye lane-shift).
+Writes benchmarks/results/view_families[_TARGET].{json,md,png} (seed 0) or view_families[_TARGET]_seedN.{json,md,png}.
 """
 import argparse
 import json
@@ -90,34 +91,46 @@ def main() -> None:
     ap.add_argument("seed", type=int, nargs="?", default=0)
     ap.add_argument("reference_run", nargs="?", default=None)
     ap.add_argument("--only-fixed-rows", action="store_true", help="the rows that do not wait for the sweep's choice")
+    ap.add_argument("--target", default=TARGET, help="the target method; other than splatfacto: alone, + birds-eye, "
+                    "+ birds-eye lane-shift only (the family rows are Splatfacto's)")
     args = ap.parse_args()
-    work, seed = args.work, args.seed
+    work, seed, t = args.work, args.seed, args.target
     data = street(work, seed)
     ref_dir, ref_key, ref_result = reference(data, work / "runs", args.reference_run)
     runner = BenchRunner(work / "runs", splits=EVAL_SPLITS)
     ref = (ref_dir, ref_key)
-    rows = {"StreetNeRF": ref_result,
-            TARGET: run_augmented(runner, data, ref, TARGET, None),
-            f"{TARGET} + birds-eye": run_augmented(runner, data, ref, f"{TARGET} + birds-eye", {}),
-            f"{TARGET} + birds-eye lane-shift (one share)": run_augmented(runner, data, ref, f"{TARGET} + birds-eye lane-shift (one share)",
-                                                                        {"views": ["birds-eye", "lane-shift"]} | SHARED)}
+
+    def row(label: str, augment: Optional[dict]) -> dict:
+        return run_augmented(runner, data, ref, label, augment, target=t)
+
+    rows = {"StreetNeRF": ref_result, t: row(t, None), f"{t} + birds-eye": row(f"{t} + birds-eye", {})}
+    if t == TARGET:
+        rows[f"{t} + birds-eye lane-shift (one share)"] = row(f"{t} + birds-eye lane-shift (one share)",
+                                                              {"views": ["birds-eye", "lane-shift"]} | SHARED)
     if args.only_fixed_rows:
         return
     chosen, lane = chosen_lane_shift()
-    rows[f"{TARGET} + lane-shift"] = run_augmented(runner, data, ref, f"{TARGET} + lane-shift", {"views": ["lane-shift"], "lane_shift": lane})
-    rows[f"{TARGET} + birds-eye lane-shift"] = run_augmented(runner, data, ref, f"{TARGET} + birds-eye lane-shift",
-                                                            {"views": ["birds-eye", "lane-shift"], "lane_shift": lane})
-    t = TARGET
+    if t == TARGET:
+        rows[f"{t} + lane-shift"] = row(f"{t} + lane-shift", {"views": ["lane-shift"], "lane_shift": lane})
+    rows[f"{t} + birds-eye lane-shift"] = row(f"{t} + birds-eye lane-shift", {"views": ["birds-eye", "lane-shift"], "lane_shift": lane})
     pairs = [(f"{t} + birds-eye", t), (f"{t} + lane-shift", t), (f"{t} + birds-eye lane-shift", t), (f"{t} + birds-eye lane-shift", f"{t} + birds-eye"),
              (f"{t} + birds-eye lane-shift (one share)", f"{t} + birds-eye")]
-    name = "view_families" if seed == 0 else f"view_families_seed{seed}"
-    note = (f"Street seed {seed} (200x112, generator version 3), quick-bench steps (StreetNeRF 1500, Splatfacto 800), one run each, "
+    pairs = [p for p in pairs if p[0] in rows]
+    name = results_name(t, seed)
+    note = (f"Street seed {seed} (200x112, generator version 3), quick-bench steps (StreetNeRF 1500, {t} 800), one run each, "
             f"reference {ref_dir.name}. lane-shift: {chosen} ({json.dumps(lane)}), the options lane_shift_sweep.py chose on the "
-            "validation views (the family's defaults); (one share): offsets -2 and +2 m, every additional view drawn alike, as "
-            "before the per-family shares (bird's-eye 0.25, lane-shift 0.5 of the samples). "
-            "`python benchmarks/validation/view_families.py WORK" + (f" {seed}" if seed else "") + " [REFERENCE_RUN]`.\n\n")
-    write_results(RESULTS, name, rows, "View families (synthetic street, quick scale)",
+            "validation views (the family's defaults)"
+            + ("; (one share): offsets -2 and +2 m, every additional view drawn alike, as before the per-family shares "
+               "(bird's-eye 0.25, lane-shift 0.5 of the samples). " if t == TARGET else ". ")
+            + "`python benchmarks/validation/view_families.py WORK" + (f" {seed}" if seed else "") + " [REFERENCE_RUN]"
+            + ("" if t == TARGET else f" --target {t}") + "`.\n\n")
+    write_results(RESULTS, name, rows, f"View families (synthetic street, quick scale){'' if t == TARGET else ', ' + t}",
                   extra_md=note + "Differences, same bench run:\n\n" + ratios_md(rows, pairs) + "\n")
+
+
+def results_name(target: str, seed: int) -> str:
+    """view_families[_TARGET][_seedN]: Splatfacto's files keep their names."""
+    return "view_families" + ("" if target == TARGET else "_" + target.replace("-", "_")) + ("" if seed == 0 else f"_seed{seed}")
 
 
 if __name__ == "__main__":
