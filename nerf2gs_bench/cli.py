@@ -139,7 +139,7 @@ class Ablation:
     """Retrain and re-evaluate every run of the bench even when a finished one with its key exists."""
 
     def main(self) -> None:
-        from nerf2gs_bench.paper import ablation_plan, confidence_label, run_named_bench
+        from nerf2gs_bench.paper import ABLATION_FAMILIES, ablation_plan, confidence_label, family_label, run_named_bench
 
         data = ensure_street(self.data, self.runs)
         enh = bench_enhancer(data, self.runs, self.scale, self.enhancer_prior, self.enhancer_fine_tune) if self.enhancer else None
@@ -147,6 +147,7 @@ class Ablation:
         t = "splatfacto"
         compare = [(f"{t} + views from {t}", t), (f"{t} + views from StreetNeRF", t)]
         compare += [(f"{t} + views from StreetNeRF{confidence_label(c)}", f"{t} + views from StreetNeRF") for c in self.confidence]
+        compare += [(f"{t} + views from StreetNeRF{family_label(v)}", t) for v in ABLATION_FAMILIES]
         compare += [(f"StreetNeRF w/o {f}", "StreetNeRF") for f in ("sky", "ground_reg", "transient_mask", "appearance", "point_depth")]
         run_named_bench("ablation", plan, data, self.runs, self.out, f"Ablation, synthetic street ({self.scale} scale)", compare=compare,
                         rerun=self.rerun)

@@ -91,6 +91,16 @@ def paper_table_plan(scale: str, targets=TARGETS, enhancer: Optional[str] = None
     return plan
 
 
+ABLATION_FAMILIES = (("lane-shift",), ("raise",), ("birds-eye", "lane-shift"))
+"""The ablation's view-family rows beside the bird's-eye views ("views from StreetNeRF"), each family's defaults;
+the poses family needs the user's file of poses, so it has no row."""
+
+
+def family_label(views: tuple[str, ...]) -> str:
+    """The row suffix of a run trained with ``--augment.views views``."""
+    return f" ({' '.join(views)})"
+
+
 def ablation_plan(scale: str, enhancer: Optional[str] = None, confidence: tuple[str, ...] = ()) -> list[RunSpec]:
     """Views from Splatfacto itself vs from StreetNeRF (+ enhancer, + ``--augment.confidence`` per mode
     in ``confidence``), then StreetNeRF without each of its street-specific terms."""
@@ -103,6 +113,8 @@ def ablation_plan(scale: str, enhancer: Optional[str] = None, confidence: tuple[
     ]
     plan += [RunSpec(f"{t} + views from StreetNeRF{confidence_label(mode)}", t, _overrides(scale, t), augment_from="StreetNeRF",
                      augment={"confidence": mode}) for mode in confidence]
+    plan += [RunSpec(f"{t} + views from StreetNeRF{family_label(views)}", t, _overrides(scale, t), augment_from="StreetNeRF",
+                     augment={"views": list(views)}) for views in ABLATION_FAMILIES]
     if enhancer:
         plan.insert(3, RunSpec(f"{t} + views from {t} + enhancer", t, _overrides(scale, t), augment_from=t, augment={"enhancer": enhancer}))
         plan.append(RunSpec(f"{t} + views from StreetNeRF + enhancer", t, _overrides(scale, t), augment_from="StreetNeRF", augment={"enhancer": enhancer}))
