@@ -133,6 +133,10 @@ class Ablation:
     """With --enhancer-prior: fine-tune the prior (its ``.pt``) on the capture's pairs first (``train --init``)."""
     confidence: tuple[Literal["visibility", "consistency"], ...] = ()
     """Also a "splatfacto + views from StreetNeRF (<mode> confidence)" row per mode (--augment.confidence <mode>)."""
+    streetnerf_terms: bool = True
+    """The rows of StreetNeRF without each of its street terms (five more StreetNeRF trainings)."""
+    name: str = "ablation"
+    """Results file name under out (another name keeps a partial table from replacing the full one)."""
     out: Path = RESULTS
     runs: Path = RUNS
     rerun: bool = False
@@ -143,13 +147,14 @@ class Ablation:
 
         data = ensure_street(self.data, self.runs)
         enh = bench_enhancer(data, self.runs, self.scale, self.enhancer_prior, self.enhancer_fine_tune) if self.enhancer else None
-        plan = ablation_plan(self.scale, enh, self.confidence)
+        plan = ablation_plan(self.scale, enh, self.confidence, self.streetnerf_terms)
         t = "splatfacto"
         compare = [(f"{t} + views from {t}", t), (f"{t} + views from StreetNeRF", t)]
         compare += [(f"{t} + views from StreetNeRF{confidence_label(c)}", f"{t} + views from StreetNeRF") for c in self.confidence]
         compare += [(f"{t} + views from StreetNeRF{family_label(v)}", t) for v in ABLATION_FAMILIES]
-        compare += [(f"StreetNeRF w/o {f}", "StreetNeRF") for f in ("sky", "ground_reg", "transient_mask", "appearance", "point_depth")]
-        run_named_bench("ablation", plan, data, self.runs, self.out, f"Ablation, synthetic street ({self.scale} scale)", compare=compare,
+        compare += [(f"StreetNeRF w/o {f}", "StreetNeRF") for f in ("sky", "ground_reg", "transient_mask", "appearance", "point_depth")
+                    if self.streetnerf_terms]
+        run_named_bench(self.name, plan, data, self.runs, self.out, f"Ablation, synthetic street ({self.scale} scale)", compare=compare,
                         rerun=self.rerun)
 
 

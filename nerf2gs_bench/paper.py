@@ -101,7 +101,8 @@ def family_label(views: tuple[str, ...]) -> str:
     return f" ({' '.join(views)})"
 
 
-def ablation_plan(scale: str, enhancer: Optional[str] = None, confidence: tuple[str, ...] = ()) -> list[RunSpec]:
+def ablation_plan(scale: str, enhancer: Optional[str] = None, confidence: tuple[str, ...] = (),
+                  streetnerf_terms: bool = True) -> list[RunSpec]:
     """Views from Splatfacto itself vs from StreetNeRF (+ enhancer, + ``--augment.confidence`` per mode
     in ``confidence``), then StreetNeRF without each of its street-specific terms."""
     t = "splatfacto"
@@ -118,7 +119,7 @@ def ablation_plan(scale: str, enhancer: Optional[str] = None, confidence: tuple[
     if enhancer:
         plan.insert(3, RunSpec(f"{t} + views from {t} + enhancer", t, _overrides(scale, t), augment_from=t, augment={"enhancer": enhancer}))
         plan.append(RunSpec(f"{t} + views from StreetNeRF + enhancer", t, _overrides(scale, t), augment_from="StreetNeRF", augment={"enhancer": enhancer}))
-    for flag in ("sky", "ground_reg", "transient_mask", "appearance", "point_depth"):
+    for flag in ("sky", "ground_reg", "transient_mask", "appearance", "point_depth") if streetnerf_terms else ():
         plan.append(RunSpec(f"StreetNeRF w/o {flag}", "streetnerf", _overrides(scale, "streetnerf", {"pipeline": {"model": {flag: False}}})))
     return plan
 

@@ -371,6 +371,8 @@ def test_quick_scale_rescales_schedules_and_merges_extras(tmp_path):
     assert fams == {"splatfacto + views from StreetNeRF (lane-shift)": ["lane-shift"], "splatfacto + views from StreetNeRF (raise)": ["raise"],
                     "splatfacto + views from StreetNeRF (birds-eye lane-shift)": ["birds-eye", "lane-shift"]}
     assert all(s.augment_from == "StreetNeRF" for s in ablation_plan("quick") if "views" in s.augment)
+    short = ablation_plan("quick", streetnerf_terms=False)
+    assert [s.label for s in short] == [s.label for s in ablation_plan("quick") if " w/o " not in s.label] and len(short) == 7
     res = {"a": _result("a", "splatfacto", 30.0, 18.0, 20.0, 100, 1000, "/a"), "b": _result("b", "streetnerf", 0.2, 20.0, 21.0, 500, 0, "/b")}
     speed_quality_chart(res, tmp_path / "x_speed_quality.png", "t")
     assert (tmp_path / "x_speed_quality.png").read_bytes()[:4] == b"\x89PNG"
