@@ -586,9 +586,22 @@ def levers_section() -> str:
                      + " | ".join(cell("test_bev_1_over_birds_eye", s) for s in seeds) + " |")
     nerf = [doc["test_psnr"][s]["StreetNeRF"]["lane_4"] - doc["test_psnr"][s]["alone"]["lane_4"] for s in seeds
             if doc["test_psnr"][s].get("StreetNeRF") and doc["test_psnr"][s].get("alone")]
+    chosen_said = ""
+    if doc["chosen"]:
+        steps = doc["runs"][doc["chosen"]]["steps"]
+        alone = next(n for n, r in doc["runs"].items() if r["augment"] is None and r["steps"] == steps)
+        parts, gots = [], []
+        for s in seeds:
+            t = doc["test_psnr"][s]
+            if t.get("StreetNeRF") and t.get(alone) and t.get(doc["chosen"]):
+                lead, got = t["StreetNeRF"]["lane_4"] - t[alone]["lane_4"], t[doc["chosen"]]["lane_4"] - t[alone]["lane_4"]
+                parts.append(f"seed {s}: {db(got)} of the reference's {db(lead)} ({got / lead:.0%})")
+                gots.append(got)
+        chosen_said = (f" On the test views the chosen lever gives lane_4 {'; '.join(parts)} over Splatfacto alone at {steps} steps"
+                       + (": short of +2 dB on every street." if gots and max(gots) < 2 else "."))
     return ("Splatfacto + bird's-eye + lane-shift views with other offsets and shares, and at twice the steps, against Splatfacto "
             "alone at the same steps (val_lane: 1.5 and 3 m to the side; bird's-eye kept: val_bev within 0.2 dB of the bird's-eye "
-            f"views alone). Chosen on the validation views: {doc['chosen'] or 'none'}. For scale, StreetNeRF is "
+            f"views alone). Chosen on the validation views: {doc['chosen'] or 'none'}.{chosen_said} For scale, StreetNeRF is "
             f"{span(nerf) if nerf else '-'} dB over Splatfacto alone (800 steps) at lane_4. "
             f"Source: {source('lane_levers.json')} (every run's PSNR, both split sets: {source('lane_levers.md')}), "
             "`python benchmarks/validation/lane_levers.py WORK 0=REFERENCE_RUN 7=REFERENCE_RUN`.\n\n" + "\n".join(lines))
