@@ -3,7 +3,7 @@ reference, trained here when absent: STEPS steps on the mask-less view), IoU aga
 when the dataset has them (synthetic streets) and the agreement of the two mask sets; default
 AutoOptions, and with the motion route on. Numbers in docs/speed.md.
 Usage: python benchmarks/validation/masks_render_downscale.py DATA REFERENCE_DIR STEPS OUT.json"""
-import json, sys, time, torch, torch.nn.functional as F
+import argparse, json, time, torch, torch.nn.functional as F
 from pathlib import Path
 from nerf2gs_plugin.masking.auto_masks import render_views
 from nerf2gs_plugin.masking.mask_reference import ensure_reference
@@ -13,7 +13,13 @@ from nerf2gs_plugin.masks.maskless import maskless_view
 from nerf2gs_plugin.data.images import load_mask
 
 torch.set_num_threads(1)
-data, refdir, steps, out = Path(sys.argv[1]), Path(sys.argv[2]), int(sys.argv[3]), Path(sys.argv[4])
+ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+ap.add_argument("data", type=Path, help="dataset folder")
+ap.add_argument("refdir", type=Path, help="the masks' reference folder (trained here when absent)")
+ap.add_argument("steps", type=int, help="reference steps")
+ap.add_argument("out", type=Path, help="results JSON")
+args = ap.parse_args()
+data, refdir, steps, out = args.data, args.refdir, args.steps, args.out
 c0 = time.process_time()
 ref = ensure_reference(data, refdir, steps, progress=False, log=lambda s: None)
 print(f"reference: {time.process_time() - c0:.1f} CPU s", flush=True)

@@ -3,17 +3,24 @@ render, on bird's-eye views of the augmentation (AugmentConfig defaults) and tra
 The first variant is the reference of the PSNR column. Numbers in docs/speed.md.
 Usage: python benchmarks/validation/render_samples_ab.py RUN NBEV NTRAIN REPS "48,24,24;48,24,16;32,16,16"
 (proposal samples..., fine samples per variant)"""
-import dataclasses, sys, time, torch
+import argparse, dataclasses, time, torch
 from nerf2gs_plugin.runs.load import load_run
 from nerf2gs_plugin.augment.config import AugmentConfig
 from nerf2gs_plugin.augment.views import additional_views
 
 torch.set_num_threads(1)
-run = load_run(sys.argv[1], device="cpu")
+ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+ap.add_argument("run", help="a StreetNeRF run folder")
+ap.add_argument("nbev", type=int, help="bird's-eye views to render")
+ap.add_argument("ntrain", type=int, help="training views to render")
+ap.add_argument("reps", type=int, help="interleaved repetitions (best kept)")
+ap.add_argument("variants", help='"proposal...,fine;..." one variant per ;')
+args = ap.parse_args()
+run = load_run(args.run, device="cpu")
 model = run.model
 td = run.pipeline.datamanager.train_data
-nbev, ntrain, reps = int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
-variants = [tuple(int(x) for x in v.split(",")) for v in sys.argv[5].split(";")]
+nbev, ntrain, reps = args.nbev, args.ntrain, args.reps
+variants = [tuple(int(x) for x in v.split(",")) for v in args.variants.split(";")]
 views = additional_views(td.cameras, td, AugmentConfig())
 bev = views.cameras
 cams = [bev[int(i)] for i in torch.linspace(0, len(bev) - 1, nbev).round().long()] + \
