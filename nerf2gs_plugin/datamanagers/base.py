@@ -133,6 +133,11 @@ class DataManager(ABC):
             return torch.randint(len(self.extra_images), (n,), generator=self.generator)
         return torch.multinomial(self.extra_view_probs, n, replacement=True, generator=self.generator)
 
+    def initial_points(self) -> Optional[tuple[Tensor, Tensor]]:
+        """Points ``[P, 3]`` (normalised world) and colours ``[P, 3]`` (0-1) a model may start from besides the
+        dataset's sparse points (the augmentation's: where only its views see the scene); None: none."""
+        return None
+
     def state_dict(self) -> dict:
         return {"generator": self.generator.get_state()}
 

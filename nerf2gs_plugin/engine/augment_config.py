@@ -127,6 +127,11 @@ class AugmentConfig:
     it renders: mean: every view in the mean of the photos' transforms; nearest: each view in the
     transform of the training photo nearest it (an input view its own, a view from above the photo it
     was raised from), so the target sees the colours of the photos around each view."""
+    seed_points: float = 1.0
+    """The target also starts from points of the reference's depth in the additional views, one per voxel
+    that none of the capture's sparse points is in (augment/seeds.py), at most this many times the sparse
+    points (at least 1000): a splatting target only grows primitives by splitting those it has, so without
+    them the road seen from above stays a hole (0: off)."""
     real_only_from: float = 0.9
     """Fraction of the run after which only the input views (composites) are sampled: 0.9 gives the last
     10% of the steps to the target's own street evidence (1.0: the additional views to the end; 0.9 was

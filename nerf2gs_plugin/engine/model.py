@@ -110,6 +110,12 @@ class Model(nn.Module, metaclass=ABCMeta):
         the model's (the default). The augmentation renders the input views from these."""
         return None
 
+    def add_initial_points(self, xyz: Tensor, rgb: Tensor) -> int:
+        """Start also from these points ``[P, 3]`` (normalised world) with colours ``[P, 3]`` (0-1), before
+        training (:meth:`DataManager.initial_points`); returns how many primitives were added. A model that
+        does not start from points ignores them (the default)."""
+        return 0
+
     def training_state(self) -> dict[str, Tensor]:
         """What a resumed run needs besides the parameters and the optimizers' moments (a densification
         strategy's accumulated statistics); written into every checkpoint. Nothing by default."""

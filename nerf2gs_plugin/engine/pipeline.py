@@ -26,7 +26,8 @@ class PipelineConfig(InstantiateConfig):
 class Pipeline(nn.Module):
     """``wrap_datamanager`` (e.g. the AugmentedDataManager's factory) replaces the method's
     DataManager by a wrapper of it once the model is built: the model is built from the real
-    training data, and with the same random state as without the wrapper."""
+    training data, and with the same random state as without the wrapper; then it takes the wrapper's
+    :meth:`DataManager.initial_points` (if any) as more primitives to start from."""
 
     def __init__(self, config: PipelineConfig, data: Path, device: torch.device | str = "cpu", seed: int = 0,
                  datamanager: Optional[DataManager] = None,
@@ -38,6 +39,11 @@ class Pipeline(nn.Module):
         self.model: Model = config.model.setup(train_data=self.datamanager.train_data).to(self.device)
         if wrap_datamanager is not None:
             self.datamanager = wrap_datamanager(self.datamanager)
+            points = self.datamanager.initial_points()
+            if points is not None and len(points[0]):
+                added = self.model.add_initial_points(points[0].to(self.device), points[1].to(self.device))
+                if added:
+                    print(f"initial points: {added} added where only the additional views see the scene")
 
     def get_train_loss_dict(self, step: int) -> tuple[dict[str, Tensor], dict[str, Tensor], dict[str, Tensor]]:
         inputs, batch = self.datamanager.next_train(step)

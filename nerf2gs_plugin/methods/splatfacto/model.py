@@ -124,6 +124,31 @@ class SplatfactoModel(Model):
         self._depth_targets = self._sparse_depth_targets(train_data) if cfg.depth_loss_weight > 0 else None
         self._setup_strategy()
 
+    @torch.no_grad()
+    def add_initial_points(self, xyz: Tensor, rgb: Tensor) -> int:
+        """New Gaussians at ``xyz`` as the initial ones are made (kNN scale among all, initial opacity,
+        colour ``rgb``); before training only (the optimizers are built from the parameters after)."""
+        if len(xyz) == 0:
+            return 0
+        g = self.gauss
+        dev = g["means"].device
+        xyz = xyz.to(dev, torch.float32)
+        every = torch.cat([g["means"].detach(), xyz])
+        dist = knn_mean_distance(every).clamp_min(1e-4)[-len(xyz):]
+        mcmc = self.config.strategy_type == "mcmc"
+        if mcmc:
+            dist = dist * self.config.mcmc.init_scale
+        init_op = self.config.mcmc.init_opacity if mcmc else self.config.init_opacity
+        n, k = len(xyz), g["features_rest"].shape[1]
+        scales = torch.log(dist)[:, None].repeat(1, g["scales"].shape[1])  # 2DGS: two tangent scales
+        new = {"means": xyz, "scales": scales, "quats": random_quats(n, torch.Generator().manual_seed(1)).to(dev),
+               "opacities": torch.full((n,), float(logit(init_op)), device=dev), "features_dc": rgb_to_sh(rgb.to(dev).float()),
+               "features_rest": torch.zeros(n, k, 3, device=dev)}
+        for name, rows in new.items():
+            g[name] = nn.Parameter(torch.cat([g[name].detach(), rows.to(g[name].dtype)]))
+        self._setup_strategy()
+        return n
+
     def _initial_points(self, data: DataparserOutputs, gen: torch.Generator) -> tuple[Tensor, Tensor]:
         """Sparse points (normalised world) and their colours in [0,1]; random in the box if none."""
         if data.points3D_xyz is not None and len(data.points3D_xyz) > 0:
