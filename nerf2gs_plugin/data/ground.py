@@ -108,12 +108,51 @@ def fit_ground_plane(points: np.ndarray, cam_centres: np.ndarray, cam_up: Option
     return GroundPlane(normal, offset, inliers, int(len(cand)), med)
 
 
+MIN_BELOW_FRACTION = 0.5
+"""A ground plane lies below the cameras: its inliers' median must be at least this fraction of the median
+camera height above the plane below the median camera, along the cameras' own mean up. Photos of a facade
+see little floor, and a plane through the walls' points at the cameras' height passes the tilt limit
+(Herz-Jesu-P25: 29 deg from the cameras' up, inliers 0.28 camera heights below them; road captures 1.0-1.3)."""
+
+
+def below_cameras(plane: GroundPlane, points: np.ndarray, cam_centres: np.ndarray, cam_up: np.ndarray,
+                  rel_thresh: float = 0.05) -> float:
+    """How far the plane's inliers (within ``rel_thresh`` x the median camera height of it) lie below the
+    median camera along ``cam_up``, in median camera heights above the plane (0 without inliers)."""
+    up = np.asarray(cam_up, dtype=np.float64) / np.linalg.norm(cam_up)
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    inl = pts[np.abs(plane.height(pts)) < rel_thresh * plane.median_camera_height]
+    if len(inl) == 0 or plane.median_camera_height <= 0:
+        return 0.0
+    cams = np.asarray(cam_centres, dtype=np.float64).reshape(-1, 3)
+    return float((np.median(cams @ up) - np.median(inl @ up)) / plane.median_camera_height)
+
+
+UPRIGHT_FROM_MEAN_DEG = 45.0
+"""The most the cameras' upright (from their horizontal axes) may differ from their mean up and still be
+taken: photos look up or down by tens of degrees, but a portrait (rolled) photo's axis is no horizon."""
+
+
+def cameras_upright(cam_up: np.ndarray, cam_right: Optional[np.ndarray]) -> np.ndarray:
+    """The up of the cameras alone: perpendicular to every camera's horizontal axis (people and cars hold
+    cameras without roll; Herz-Jesu-P25: 1 deg from the surveyed vertical, the mean up 10 deg: facade photos
+    look up) when those axes turn enough to say it, else the cameras' mean up."""
+    from nerf2gs_plugin.data.road_plane import upright_normal
+
+    up = np.asarray(cam_up, dtype=np.float64) / np.linalg.norm(cam_up)
+    if cam_right is None:
+        return up
+    upright = upright_normal(up, cam_right, np.zeros((1, 3)), min_extent=np.inf, max_deg=UPRIGHT_FROM_MEAN_DEG)
+    return up if upright is None else upright
+
+
 @dataclass
 class MetricScale:
     metres_per_unit: float
     up: np.ndarray  # [3] in data units
-    source: str  # "camera-height" | "override"
+    source: str  # "camera-height" | "camera-height, lowest layer" | "override"
     plane: Optional[GroundPlane] = None
+    note: str = ""  # why the ground plane was not used (one line), or ""
 
 
 def estimate_metric_scale(points: np.ndarray, cam_centres: np.ndarray, cam_up: np.ndarray, camera_height: float = 1.5,
@@ -123,24 +162,39 @@ def estimate_metric_scale(points: np.ndarray, cam_centres: np.ndarray, cam_up: n
     plane still gives up when found). No plane and no override: a DataError naming the flags. Given
     the cameras' horizontal axes ``cam_right [N, 3]``, up is the cameras' upright direction when it
     agrees with the plane (:func:`~nerf2gs_plugin.data.road_plane.upright_normal`); the scale is the
-    plane's either way."""
+    plane's either way. A plane whose points are not below the cameras (:data:`MIN_BELOW_FRACTION`) is
+    rejected (``note`` says why): up is then the cameras' own (:func:`cameras_upright`, as without a plane)
+    and the scale the camera height over the densest layer of points below them along it."""
     from nerf2gs_plugin.data.road_plane import upright_normal
 
     plane = fit_ground_plane(points, cam_centres, cam_up)
+    note = ""
+    below = below_cameras(plane, points, cam_centres, cam_up) if plane is not None else 1.0
+    if below < MIN_BELOW_FRACTION:
+        note = (f"the ground plane's points lie {below:.2f} camera heights below the cameras (at least {MIN_BELOW_FRACTION:g}: "
+                "a wall at their height, not the ground?)")
+        plane = None
     if plane is None:
-        up = np.asarray(cam_up, dtype=np.float64) / np.linalg.norm(cam_up)
+        up = cameras_upright(cam_up, cam_right)
     else:
         upright = None if cam_right is None else upright_normal(plane.normal, cam_right, cam_centres, plane.median_camera_height)
         up = plane.normal if upright is None else upright
     if metres_per_unit is not None:
         if not metres_per_unit > 0:
             raise DataError(f"--metres-per-unit must be positive, got {metres_per_unit}", where)
-        return MetricScale(float(metres_per_unit), up, "override", plane)
+        return MetricScale(float(metres_per_unit), up, "override", plane, note)
+    if not camera_height > 0:
+        raise DataError(f"--camera-height must be positive, got {camera_height}", where)
+    if plane is None and note:  # a rejected plane: the camera height over the densest layer of points below along up
+        from nerf2gs_plugin.data.road_plane import road_layer
+
+        offset, _ = road_layer(points, cam_centres, up)
+        height = float(np.median(np.asarray(cam_centres, dtype=np.float64).reshape(-1, 3) @ up + offset)) if offset is not None else 0.0
+        if height > 0:
+            return MetricScale(float(camera_height / height), up, "camera-height, lowest layer", None, note)
     if plane is None:
         raise DataError(f"no ground plane found below the cameras (within {MAX_TILT_DEG:.0f} deg of their up) to set the "
                         "metric scale: pass --metres-per-unit (metres per data unit) instead", where)
-    if not camera_height > 0:
-        raise DataError(f"--camera-height must be positive, got {camera_height}", where)
     return MetricScale(float(camera_height / plane.median_camera_height), up, "camera-height", plane)
 
 

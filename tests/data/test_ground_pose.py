@@ -119,3 +119,53 @@ def test_capture_report_scale_error():
     r = capture_report(est, true, 2.1, np.array([0, 0, 1.0]), np.array([0, 0, 1.0]), 10, 12)
     assert abs(r["scale_error_percent"] - 5.0) < 1e-6 and r["ate_percent"] < 1e-9 and r["up_error_deg"] < 1e-6
     assert abs(r["registered_fraction"] - 10 / 12) < 1e-12
+
+
+def _courtyard(seed: int = 0, pitch_deg: float = 20.0, units_per_m: float = 0.37):
+    """Photos of a facade from 4 m, looking up ~20 deg, in a courtyard with no floor reconstructed (only the
+    walls have points, as on Herz-Jesu-P25): the old fit took a plane through the walls' feet, 44 deg off."""
+    import torch
+
+    from nerf2gs_plugin.cameras import look_at
+
+    rng = np.random.default_rng(seed)
+    back = np.stack([rng.uniform(-6, 6, 2000), np.full(2000, 4.0), rng.uniform(0, 10, 2000)], 1)
+    sides = [np.stack([np.full(1000, x), rng.uniform(-2, 4, 1000), rng.uniform(0, 10, 1000)], 1) for x in (-6.0, 6.0)]
+    pts = np.concatenate([back, *sides]) + rng.normal(0, 0.02, (4000, 3))
+    eye = np.stack([np.linspace(-4.2, 4.2, 15), rng.uniform(-1, 1, 15), np.full(15, 1.6)], 1)
+    target = np.stack([eye[:, 0] + rng.uniform(-2, 2, 15), np.full(15, 4.0),
+                       1.6 + 4.0 * np.tan(np.radians(pitch_deg + rng.uniform(-5, 5, 15)))], 1)
+    c2w = look_at(torch.tensor(eye), torch.tensor(target), torch.tensor([0.0, 0, 1], dtype=torch.float64)).numpy()
+    R, t = _random_rotation(rng), rng.normal(size=3)
+    c2w = np.concatenate([R @ c2w[:, :, :3], (units_per_m * c2w[:, :, 3] @ R.T + t)[:, :, None]], axis=2)
+    return units_per_m * pts @ R.T + t, c2w, R @ np.array([0, 0, 1.0])
+
+
+def test_a_plane_through_the_walls_is_rejected_and_up_comes_from_the_cameras(capsys):
+    from nerf2gs_plugin.data.ground import MIN_BELOW_FRACTION, below_cameras
+    from nerf2gs_plugin.data.process.pipeline import metric_scale
+
+    pts, c2w, true_up = _courtyard()
+    cam_up = c2w[:, :, 1].mean(0)
+    plane = fit_ground_plane(pts, c2w[:, :, 3], cam_up)
+    assert plane is not None and _tilt(plane.normal, true_up) > 30  # the walls' plane: what up used to be
+    assert below_cameras(plane, pts, c2w[:, :, 3], cam_up) < MIN_BELOW_FRACTION
+    s = estimate_metric_scale(pts, c2w[:, :, 3], cam_up, camera_height=1.6, cam_right=c2w[:, :, 0])
+    assert s.plane is None and "below the cameras" in s.note
+    assert _tilt(s.up, true_up) < 1.0  # perpendicular to the cameras' horizontal axes (their mean up is 20 deg off)
+    assert _tilt(estimate_metric_scale(pts, c2w[:, :, 3], cam_up, camera_height=1.6).up, cam_up) < 1e-6  # no axes: mean up
+    assert s.source == "camera-height, lowest layer" and s.metres_per_unit > 0
+    with pytest.warns(UserWarning) as caught:  # one warning line from process, naming the cause and the fallback
+        metric_scale(pts, c2w, type("Opts", (), {"camera_height": 1.6, "metres_per_unit": None})())
+    assert len(caught) == 1 and "\n" not in str(caught[0].message) and "below the cameras" in str(caught[0].message)
+
+
+def test_a_road_below_the_cameras_is_kept(capsys):
+    from nerf2gs_plugin.data.ground import MIN_BELOW_FRACTION, below_cameras
+
+    rng = np.random.default_rng(3)
+    pts, cams, up, upm = _street(rng)
+    plane = fit_ground_plane(pts, cams, up)
+    assert below_cameras(plane, pts, cams, up) > 2 * MIN_BELOW_FRACTION
+    s = estimate_metric_scale(pts, cams, up, camera_height=1.5)
+    assert s.plane is not None and s.note == "" and s.source == "camera-height"

@@ -188,7 +188,10 @@ def metric_scale(xyz: np.ndarray, c2w: np.ndarray, opts: ProcessOptions):
     if scale.plane is None:
         import warnings
 
-        warnings.warn("no ground plane below the cameras: up is the cameras' mean up instead", stacklevel=2)
+        why = scale.note or "no ground plane below the cameras"
+        warnings.warn(f"{why}: up is the cameras' own (perpendicular to their horizontal axes, else their mean up)"
+                      + (", metric scale from the densest layer of points below them (check it, or pass --metres-per-unit)"
+                         if scale.source == "camera-height, lowest layer" else ""), stacklevel=2)
     return scale
 
 
