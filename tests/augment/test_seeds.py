@@ -92,3 +92,15 @@ def test_augmented_target_starts_with_points_where_only_the_views_from_above_see
         dm, Reference(plane, "plane:1", tmp_path / "ref", depth_along="ray"),
         AugmentConfig(delta_h=3.0, theta_pitch=45.0, composites=False, min_coverage=0.0, seed_points=0.0)))
     assert off.model.num_primitives() == len(sparse)
+
+
+def test_surfels_take_initial_points_too(tiny_scene):
+    """2DGS (two tangent scales per surfel) grows by the points as Splatfacto does, and still renders."""
+    pipeline = Pipeline(get_method("2dgs").config.pipeline, tiny_scene, "cpu")
+    model = pipeline.model
+    n = model.num_primitives()
+    xyz = pipeline.datamanager.train_data.points3D_xyz[:5].float() + 0.01
+    assert model.add_initial_points(xyz, torch.full((5, 3), 0.5)) == 5
+    assert model.num_primitives() == n + 5 and model.gauss["scales"].shape == (n + 5, 2)
+    out = model.render_camera(pipeline.datamanager.train_images.cameras[0])
+    assert torch.isfinite(out["rgb"]).all()
