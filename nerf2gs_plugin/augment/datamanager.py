@@ -420,22 +420,13 @@ class AugmentedDataManager(DataManager):
 
     def initial_points(self) -> Optional[tuple[Tensor, Tensor]]:
         """The reference's depth in the additional views, thinned where the sparse points leave gaps
-        (:mod:`nerf2gs_plugin.augment.seeds`, ``--augment.seed-points``); None without them."""
-        from nerf2gs_plugin.augment.seeds import MIN_SEED_BASE, lifted_points, seed_points
+        (:func:`nerf2gs_plugin.augment.seeds.views_seed_points`, ``--augment.seed-points``); None without them."""
+        from nerf2gs_plugin.augment.seeds import views_seed_points
 
-        manifest, extra = self.views.manifest, self.views.extra
-        if self.augment.seed_points <= 0 or extra is None or manifest is None or not manifest.num_extra:
+        if self.augment.seed_points <= 0 or self.views.extra is None or self.views.manifest is None:
             return None
-        depth_files = [manifest.extra_png(j, raw=True).with_name(f"{j:05d}_depth.npy") for j in range(manifest.num_extra)]
-        if not all(f.is_file() for f in depth_files):
-            return None
-        images = [extra.image(j).cpu() for j in range(len(extra))]
-        depths = [torch.from_numpy(np.load(f).astype(np.float32)).reshape(*img.shape[:2], 1) for f, img in zip(depth_files, images)]
-        td = self.inner.train_data
-        xyz, rgb = lifted_points(extra.cameras.to("cpu"), depths, images, self.reference.depth_along, td.scene_box)
-        sparse = td.points3D_xyz.float().cpu() if td.points3D_xyz is not None else None
-        budget = int(round(self.augment.seed_points * max(len(sparse) if sparse is not None else 0, MIN_SEED_BASE)))
-        return seed_points(xyz, rgb, sparse, budget)
+        return views_seed_points(self.views.manifest, self.views.extra, self.reference.depth_along, self.inner.train_data,
+                                 self.augment.seed_points)
 
     @property
     def manifest(self) -> CacheManifest:

@@ -11,8 +11,9 @@ as the count allows, so they fill the gaps the sparse points leave and no more.
 
 from __future__ import annotations
 
-from typing import Optional, Sequence
+from typing import Any, Optional, Sequence
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -78,3 +79,18 @@ def seed_points(xyz: Tensor, rgb: Tensor, occupied: Optional[Tensor], max_points
         if len(out[0]) <= max_points:
             return out
         size *= 2.0
+
+
+def views_seed_points(manifest: Any, extra: Any, depth_along: str, train_data: Any, ratio: float) -> Optional[tuple[Tensor, Tensor]]:
+    """:func:`seed_points` of a cache entry's additional views (``manifest``: their depths beside the raw
+    renders; ``extra``: the ImageSet the target trains on), at most ``ratio`` x the dataset's sparse points
+    (at least :data:`MIN_SEED_BASE`); None when the entry has no depths (a reference that renders none)."""
+    depth_files = [manifest.extra_png(j, raw=True).with_name(f"{j:05d}_depth.npy") for j in range(manifest.num_extra)]
+    if not depth_files or not all(f.is_file() for f in depth_files):
+        return None
+    images = [extra.image(j).cpu() for j in range(len(extra))]
+    depths = [torch.from_numpy(np.load(f).astype(np.float32)).reshape(*img.shape[:2], 1) for f, img in zip(depth_files, images)]
+    xyz, rgb = lifted_points(extra.cameras.to("cpu"), depths, images, depth_along, train_data.scene_box)
+    sparse = train_data.points3D_xyz.float().cpu() if train_data.points3D_xyz is not None else None
+    base = max(len(sparse) if sparse is not None else 0, MIN_SEED_BASE)
+    return seed_points(xyz, rgb, sparse, int(round(ratio * base)))
