@@ -38,6 +38,7 @@ from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
 from nerf2gs_plugin.augment.config import FAMILY_FIELDS, AugmentConfig
 from nerf2gs_plugin.augment.geometry import ViewGeometry, WorldFrame
+from nerf2gs_plugin.augment.reference_sky import reference_sky_masks, with_sky
 from nerf2gs_plugin.augment.shares import extra_sampling
 from nerf2gs_plugin.augment.views import additional_views
 from nerf2gs_plugin.augment.cache import (
@@ -413,6 +414,10 @@ class AugmentedDataManager(DataManager):
         print(f"reference renders: {self.views.render_seconds:.1f} s" + (" (reused from the cache)" if self.views.reused else ""))
         if self.views.composites is not None:
             inner.set_train_images(self.views.composites)
+        if augment.reference_sky:
+            sky = reference_sky_masks(reference.render, refined if refined is not None else inner.train_images.cameras,
+                                      td.up, reference.key, Path(reference.cache_root) / CACHE_DIR_NAME)
+            inner.set_train_images(with_sky(inner.train_images, sky))
         if self.views.extra is not None:
             families = self.views.manifest.extra_families or ["birds-eye"] * len(self.views.extra)
             prob, view_probs = extra_sampling(families, len(inner.train_images), augment)

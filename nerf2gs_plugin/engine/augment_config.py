@@ -141,6 +141,11 @@ class AugmentConfig:
     box (the far background a NeRF contracts) or that show sky (accumulation < 0.5): the target learns from
     above only the scene inside the box, and fits nothing in the air that street views would then see in
     front of their sky and far facades (augment/confidence.py:inside_box_weight)."""
+    reference_sky: bool = False
+    """Join the reference's sky at each input view (its accumulation < 0.5 above the horizon, rendered at a
+    quarter of the resolution, cached) to the input views' sky masks, so the model's sky alpha loss
+    (--pipeline.model.sky-alpha-weight) clears what the target fitted from above in front of the street
+    views' sky wherever the reference sees sky, not only where the masks do (augment/reference_sky.py)."""
 
 
 def share_flag(family: str) -> str:
