@@ -83,6 +83,10 @@ class SplatfactoModelConfig(SplatModelConfig):
     """False: the default strategy's clone / split statistics (screen-space gradients) come from the input
     views only; the additional views (from above) still move the Gaussians but do not decide where new ones
     grow (what only a NeRF's render shows, e.g. the far background from above, seeds no Gaussians)."""
+    background_from_extra_views: bool = True
+    """False: the additional views (from above) do not train the background: where the target leaves them
+    transmittance the background shows but takes no gradient, so a view-direction sky fitted to the ground
+    seen from above cannot spill into the street views' sky (the Gaussians must fill those pixels instead)."""
     mcmc: MCMCStrategyConfig = field(default_factory=lambda: MCMCStrategyConfig(
         cap_max=30000, refine_start_iter=300, refine_stop_iter=2500))
     """The MCMC strategy at CPU scale (with --pipeline.model.strategy-type mcmc): 30k-Gaussian hard budget."""
@@ -257,7 +261,10 @@ class SplatfactoModel(Model):
         self._meta = meta if training else None
         alpha = alpha[0]
         rgb = composite(render[0, ..., :3], alpha, bg).clamp(0.0, 1.0)
-        return {"rgb": rgb, "depth": render[0, ..., 3:4], "accumulation": alpha, "background": bg}
+        out = {"rgb": rgb, "depth": render[0, ..., 3:4], "accumulation": alpha, "background": bg}
+        if training and not self.config.background_from_extra_views:
+            out["foreground"] = render[0, ..., :3]  # to composite again on a detached background (an extra view)
+        return out
 
     def _render_features(self, camera: Cameras, features: Tensor) -> Tensor:
         """``[1, H, W, D]``: plain per-primitive ``features [N, D]`` composited by the rasterizer of
@@ -342,9 +349,12 @@ class SplatfactoModel(Model):
 
     def get_loss_dict(self, outputs: dict[str, Tensor], batch: dict[str, Any], metrics_dict: dict[str, Tensor]) -> dict[str, Tensor]:
         c = self.config
+        self._extra_batch = self.training and "image_idx" in batch and int(batch["image_idx"]) >= self.num_train_images
+        if self._extra_batch and "foreground" in outputs:
+            bg = outputs["background"].detach()
+            outputs = {**outputs, "rgb": composite(outputs["foreground"], outputs["accumulation"], bg).clamp(0.0, 1.0)}
         sky_bg = outputs.get("background") if c.background == "random" else None
         losses = image_loss(outputs, batch, c.ssim_lambda, c.mask_transients, c.sky_alpha_weight, sky_bg)
-        self._extra_batch = self.training and "image_idx" in batch and int(batch["image_idx"]) >= self.num_train_images
         depth = self._depth_loss(outputs, int(batch["image_idx"])) if self.training and "image_idx" in batch else None
         if depth is not None:
             losses["depth_loss"] = depth
