@@ -46,6 +46,8 @@ VARIANTS: dict[str, dict] = {
     "densify from input views": {"augment": {}, "model": {"densify_from_extra_views": False}},
     "drop_outside_box + background from input views": {"augment": {"drop_outside_box": True},
                                                         "model": {"background_from_extra_views": False}},
+    "drop_outside_box + background from input views + sky_alpha 0": {
+        "augment": {"drop_outside_box": True}, "model": {"background_from_extra_views": False, "sky_alpha_weight": 0.0}},
     "drop_outside_box + reference sky": {"augment": {"drop_outside_box": True, "reference_sky": True}},
     "drop_outside_box + reference sky, sky_alpha 0.5": {"augment": {"drop_outside_box": True, "reference_sky": True},
                                                          "model": {"sky_alpha_weight": 0.5}},
