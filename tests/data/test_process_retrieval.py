@@ -64,7 +64,7 @@ def test_no_level_plane_and_process_asks_for_the_scale(tmp_path):
     pts = np.stack([x, u * np.sin(t) - 1.0, -u * np.cos(t)], 1)  # rises 40 deg away from the cameras
     with pytest.raises(DataError, match="within 30 deg.*pass --metres-per-unit"):
         metric_scale(pts, c2w, ProcessOptions(out=tmp_path))
-    with pytest.warns(UserWarning, match="cameras' mean up"):
+    with pytest.warns(UserWarning, match="up is the cameras' own"):
         s = metric_scale(pts, c2w, ProcessOptions(out=tmp_path, metres_per_unit=2.0))
     assert s.metres_per_unit == 2.0 and np.allclose(s.up, [0, 1, 0]) and s.source == "override"
     level = np.stack([x, np.full(400, -0.0) + rng.normal(0, 0.005, 400), -u], 1)  # a level ground: kept

@@ -182,10 +182,8 @@ class StreetNeRFModelConfig(ModelConfig):
     """Rays rendered at once when rendering a whole image."""
     render_nerf_samples: Optional[int] = None
     """Renders (no gradient: eval, the masks' reference, the augmentation's views) take this many fine
-    samples per ray; None: ``num_nerf_samples``, as training. Fewer make a view faster (16: 1.25-1.5x)
-    but a long-trained reference's bird's-eye views lose surfaces the fewer samples miss (16 on the
-    real path's 3000-step reference: mean accumulation change up to 0.11, 23 dB from the 24-sample render;
-    docs/speed.md)."""
+    samples per ray; None: the training's fine samples (num-nerf-samples). Fewer make a view faster but can
+    miss surfaces of a long-trained reference's views from above (docs/speed.md)."""
     render_min_weight: float = 1e-4
     """Renders (no gradient: eval, views from above, the augmentation, the masks' reference) run the colour
     network only for samples whose compositing weight exceeds this; the others add at most this much
