@@ -112,7 +112,7 @@ MIN_BELOW_FRACTION = 0.5
 """A ground plane lies below the cameras: its inliers' median must be at least this fraction of the median
 camera height above the plane below the median camera, along the cameras' own mean up. Photos of a facade
 see little floor, and a plane through the walls' points at the cameras' height passes the tilt limit
-(Herz-Jesu-P25: 29 deg from the cameras' up, inliers 0.28 camera heights below them; road captures 1.0-1.3)."""
+while lying far closer to the cameras than a road does (docs/capture.md)."""
 
 
 def below_cameras(plane: GroundPlane, points: np.ndarray, cam_centres: np.ndarray, cam_up: np.ndarray,
@@ -135,8 +135,8 @@ taken: photos look up or down by tens of degrees, but a portrait (rolled) photo'
 
 def cameras_upright(cam_up: np.ndarray, cam_right: Optional[np.ndarray]) -> np.ndarray:
     """The up of the cameras alone: perpendicular to every camera's horizontal axis (people and cars hold
-    cameras without roll; Herz-Jesu-P25: 1 deg from the surveyed vertical, the mean up 10 deg: facade photos
-    look up) when those axes turn enough to say it, else the cameras' mean up."""
+    cameras without roll, while photos of facades look up, tilting the mean up) when those axes turn enough
+    to say it, else the cameras' mean up."""
     from nerf2gs_plugin.data.road_plane import upright_normal
 
     up = np.asarray(cam_up, dtype=np.float64) / np.linalg.norm(cam_up)

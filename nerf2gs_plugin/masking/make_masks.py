@@ -46,9 +46,8 @@ class MasksConfig:
     """auto: image downscale of a new reference (renders are upsampled to the image size)."""
     render_downscale: int = 1
     """auto: the reference renders every d-th pixel per side of each frame for the mask maths (d^2 fewer
-    rays; the masks are upsampled to the image size). 2 keeps the residual route's masks (two synthetic
-    streets, KITTI) but costs the motion route a fifth of its moving-object IoU on KITTI's hand labels
-    (docs/speed.md); 1: every pixel."""
+    rays; the masks are upsampled to the image size). 2 keeps the residual route's masks but loses the
+    motion route's small movers (docs/speed.md); 1: every pixel."""
     auto: AutoOptions = field(default_factory=AutoOptions)
     motion: MotionOptions = field(default_factory=MotionOptions)
     """auto: moving objects from optical flow against the static scene's (docs/masks-motion.md)."""
