@@ -45,6 +45,8 @@ ap.add_argument("runs", type=Path)
 ap.add_argument("out_stem", type=Path)
 ap.add_argument("--steps", type=int, default=1000, help="StreetNeRF and Splatfacto steps")
 ap.add_argument("--factor", type=int, default=2, help="training images at 1/FACTOR per side")
+ap.add_argument("--arm", choices=(*ARMS, "both"), default="both", help="train one arm only (run the two side by side)")
+ap.add_argument("--train-seed", type=int, default=42, help="the trainings' seed (another one: the runs' own spread)")
 ap.add_argument("--md-only", action="store_true")
 args = ap.parse_args()
 
@@ -91,14 +93,17 @@ def masks_for_arms(work: Path, est: Path) -> tuple[dict, list[str], dict]:
     add_motion(r, with_motion, MotionOptions(), log=lambda s: None, progress=False)
     seconds = cpu() - c0
     street = work / "street"
+    rows = {arm: {"coverage": round(float(torch.stack([m.transient for m in res["train"]]).float().mean()), 4)}
+            for arm, res in zip(ARMS, (base, with_motion))}
+    rows["with_motion"]["motion_cpu_s"] = round(seconds, 1)
+    rows["with_motion"]["motion_cpu_s_per_frame"] = round(seconds / len(names), 3)
+    if not street.is_dir():  # a real capture: no exact masks
+        return {"without_motion": base["train"], "with_motion": with_motion["train"]}, names, rows
     meta = json.loads((street / "transforms.json").read_text())
-    rows = {}
     for arm, res in zip(ARMS, (base, with_motion)):
         c = sum(counts(m.transient, load_mask(street / meta["frames"][br.frame_index(Path(n))]["transient_mask_path"]))
                 for n, m in zip(names, res["train"]))
-        rows[arm] = {"transient": stats(c), "coverage": round(float(torch.stack([m.transient for m in res["train"]]).float().mean()), 4)}
-    rows["with_motion"]["motion_cpu_s"] = round(seconds, 1)
-    rows["with_motion"]["motion_cpu_s_per_frame"] = round(seconds / len(names), 3)
+        rows[arm]["transient"] = stats(c)
     return {"without_motion": base["train"], "with_motion": with_motion["train"]}, names, rows
 
 
@@ -141,17 +146,21 @@ def backgrounds(street: Path, frames: list[int], size: tuple[int, int]) -> dict[
 
 
 def evaluate(run_dir: Path, street: Path, bg: dict, f: int) -> dict:
+    """Held-out means; a real capture (no street) gets the whole-image PSNR only."""
     from nerf2gs_plugin.runs.load import load_run
 
     run = load_run(run_dir)
     dm = run.pipeline.datamanager
     outputs, _ = dm.eval_split("test")
-    meta = json.loads((street / "transforms.json").read_text())
+    meta = json.loads((street / "transforms.json").read_text()) if street.is_dir() else None
     sums = {k: [] for k in ("psnr", "static_psnr", "ghost_psnr", "ghost_mae", "mover_vs_photo_psnr")}
     with torch.no_grad():
         for (camera, batch), name in zip(dm.eval_images("test"), outputs.image_filenames):
             i = br.frame_index(Path(name))
             pred, gt = run.model.render_camera(camera)["rgb"].clamp(0, 1).cpu(), batch["image"].cpu()
+            if meta is None:
+                sums["psnr"].append(-10 * np.log10(max(float(((pred - gt) ** 2).mean()), 1e-10)))
+                continue
             mover = down(load_mask(street / meta["frames"][i]["transient_mask_path"]), f) > 0.5
             static = ~mover
             back = down(bg[i], f)
@@ -165,7 +174,7 @@ def evaluate(run_dir: Path, street: Path, bg: dict, f: int) -> dict:
                 sums["ghost_psnr"].append(p(mse(pred, back, mover)))
                 sums["ghost_mae"].append(float((pred[mover] - back[mover]).abs().mean()))
                 sums["mover_vs_photo_psnr"].append(p(mse(pred, gt, mover)))
-    return {k: round(float(np.mean(v)), 3) for k, v in sums.items()} | {"images": len(sums["psnr"])}
+    return {k: round(float(np.mean(v)), 3) for k, v in sums.items() if v} | {"images": len(sums["psnr"])}
 
 
 def run_scene() -> dict:
@@ -176,23 +185,24 @@ def run_scene() -> dict:
     masks, names, rows = masks_for_arms(work, est)
     print("masks", rows, flush=True)
     street = work / "street"
-    meta = json.loads((street / "transforms.json").read_text())
     every = [Path(fr["file_path"]).name for fr in json.loads((est / "transforms.json").read_text())["frames"]]
     held = sorted(br.frame_index(Path(n)) for n in every if n not in names)
-    size = tuple(int(v) for v in load_image(street / meta["frames"][0]["file_path"]).shape[1::-1])
-    bg = backgrounds(street, held, size)
-    for arm in ARMS:
+    size = tuple(int(v) for v in load_image(est / json.loads((est / "transforms.json").read_text())["frames"][0]["file_path"]).shape[1::-1])
+    bg = backgrounds(street, held, size) if street.is_dir() else {}
+    for arm in ARMS if args.arm == "both" else (args.arm,):
         data = arm_capture(est, runs / arm / "capture", args.factor, names, masks[arm])
         stages = Stages()
-        sn = _train(stages, "StreetNeRF", _trainer_config("streetnerf", data, runs / arm / "streetnerf", args.steps))
-        gs = _train(stages, "Splatfacto + NeRF views", _trainer_config("splatfacto", data, runs / arm / "splatfacto-nerf-views", args.steps,
-                                                                       augment_from=sn), setup_part="NeRF views: renders")
-        rows[arm]["cpu_s"] = {k: v["cpu_s"] for k, v in stages.rows.items()}
+        sn = _train(stages, "StreetNeRF", _trainer_config("streetnerf", data, runs / arm / "streetnerf", args.steps, seed=args.train_seed))
         rows[arm]["streetnerf"] = evaluate(sn, street, bg, args.factor)
-        rows[arm]["splatfacto_nerf_views"] = evaluate(gs, street, bg, args.factor)
+        if street.is_dir():
+            gs = _train(stages, "Splatfacto + NeRF views", _trainer_config("splatfacto", data, runs / arm / "splatfacto-nerf-views", args.steps,
+                                                                           augment_from=sn, seed=args.train_seed), setup_part="NeRF views: renders")
+            rows[arm]["splatfacto_nerf_views"] = evaluate(gs, street, bg, args.factor)
+        rows[arm]["cpu_s"] = {k: v["cpu_s"] for k, v in stages.rows.items()}
         print(arm, rows[arm], flush=True)
-    return {"work": str(work), "seed": json.loads((street / "synth_stats.json").read_text())["config"]["seed"], "size": [size[0] // args.factor, size[1] // args.factor],
-            "train_frames": len(names), "held_out": held, "steps": args.steps, **rows}
+    seed = json.loads((street / "synth_stats.json").read_text())["config"]["seed"] if street.is_dir() else None
+    return {"work": str(work), "seed": seed, "size": [size[0] // args.factor, size[1] // args.factor],
+            "train_frames": len(names), "held_out": held, "steps": args.steps, "train_seed": args.train_seed, **rows}
 
 
 def write_md(doc: dict, stem: Path) -> None:
@@ -208,15 +218,16 @@ def write_md(doc: dict, stem: Path) -> None:
           "|---|---|---|---|---|---|---|---|---|---|"]
     for key, sc in sorted(doc["scenes"].items()):
         for arm in ARMS:
-            a = sc[arm]
-            t = a["transient"]
+            a = sc.get(arm, {})
+            t = a.get("transient")
+            iou = f"{t['iou']:.3f} ({t['precision']:.2f} / {t['recall']:.2f})" if t else ""
+            secs = f"{a['motion_cpu_s']:.1f}" if "motion_cpu_s" in a else ""
             for model, label in (("streetnerf", "StreetNeRF"), ("splatfacto_nerf_views", "Splatfacto + NeRF views")):
                 e = a.get(model)
-                if not e:
-                    continue
-                md.append(f"| {key} | {arm.replace('_', ' ')} | {t['iou']:.3f} ({t['precision']:.2f} / {t['recall']:.2f}) | "
-                          f"{a.get('motion_cpu_s', 0.0):.1f} | {label} | {e['psnr']:.2f} | {e['static_psnr']:.2f} | "
-                          f"{e['ghost_psnr']:.2f} | {e['ghost_mae']:.4f} | {e['mover_vs_photo_psnr']:.2f} |")
+                if e:
+                    cells = [f"{e[k]:{fmt}}" if k in e else "" for k, fmt in
+                             (("psnr", ".2f"), ("static_psnr", ".2f"), ("ghost_psnr", ".2f"), ("ghost_mae", ".3f"), ("mover_vs_photo_psnr", ".2f"))]
+                    md.append(f"| {key} | {arm.replace('_', ' ')} | {iou} | {secs} | {label} | " + " | ".join(cells) + " |")
     md.append("")
     md.append(doc.get("notes", ""))
     atomic_write_text(stem.with_suffix(".md"), "\n".join(md) + "\n")
@@ -227,7 +238,13 @@ doc = json.loads(stem.with_suffix(".json").read_text()) if stem.with_suffix(".js
 if not args.md_only:
     row = run_scene()
     doc = json.loads(stem.with_suffix(".json").read_text()) if stem.with_suffix(".json").is_file() else {"scenes": {}}
-    doc["scenes"][args.work.name] = row
+    key = args.work.name if args.train_seed == 42 else f"{args.work.name}, training seed {args.train_seed}"
+    scene = doc["scenes"].setdefault(key, {})
+    for k, v in row.items():  # an arm trained by an earlier run keeps its rows
+        if isinstance(v, dict) and isinstance(scene.get(k), dict):
+            scene[k].update(v)
+        else:
+            scene[k] = v
     doc["machine"] = machine_line()
     atomic_write_text(stem.with_suffix(".json"), json.dumps(doc, indent=1))
 write_md(doc, stem)
