@@ -43,7 +43,7 @@ ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDe
 ap.add_argument("work", type=Path, help="a motion bench WORK folder (street/, estimated/, renders.pt)")
 ap.add_argument("runs", type=Path)
 ap.add_argument("out_stem", type=Path)
-ap.add_argument("--steps", type=int, default=1000, help="StreetNeRF and Splatfacto steps")
+ap.add_argument("--steps", type=int, default=600, help="StreetNeRF and Splatfacto steps")
 ap.add_argument("--factor", type=int, default=2, help="training images at 1/FACTOR per side")
 ap.add_argument("--arm", choices=(*ARMS, "both"), default="both", help="train one arm only (run the two side by side)")
 ap.add_argument("--train-seed", type=int, default=42, help="the trainings' seed (another one: the runs' own spread)")
@@ -238,7 +238,7 @@ doc = json.loads(stem.with_suffix(".json").read_text()) if stem.with_suffix(".js
 if not args.md_only:
     row = run_scene()
     doc = json.loads(stem.with_suffix(".json").read_text()) if stem.with_suffix(".json").is_file() else {"scenes": {}}
-    key = args.work.name if args.train_seed == 42 else f"{args.work.name}, training seed {args.train_seed}"
+    key = args.work.name + (f", training seed {args.train_seed}" if args.train_seed != 42 else "") + (f", {args.steps} steps" if args.steps != 600 else "")
     scene = doc["scenes"].setdefault(key, {})
     for k, v in row.items():  # an arm trained by an earlier run keeps its rows
         if isinstance(v, dict) and isinstance(scene.get(k), dict):
