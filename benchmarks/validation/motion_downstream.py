@@ -47,6 +47,7 @@ ap.add_argument("--steps", type=int, default=600, help="StreetNeRF and Splatfact
 ap.add_argument("--factor", type=int, default=2, help="training images at 1/FACTOR per side")
 ap.add_argument("--arm", choices=(*ARMS, "both"), default="both", help="train one arm only (run the two side by side)")
 ap.add_argument("--train-seed", type=int, default=42, help="the trainings' seed (another one: the runs' own spread)")
+ap.add_argument("--reuse", action="store_true", help="keep a StreetNeRF already trained in RUNS")
 ap.add_argument("--md-only", action="store_true")
 args = ap.parse_args()
 
@@ -190,9 +191,12 @@ def run_scene() -> dict:
     size = tuple(int(v) for v in load_image(est / json.loads((est / "transforms.json").read_text())["frames"][0]["file_path"]).shape[1::-1])
     bg = backgrounds(street, held, size) if street.is_dir() else {}
     for arm in ARMS if args.arm == "both" else (args.arm,):
-        data = arm_capture(est, runs / arm / "capture", args.factor, names, masks[arm])
-        stages = Stages()
-        sn = _train(stages, "StreetNeRF", _trainer_config("streetnerf", data, runs / arm / "streetnerf", args.steps, seed=args.train_seed))
+        stages, sn = Stages(), runs / arm / "streetnerf"
+        if args.reuse and any((sn / "checkpoints").glob("*.ckpt")):  # an interrupted run's StreetNeRF
+            data = runs / arm / "capture"
+        else:
+            data = arm_capture(est, runs / arm / "capture", args.factor, names, masks[arm])
+            sn = _train(stages, "StreetNeRF", _trainer_config("streetnerf", data, sn, args.steps, seed=args.train_seed))
         rows[arm]["streetnerf"] = evaluate(sn, street, bg, args.factor)
         if street.is_dir():
             gs = _train(stages, "Splatfacto + NeRF views", _trainer_config("splatfacto", data, runs / arm / "splatfacto-nerf-views", args.steps,
