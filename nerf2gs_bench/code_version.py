@@ -3,8 +3,9 @@
 The rule (stated once, used by :mod:`nerf2gs_bench.runs` and
 :mod:`nerf2gs_bench.runner`): a trained model depends on every ``.py``/``.cpp``/``.h``/``.cu``
 file of ``nerf2gs_plugin`` except those under ``eval/``, ``cli/`` and ``viewer/``, which read models but
-never change one, and the dataset makers ``masks/``, ``masking/``, ``data/process/`` and ``blocks/`` (city-block partition and merge), which write the files a run reads or merge finished
-runs (those files key the run through the dataset fingerprint instead). No model code imports the
+never change one, and the dataset makers ``masking/``, ``data/process/`` and ``blocks/`` (city-block partition and merge), which write the files a run reads or merge finished
+runs (those files key the run through the dataset fingerprint instead). ``masks/`` (the mask maths) keys models: the
+augmentation reads the reference's sky with it. No model code imports the
 excluded folders (``tests/bench/test_bench_keys.py`` checks it on the import graph); the image metrics
 the enhancer trains and selects by sit under ``utils/`` and key models with the rest. That is coarser
 than the files a method imports (an edit to another method retrains every bench run), but it can never
@@ -23,7 +24,7 @@ import nerf2gs_plugin
 SOURCE_ROOT = Path(nerf2gs_plugin.__file__).resolve().parent
 """The package source that is hashed (tests point it at a modified copy)."""
 SOURCE_SUFFIXES = (".py", ".cpp", ".h", ".cu")
-NOT_MODEL_CODE = ("eval", "cli", "viewer", "masks", "masking", "data/process", "blocks")
+NOT_MODEL_CODE = ("eval", "cli", "viewer", "masking", "data/process", "blocks")
 """Folders (relative to the package) whose files never key a trained model."""
 METRIC_CODE = ("eval/metrics.py", "eval/evaluate.py", "utils/image_metrics.py", "utils/lpips.py")
 

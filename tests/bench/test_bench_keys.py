@@ -34,7 +34,8 @@ def test_model_files_rule():
     names = {str(p.relative_to(code_version.SOURCE_ROOT)) for p in code_version.model_source_files()}
     assert "engine/losses.py" in names and "methods/splatfacto/model.py" in names
     assert any(n.endswith(".cpp") for n in names)  # the kernels count
-    assert not any(n.split("/")[0] in ("eval", "cli", "viewer", "masks", "masking") for n in names)
+    assert not any(n.split("/")[0] in ("eval", "cli", "viewer", "masking") for n in names)
+    assert "masks/from_renders.py" in names  # the augmentation reads the reference's sky with it
     assert not any(n.startswith(("data/process/",)) for n in names)
     assert "data/ground.py" in names and "data/colmap_parser.py" in names  # parsers read it
     assert "utils/image_metrics.py" in names and "utils/lpips.py" in names  # the enhancer selects by them
