@@ -44,7 +44,7 @@ class RealPathOptions:
     warm_start: bool = True
     """StreetNeRF continues from the masks' reference (its first steps are the reference's)."""
     render_downscale: Optional[int] = None
-    """The masks' renders at every d-th pixel per side (``ns2gs-data masks --render-downscale``); None: its default."""
+    """The masks' renders at every d-th pixel per side (ns2gs-data masks --render-downscale); None: its default."""
 
 
 def cpu_seconds() -> float:
