@@ -137,6 +137,14 @@ def visibility_confidence(depth: Tensor, camera: Cameras, along: DepthAlong, tra
     return conf
 
 
+def inside_box(points: Tensor, box: Optional[Tensor]) -> Tensor:
+    """Bool ``[N]``: points ``[N, 3]`` inside the scene box ``[2, 3]`` (all True without a box)."""
+    if box is None:
+        return torch.ones(len(points), dtype=torch.bool, device=points.device)
+    box = box.to(points)
+    return ((points >= box[0]) & (points <= box[1])).all(-1)
+
+
 SKY_ACCUMULATION = 0.5
 """A reference pixel with less accumulation than this shows sky (the masks stage's rule)."""
 
@@ -150,8 +158,7 @@ def inside_box_weight(depth: Tensor, accumulation: Optional[Tensor], camera: Cam
     keep = torch.ones(h * w, dtype=torch.bool, device=depth.device)
     if box is not None:
         pts = lift(depth, camera, along).to(depth.device)
-        b = box.to(pts)
-        keep &= torch.isfinite(pts).all(-1) & ((pts >= b[0]) & (pts <= b[1])).all(-1)
+        keep &= torch.isfinite(pts).all(-1) & inside_box(pts, box)
     if accumulation is not None:
         keep &= accumulation.reshape(-1).to(depth.device) >= SKY_ACCUMULATION
     return keep.reshape(h, w, 1).float()

@@ -38,6 +38,7 @@ from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
 from nerf2gs_plugin.augment.config import FAMILY_FIELDS, AugmentConfig
 from nerf2gs_plugin.augment.geometry import ViewGeometry, WorldFrame
+from nerf2gs_plugin.augment.confidence import inside_box
 from nerf2gs_plugin.augment.reference_sky import reference_sky_masks, with_sky
 from nerf2gs_plugin.augment.shares import extra_sampling
 from nerf2gs_plugin.augment.views import additional_views
@@ -91,14 +92,6 @@ class Reference:
     render_pixels: Optional[PixelRenderFn] = None
     """Renders only some pixels of a camera (a model whose ``render_camera`` takes ``pixels``); None:
     a composite renders its whole view."""
-
-
-def inside_box(centres: Tensor, box: Optional[Tensor]) -> Tensor:
-    """Bool ``[N]``: camera centres inside the scene box ``[2, 3]`` (all True without a box)."""
-    if box is None:
-        return torch.ones(len(centres), dtype=torch.bool)
-    box = box.to(centres)
-    return ((centres >= box[0]) & (centres <= box[1])).all(-1)
 
 
 def composite_weight(mask: Tensor, dilate_px: int = 0, feather_px: int = 0) -> Tensor:

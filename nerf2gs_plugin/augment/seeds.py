@@ -17,7 +17,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from nerf2gs_plugin.augment.confidence import lift
+from nerf2gs_plugin.augment.confidence import inside_box, lift
 from nerf2gs_plugin.cameras import Cameras
 
 MIN_SEED_BASE = 1000
@@ -42,11 +42,8 @@ def lifted_points(cameras: Cameras, depths: Sequence[Tensor], images: Sequence[T
         pts.append(p)
         cols.append(img.reshape(-1, 3)[keep.reshape(-1)])
     xyz, rgb = torch.cat(pts), torch.cat(cols)
-    if scene_box is not None:
-        box = scene_box.to(xyz)
-        inside = ((xyz >= box[0]) & (xyz <= box[1])).all(-1)
-        xyz, rgb = xyz[inside], rgb[inside]
-    return xyz, rgb
+    inside = inside_box(xyz, scene_box)
+    return xyz[inside], rgb[inside]
 
 
 def thin_on_grid(xyz: Tensor, rgb: Tensor, occupied: Optional[Tensor], size: float) -> tuple[Tensor, Tensor]:
