@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any, Callable, Optional
 
 from nerf2gs_plugin.errors import UserError
-from nerf2gs_bench.runs import RunSpec, evaluation_lock, run_key, train_or_reuse
+from nerf2gs_bench.runs import IN_USE, RunSpec, evaluation_lock, run_key, train_or_reuse
 from nerf2gs_bench.machine import machine_info, machine_line
 from nerf2gs_plugin.utils.lpips import LPIPS
 from nerf2gs_plugin.utils.config import apply_plain
@@ -175,7 +175,7 @@ class BenchRunner:
             msg = str(e).splitlines()[0][:300] if str(e) else type(e).__name__
             error = f"{type(e).__name__}: {msg}"
             self.log(f"[bench] {spec.label} FAILED: {error}")
-            if isinstance(e, (UserError, FloatingPointError)):
+            if isinstance(e, (UserError, FloatingPointError)) and IN_USE not in str(e):  # a busy lock is not the run's fault
                 marker.parent.mkdir(parents=True, exist_ok=True)
                 atomic_write_text(marker, json.dumps({"label": spec.label, "error": error}))
             return Outcome(spec.label, error=error, key=key)

@@ -92,7 +92,7 @@ def evaluation_lock(run_dir: Path) -> Iterator[None]:
 
 def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, reference: Optional[tuple[Path, str]] = None,
                    progress: bool = True, log=print, step_hook=None, device: str = "auto",
-                   rerun: bool = False, _wait_on_lock: bool = True) -> tuple[Path, str]:
+                   rerun: bool = False, _lock_tries: int = 3) -> tuple[Path, str]:
     """Returns (run_dir, key). A finished run with the same key is reused (unless ``rerun``: then
     its directory is replaced); a partial one resumes. ``step_hook(step)`` is called after every
     training step (a bench-wide progress bar). ``bench_run.json`` records where and when it trained."""
@@ -130,12 +130,14 @@ def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, ref
         trainer.setup()
     except ConfigError as e:
         # another bench sharing the runs folder took the run's lock between the wait above and this setup: wait for it
-        # and reuse its run, once; never a failure of the run (a bench would remember it as a known failure)
-        if not (_wait_on_lock and IN_USE in str(e)):
+        # and reuse its run (a few tries)
+        if not (_lock_tries > 1 and IN_USE in str(e)):
             raise
         log(f"[bench] {spec.label}: another process started training it; waiting to reuse it")
         wait_for_other_training(run_dir, log)
-        return train_or_reuse(spec, data, runs_root, dataset, reference, progress, log, step_hook, device, False, _wait_on_lock=False)
+        time.sleep(1.0)  # the other process may hold the lock only a moment (a setup that failed, a resume): let it go first
+        return train_or_reuse(spec, data, runs_root, dataset, reference, progress, log, step_hook, device, False,
+                              _lock_tries=_lock_tries - 1)
     setup_seconds = time.perf_counter() - t_setup  # an augmented run renders its NeRF views here
     if step_hook is not None:
         trainer.step_hooks.append(step_hook)
