@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import time
 import warnings
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable, Iterable, Optional
 
@@ -68,8 +69,6 @@ def check_reference_dataset(checkpoint: Path, image_filenames: list[Path]) -> No
 def decimated(camera, d: int) -> tuple[object, Tensor]:
     """Every ``d``-th pixel of ``camera`` (one camera) per side, the middle one of each d x d block:
     ``(a camera whose pixels are exactly those, bool [H, W] of them)``."""
-    from dataclasses import replace
-
     h, w = int(camera.height[0]), int(camera.width[0])
     rows, cols = torch.arange(h // d) * d + d // 2, torch.arange(w // d) * d + d // 2
     pixels = torch.zeros(h, w, dtype=torch.bool)
@@ -97,6 +96,55 @@ def _render(model, cam, d: int) -> tuple[object, dict[str, Tensor], Optional[Ten
     out = model.render_camera(cam, pixels=pixels)
     hh, ww = int(small.height[0]), int(small.width[0])
     return small, {k: v[pixels].reshape(hh, ww, -1) for k, v in out.items()}, pixels
+
+
+def _intrinsics(cam) -> Tensor:
+    return torch.stack([cam.fx[0], cam.fy[0], cam.cx[0], cam.cy[0]]).cpu()
+
+
+def upsample(x: Tensor, step: int, size: tuple[int, int], smooth: bool = False) -> Tensor:
+    """``[h, w, ...]`` values at every ``step``-th pixel per side (the middle of each step x step block,
+    :func:`decimated`) -> ``[H, W, ...]`` at every pixel: each block takes its sample (nearest: the
+    same blocks as ``make_masks``' nearest upsampling), or, with ``smooth``, the samples are
+    interpolated linearly between their true positions (clamped at the border)."""
+    h, w = size
+    if not smooth:
+        rows, cols = (torch.arange(h) // step).clamp(max=x.shape[0] - 1), (torch.arange(w) // step).clamp(max=x.shape[1] - 1)
+        return x[rows][:, cols]
+
+    def axis(n: int, m: int) -> tuple[Tensor, Tensor, Tensor]:
+        pos = ((torch.arange(n, dtype=torch.float64) - step // 2) / step).clamp(0, m - 1)
+        lo = pos.floor().long()
+        return lo, (lo + 1).clamp(max=m - 1), (pos - lo).to(x.dtype)
+
+    (r0, r1, fr_), (c0, c1, fc) = axis(h, x.shape[0]), axis(w, x.shape[1])
+    shape = (-1, 1) + (1,) * (x.dim() - 2)
+    fr_, fc = fr_.reshape(shape), fc.reshape((1, -1) + (1,) * (x.dim() - 2))
+    top = x[r0][:, c0] * (1 - fc) + x[r0][:, c1] * fc
+    bottom = x[r1][:, c0] * (1 - fc) + x[r1][:, c1] * fc
+    return top * (1 - fr_) + bottom * fr_
+
+
+def at_full_size(renders: Renders, result: dict[str, list[FrameMasks]]) -> Renders:
+    """The motion route's inputs at the frames' full size where the reference rendered every d-th
+    pixel (``render_views(render_downscale=d)``): the full-size image and camera, the depth taken
+    per block from its sample (nearest: a depth edge stays an edge, no surface in between), the
+    render interpolated (the residual against it); ``result``'s masks upsampled in place to that
+    size (as they would be written). Views rendered at every pixel are returned as they are."""
+    views: dict[str, list[dict[str, Tensor]]] = {}
+    for s, vs in renders.views.items():
+        views[s] = []
+        for i, v in enumerate(vs):
+            if "full_image" not in v:
+                views[s].append(v)
+                continue
+            size, step = tuple(v["full_image"].shape[:2]), int(v["step"])
+            views[s].append({"image": v["full_image"], "intr": v["full_intr"], "c2w": v["c2w"], "name": v["name"],
+                             "depth": upsample(v["depth"], step, size), "rgb": upsample(v["rgb"], step, size, smooth=True)})
+            m = result[s][i]
+            for kind in ("sky", "ground", "transient"):
+                setattr(m, kind, upsample(getattr(m, kind), step, size))
+    return replace(renders, views=views)
 
 
 def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[str], None] = print, progress: bool = True,
@@ -134,14 +182,16 @@ def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[
                 rays = cam.generate_rays(0)
                 h, w = int(cam.height[0]), int(cam.width[0])
                 img = load_image(d.image_filenames[i])
+                full = {}
                 if pixels is not None and tuple(img.shape[:2]) == tuple(pixels.shape):
+                    # the motion route measures flow on the whole frame: small movers vanish at half size
+                    full = {"full_image": img, "full_intr": _intrinsics(d.cameras[i : i + 1]), "step": int(render_downscale)}
                     img = img[pixels].reshape(h, w, -1)  # the same pixels as the render
                 if tuple(img.shape[:2]) != (h, w):
                     img = F.interpolate(img.permute(2, 0, 1)[None], size=(h, w), mode="area")[0].permute(1, 2, 0)
                 views[s].append({"rgb": out["rgb"].cpu(), "depth": out["depth"][..., 0].cpu(), "acc": out["accumulation"][..., 0].cpu(),
                                  "dirs": rays.directions.reshape(h, w, 3).cpu(), "origin": rays.origins[0].cpu(), "image": img,
-                                 "c2w": cam.camera_to_worlds[0].cpu(), "intr": torch.stack([cam.fx[0], cam.fy[0], cam.cx[0], cam.cy[0]]).cpu(),
-                                 "name": d.image_filenames[i].name})
+                                 "c2w": cam.camera_to_worlds[0].cpu(), "intr": _intrinsics(cam), "name": d.image_filenames[i].name, **full})
                 prog.advance(task)
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     log(f"masks: rendered {total} views in {seconds:.1f} s")
@@ -166,5 +216,5 @@ def auto_masks(view: Path, reference: Path, splits: list[str], opts: AutoOptions
         from nerf2gs_plugin.masks.motion import add_motion, is_sequence
 
         meta = json.loads((Path(view) / "transforms.json").read_text())
-        add_motion(renders, result, motion, log, progress, sequence=is_sequence(meta))
+        add_motion(at_full_size(renders, result), result, motion, log, progress, sequence=is_sequence(meta))
     return result
