@@ -60,6 +60,7 @@ from nerf2gs_plugin.datamanagers.base import DataManager
 from nerf2gs_plugin.datamanagers.image_set import ImageSet
 from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.utils.model_output import check_range
+from nerf2gs_plugin.utils.parallel import render_ahead
 from nerf2gs_plugin.warn import warn
 
 RenderFn = Callable[[Cameras], dict[str, Tensor]]
@@ -92,6 +93,9 @@ class Reference:
     render_pixels: Optional[PixelRenderFn] = None
     """Renders only some pixels of a camera (a model whose ``render_camera`` takes ``pixels``); None:
     a composite renders its whole view."""
+    render_workers: int = 1
+    """Additional views rendered at once, each in a forked process (``utils/parallel.py``): a model's
+    renders (``load_reference``: torch's thread count); 1: one after another in this process."""
 
 
 def composite_weight(mask: Tensor, dilate_px: int = 0, feather_px: int = 0) -> Tensor:
@@ -192,7 +196,7 @@ def _extra_confidence(out: dict[str, Tensor], camera: Cameras, vis: Optional[_Vi
 def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn: RenderFn, config: AugmentConfig,
                   enhancer: Optional[ViewEnhancer], comp_idx: list[int], scene_box: Optional[Tensor],
                   depth_along: str = "z", sources: Optional[list[int]] = None, render_pixels: Optional[PixelRenderFn] = None,
-                  store: Optional[ViewStore] = None) -> dict[str, Any]:
+                  store: Optional[ViewStore] = None, render_workers: int = 1) -> dict[str, Any]:
     """Render every image of a cache entry into ``work`` (not yet the entry: it is renamed after).
     Bird's-eye views outside the scene box or with mostly empty renders are left out; returns the
     manifest fields that say which were kept and how long it took. With a confidence, every
@@ -200,7 +204,8 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
     ``_conf.npy`` beside its PNG. ``sources``: per additional view, the input view it was made from
     (an image-conditioned enhancer's reference; None: every ``every_n``-th, the bird's-eye views').
     Without a confidence, a composite renders only the pixels it takes from the reference
-    (``render_pixels``). Additional views' renders come from and go to ``store`` (one key per view)."""
+    (``render_pixels``). Additional views' renders come from and go to ``store`` (one key per view);
+    those not there are rendered ``render_workers`` at once."""
     import time
 
     from nerf2gs_plugin.augment.confidence import depth_to_z
@@ -247,17 +252,30 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
                 _save_confidence(confidence_path(work / "composites" / f"{i:05d}.png"), conf)
         inside = inside_box(bev.centers, scene_box) if bev is not None else None
         source_depths: dict[int, Tensor] = {}  # a warped-conditioned enhancer's source views: the reference's depth there
-        for j in range(len(bev) if bev is not None else 0):
+        n_bev = len(bev) if bev is not None else 0
+        needs_acc = with_conf or config.drop_outside_box
+
+        def usable(j: int) -> Optional[StoredView]:
+            stored = store.get(bev[j]) if store is not None else None
+            return stored if stored is not None and stored.usable(config.min_coverage, needs_acc) else None
+
+        def render_view(j: int) -> dict[str, Tensor]:
+            return {k: v.cpu() for k, v in render_fn(bev[j]).items() if k in RENDER_KEYS}
+
+        # the views to render, rendered ahead side by side (utils/parallel.py) while this loop stores them
+        to_render = [j for j in range(n_bev) if bool(inside[j]) and usable(j) is None]
+        fresh, ahead = render_ahead(render_view, to_render, render_workers), set(to_render)
+        for j in range(n_bev):
             if not bool(inside[j]):  # outside the scene box: the reference knows nothing there
                 outside += 1
                 progress.update(task, advance=1, stats=f"bird's-eye {j} outside the box")
                 continue
-            stored = store.get(bev[j]) if store is not None else None
-            if stored is not None and stored.usable(config.min_coverage, with_conf or config.drop_outside_box):
+            stored = None if j in ahead else usable(j)
+            if stored is not None:
                 out, view = stored.out, stored
                 reused += 1
             else:
-                out = {k: v.cpu() for k, v in render_fn(bev[j]).items() if k in RENDER_KEYS}
+                out = next(fresh) if j in ahead else render_view(j)
                 check_range(out["rgb"], 0.0, 1.0, "reference run", f"render of bird's-eye view {j}")  # before it is stored
                 if store is not None:
                     store.put(bev[j], out)
@@ -294,14 +312,15 @@ def render_augmented_views(train: ImageSet, world: WorldFrame, render_fn: Render
                            dataset: str, cache_root: Path, config: AugmentConfig,
                            enhancer: Optional[ViewEnhancer] = None, scene_box: Optional[Tensor] = None,
                            depth_along: str = "z", render_cameras: Optional[Cameras] = None,
-                           render_pixels: Optional[PixelRenderFn] = None) -> AugmentedViews:
+                           render_pixels: Optional[PixelRenderFn] = None, render_workers: int = 1) -> AugmentedViews:
     """Render (or reuse from the cache) the composites and the additional views. ``world``: the
     dataset's up vector and metric scale (its ``DataparserOutputs``). ``render_cameras``: the training
     cameras at the poses the reference renders the input views from (its refined poses; the
     ``ref_key``'s checkpoint hash keys them); None: ``train``'s own. The additional cameras (every view
     family of ``config.views``, in that order: augment/views.py) and the returned image sets keep
     ``train``'s poses; the additional views' poses are those the manifest saved. ``render_pixels``:
-    the reference's renderer of some pixels (composites render only those they take)."""
+    the reference's renderer of some pixels (composites render only those they take); ``render_workers``:
+    :attr:`Reference.render_workers`."""
     views = additional_views(train.cameras, world, config)
     bev = views.cameras if views is not None else None
     has_transient = "transient" in train.masks and config.composites
@@ -319,7 +338,7 @@ def render_augmented_views(train: ImageSet, world: WorldFrame, render_fn: Render
             store.add_entries(dataset, bev)
         try:
             done = _render_entry(work, seen_from, bev, render_fn, config, enhancer, comp_idx, scene_box, depth_along,
-                                 views.sources if views is not None else None, render_pixels, store)
+                                 views.sources if views is not None else None, render_pixels, store, render_workers)
         except BaseException:  # a bad model or an interrupt: no half-made entry left behind
             shutil.rmtree(work, ignore_errors=True)
             raise
@@ -403,6 +422,7 @@ class AugmentedDataManager(DataManager):
         self.views: AugmentedViews = render_augmented_views(
             inner.train_images, td, reference.render, reference.key, dataset_fingerprint(td.image_filenames),
             reference.cache_root, augment, enhancer, td.scene_box, reference.depth_along, refined, reference.render_pixels,
+            reference.render_workers,
         )
         print(f"reference renders: {self.views.render_seconds:.1f} s" + (" (reused from the cache)" if self.views.reused else ""))
         if self.views.composites is not None:

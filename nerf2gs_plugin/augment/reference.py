@@ -19,6 +19,7 @@ from nerf2gs_plugin.engine.config import read_config_doc
 from nerf2gs_plugin.runs.load import load_run
 from nerf2gs_plugin.enhancer import make_enhancer
 from nerf2gs_plugin.errors import CheckpointError, ConfigError
+from nerf2gs_plugin.utils.parallel import view_workers
 
 
 def _same_data_other_downscale(run_dir: Path, datamanager, fingerprint: Optional[str]) -> bool:
@@ -60,7 +61,8 @@ def load_reference(reference: Path, datamanager, device: torch.device | str, app
     render_key = getattr(ref.model, "render_key", lambda: "")()  # renders that differ from training's sampling
     key = f"{ref.config.method_name}:{ref.checkpoint_hash}" + (f":{render_key}" if render_key else "")
     return Reference(render, key, run_dir, ref.model.depth_along,
-                     getattr(ref.model, "refined_train_cameras", None), render_pixels)
+                     getattr(ref.model, "refined_train_cameras", None), render_pixels,
+                     view_workers() if torch.device(device).type == "cpu" else 1)  # no forked workers on a GPU
 
 
 def build_enhancer(spec: str):

@@ -22,6 +22,7 @@ from torch import Tensor
 from nerf2gs_plugin.masks import from_renders as fr
 from nerf2gs_plugin.masks.auto import AutoOptions, FrameMasks, Renders, masks_from_renders
 from nerf2gs_plugin.errors import CheckpointError, ConfigError
+from nerf2gs_plugin.utils.parallel import cpu_seconds, render_ahead
 
 MAX_PLANE_POINTS = 50_000  # RANSAC on a random subset of the rendered surface points
 
@@ -169,31 +170,33 @@ def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[
     parser = run.config.pipeline.datamanager.dataparser
     data = {s: train if s == "train" else parse_dataset(view, s, downscale=parser.downscale, cache_dir=parser.cache_dir)
             for s in splits}
-    t0, c0 = time.perf_counter(), time.process_time()
+    t0, c0 = time.perf_counter(), cpu_seconds()  # with the render workers'
     views: dict[str, list[dict[str, Tensor]]] = {s: [] for s in splits}
     total = sum(len(d) for d in data.values())
+    frames = [(s, i) for s, d in data.items() for i in range(len(d))]
     with make_progress(progress) as prog, torch.no_grad():
         task = prog.add_task("masks: render", total=total, stats="")
-        for s, d in data.items():
-            for i in range(len(d)):
-                cam, out, pixels = _render(model, d.cameras[i : i + 1], int(render_downscale))
-                for key in ("rgb", "accumulation"):  # masks are never made from a NaN render
-                    check_finite(out[key], run.checkpoint, f"reference render '{key}' of {s} view {i}")
-                rays = cam.generate_rays(0)
-                h, w = int(cam.height[0]), int(cam.width[0])
-                img = load_image(d.image_filenames[i])
-                full = {}
-                if pixels is not None and tuple(img.shape[:2]) == tuple(pixels.shape):
-                    # the motion route measures flow on the whole frame: small movers vanish at half size
-                    full = {"full_image": img, "full_intr": _intrinsics(d.cameras[i : i + 1]), "step": int(render_downscale)}
-                    img = img[pixels].reshape(h, w, -1)  # the same pixels as the render
-                if tuple(img.shape[:2]) != (h, w):
-                    img = F.interpolate(img.permute(2, 0, 1)[None], size=(h, w), mode="area")[0].permute(1, 2, 0)
-                views[s].append({"rgb": out["rgb"].cpu(), "depth": out["depth"][..., 0].cpu(), "acc": out["accumulation"][..., 0].cpu(),
-                                 "dirs": rays.directions.reshape(h, w, 3).cpu(), "origin": rays.origins[0].cpu(), "image": img,
-                                 "c2w": cam.camera_to_worlds[0].cpu(), "intr": _intrinsics(cam), "name": d.image_filenames[i].name, **full})
-                prog.advance(task)
-    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+        # views rendered side by side (utils/parallel.py) while this loop takes each one apart
+        rendered = render_ahead(lambda si: _render(model, data[si[0]].cameras[si[1] : si[1] + 1], int(render_downscale)), frames)
+        for (s, i), (cam, out, pixels) in zip(frames, rendered):
+            d = data[s]
+            for key in ("rgb", "accumulation"):  # masks are never made from a NaN render
+                check_finite(out[key], run.checkpoint, f"reference render '{key}' of {s} view {i}")
+            rays = cam.generate_rays(0)
+            h, w = int(cam.height[0]), int(cam.width[0])
+            img = load_image(d.image_filenames[i])
+            full = {}
+            if pixels is not None and tuple(img.shape[:2]) == tuple(pixels.shape):
+                # the motion route measures flow on the whole frame: small movers vanish at half size
+                full = {"full_image": img, "full_intr": _intrinsics(d.cameras[i : i + 1]), "step": int(render_downscale)}
+                img = img[pixels].reshape(h, w, -1)  # the same pixels as the render
+            if tuple(img.shape[:2]) != (h, w):
+                img = F.interpolate(img.permute(2, 0, 1)[None], size=(h, w), mode="area")[0].permute(1, 2, 0)
+            views[s].append({"rgb": out["rgb"].cpu(), "depth": out["depth"][..., 0].cpu(), "acc": out["accumulation"][..., 0].cpu(),
+                             "dirs": rays.directions.reshape(h, w, 3).cpu(), "origin": rays.origins[0].cpu(), "image": img,
+                             "c2w": cam.camera_to_worlds[0].cpu(), "intr": _intrinsics(cam), "name": d.image_filenames[i].name, **full})
+            prog.advance(task)
+    seconds, cpu = time.perf_counter() - t0, cpu_seconds() - c0
     log(f"masks: rendered {total} views in {seconds:.1f} s")
     pts = ((fr.surface_points(r["origin"], r["dirs"], r["depth"]), r["acc"]) for r in views.get("train", []))
     up, height = ground_plane(train, pts)

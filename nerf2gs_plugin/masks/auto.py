@@ -81,7 +81,7 @@ class Renders:
     metres_to_world: float
     seconds: float
     box_extent: float = float("inf")  # half the scene box's largest side (world units)
-    cpu_seconds: float = 0.0  # of the renders (this process, every thread)
+    cpu_seconds: float = 0.0  # of the renders (this process, every thread, and its render workers)
 
 
 def masks_from_renders(r: Renders, opts: AutoOptions, log: Callable[[str], None] = print) -> dict[str, list[FrameMasks]]:
