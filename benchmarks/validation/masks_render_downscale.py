@@ -5,7 +5,7 @@ AutoOptions, and with the motion route on. Numbers in docs/speed.md.
 Usage: python benchmarks/validation/masks_render_downscale.py DATA REFERENCE_DIR STEPS OUT.json"""
 import argparse, json, time, torch, torch.nn.functional as F
 from pathlib import Path
-from nerf2gs_plugin.masking.auto_masks import render_views
+from nerf2gs_plugin.masking.auto_masks import at_full_size, render_views
 from nerf2gs_plugin.masking.mask_reference import ensure_reference
 from nerf2gs_plugin.masks.auto import AutoOptions, masks_from_renders
 from nerf2gs_plugin.masks.motion import MotionOptions, add_motion
@@ -37,7 +37,7 @@ for variant, motion in (("default", None), ("motion", MotionOptions(enabled=True
     for name, r in R.items():
         res = {"train": masks_from_renders(r, AutoOptions(), log=lambda s: None)["train"]}
         if motion is not None:
-            add_motion(r, res, motion, log=lambda s: None, progress=False)
+            add_motion(at_full_size(r, res), res, motion, log=lambda s: None, progress=False)  # flow on the full-size frames
         masks[name] = res["train"]
     shape = tuple(R["full"].views["train"][0]["acc"].shape)
     row = {}

@@ -44,10 +44,11 @@ class MasksConfig:
     """auto: training steps of a new reference."""
     downscale: float = 1.0
     """auto: image downscale of a new reference (renders are upsampled to the image size)."""
-    render_downscale: int = 1
+    render_downscale: int = 2
     """auto: the reference renders every d-th pixel per side of each frame for the mask maths (d^2 fewer
-    rays; the masks are upsampled to the image size). 2 keeps the residual route's masks but loses the
-    motion route's small movers (docs/speed.md); 1: every pixel."""
+    rays; the masks are upsampled to the image size; the motion route measures flow on the full-size
+    frames with the renders upsampled). At 2 the masks held on two synthetic streets and KITTI's labelled
+    frames (docs/speed.md); 1: every pixel."""
     auto: AutoOptions = field(default_factory=AutoOptions)
     motion: MotionOptions = field(default_factory=MotionOptions)
     """auto: moving objects from optical flow against the static scene's (docs/masks-motion.md)."""

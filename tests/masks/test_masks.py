@@ -352,7 +352,7 @@ def test_make_masks_auto_with_a_very_short_reference(tmp_path):
     shutil.rmtree(data / "masks")
     ref = tmp_path / "ref"
     logs: list[str] = []
-    summary = make_masks(MasksConfig(data=data, reference=ref, reference_steps=5, progress=False), log=logs.append)
+    summary = make_masks(MasksConfig(data=data, reference=ref, reference_steps=5, progress=False, render_downscale=1), log=logs.append)
     assert (ref / "config.yml").is_file() and summary["reference"] == str(ref)
     from nerf2gs_plugin.engine.config import read_config_doc
 
@@ -362,8 +362,8 @@ def test_make_masks_auto_with_a_very_short_reference(tmp_path):
     assert all(p is not None for p in outs.mask_filenames["sky"])
     assert (data / "masks" / "sky" / "bev_1_000.png").is_file()  # every split
     assert summary["render_seconds"] >= 0 and summary["render_cpu_seconds"] > 0
-    # again from every other pixel per side: the masks are still written at the images' size
-    again = make_masks(MasksConfig(data=data, reference=ref, overwrite=True, render_downscale=2, progress=False), log=logs.append)
+    # again from every other pixel per side (the default): the masks are still written at the images' size
+    again = make_masks(MasksConfig(data=data, reference=ref, overwrite=True, progress=False), log=logs.append)
     assert any("reusing reference" in line for line in logs)
     assert (summary["render_downscale"], again["render_downscale"]) == (1, 2)
     assert again["render_cpu_seconds"] < summary["render_cpu_seconds"]
