@@ -41,8 +41,8 @@ def street(work: Path, seed: int) -> Path:
     return data
 
 
-def reference(data: Path, runs: Path, given: Optional[str], evaluate: bool = True) -> tuple[Path, str, Optional[dict]]:
-    """(run folder, run key, its evaluation on the test splits or None): ``given`` or a quick StreetNeRF trained here."""
+def reference(data: Path, runs: Path, given: Optional[str], evaluate: bool = True, scale: str = "quick") -> tuple[Path, str, Optional[dict]]:
+    """(run folder, run key, its evaluation on the test splits or None): ``given`` or a StreetNeRF trained here at ``scale``."""
     if given:
         ref = Path(given)
         key = json.loads((ref / "bench_run.json").read_text())["key"]
@@ -57,20 +57,20 @@ def reference(data: Path, runs: Path, given: Optional[str], evaluate: bool = Tru
 
             out = BenchRunner(runs)._evaluate(ref, key, load_run, evaluate_run)
         return ref, key, out | {"label": "StreetNeRF", "target": "streetnerf", "run_dir": str(ref)}
-    res = run_plan([RunSpec("StreetNeRF", "streetnerf", _overrides("quick", "streetnerf"))], data, runs, name="view_families")["StreetNeRF"]
+    res = run_plan([RunSpec("StreetNeRF", "streetnerf", _overrides(scale, "streetnerf"))], data, runs, name="view_families")["StreetNeRF"]
     return Path(res["run_dir"]), Path(res["run_dir"]).name, res
 
 
-def target_overrides(target: str, steps: Optional[int] = None) -> dict:
-    """The bench overrides of ``target``: the quick bench's (None) or ``steps`` with its schedules rescaled."""
-    return _overrides("quick", target) if steps is None else {**step_overrides(target, steps), "steps_per_eval_image": 0}
+def target_overrides(target: str, steps: Optional[int] = None, scale: str = "quick") -> dict:
+    """The bench overrides of ``target``: the bench's at ``scale`` (None) or ``steps`` with its schedules rescaled."""
+    return _overrides(scale, target) if steps is None else {**step_overrides(target, steps), "steps_per_eval_image": 0}
 
 
 def run_augmented(runner: BenchRunner, data: Path, ref: tuple[Path, str], label: str, augment: Optional[dict],
-                  target: str = TARGET, steps: Optional[int] = None) -> dict:
+                  target: str = TARGET, steps: Optional[int] = None, scale: str = "quick") -> dict:
     """One ``target`` run at the quick bench's steps or ``steps`` (+ ``augment``'s views from ``ref``; None: the
     target alone), evaluated on the runner's splits."""
-    spec = RunSpec(label, target, target_overrides(target, steps), augment_from="StreetNeRF" if augment is not None else None,
+    spec = RunSpec(label, target, target_overrides(target, steps, scale), augment_from="StreetNeRF" if augment is not None else None,
                    augment=augment or {})
     out = runner.run(spec, data, reference=ref if augment is not None else None)
     reason = failure_reason(out)
@@ -93,24 +93,26 @@ def main() -> None:
     ap.add_argument("--only-fixed-rows", action="store_true", help="the rows that do not wait for the sweep's choice")
     ap.add_argument("--target", default=TARGET, help="the target method; other than splatfacto: alone, + birds-eye, "
                     "+ birds-eye lane-shift only (the family rows are Splatfacto's)")
+    ap.add_argument("--scale", choices=("quick", "default"), default="quick",
+                    help="default: every method's registered steps; only alone, + birds-eye, + birds-eye lane-shift")
     args = ap.parse_args()
-    work, seed, t = args.work, args.seed, args.target
+    work, seed, t, scale = args.work, args.seed, args.target, args.scale
     data = street(work, seed)
-    ref_dir, ref_key, ref_result = reference(data, work / "runs", args.reference_run)
+    ref_dir, ref_key, ref_result = reference(data, work / "runs", args.reference_run, scale=scale)
     runner = BenchRunner(work / "runs", splits=EVAL_SPLITS)
     ref = (ref_dir, ref_key)
 
     def row(label: str, augment: Optional[dict]) -> dict:
-        return run_augmented(runner, data, ref, label, augment, target=t)
+        return run_augmented(runner, data, ref, label, augment, target=t, scale=scale)
 
     rows = {"StreetNeRF": ref_result, t: row(t, None), f"{t} + birds-eye": row(f"{t} + birds-eye", {})}
-    if t == TARGET:
+    if t == TARGET and scale == "quick":
         rows[f"{t} + birds-eye lane-shift (one share)"] = row(f"{t} + birds-eye lane-shift (one share)",
                                                               {"views": ["birds-eye", "lane-shift"]} | SHARED)
     if args.only_fixed_rows:
         return
     chosen, lane = chosen_lane_shift()
-    if t == TARGET:
+    if t == TARGET and scale == "quick":
         rows[f"{t} + lane-shift"] = row(f"{t} + lane-shift", {"views": ["lane-shift"], "lane_shift": lane})
     rows[f"{t} + birds-eye lane-shift"] = row(f"{t} + birds-eye lane-shift", {"views": ["birds-eye", "lane-shift"], "lane_shift": lane})
     pairs = [(f"{t} + birds-eye", t), (f"{t} + lane-shift", t), (f"{t} + birds-eye lane-shift", t), (f"{t} + birds-eye lane-shift", f"{t} + birds-eye"),

@@ -104,3 +104,21 @@ def test_surfels_take_initial_points_too(tiny_scene):
     assert model.num_primitives() == n + 5 and model.gauss["scales"].shape == (n + 5, 2)
     out = model.render_camera(pipeline.datamanager.train_images.cameras[0])
     assert torch.isfinite(out["rgb"]).all()
+
+
+def test_scaffold_gs_anchors_the_initial_points_on_its_grid(tiny_scene):
+    """Scaffold-GS makes anchors on the voxels of the points that hold none yet (one per voxel), and still renders."""
+    pipeline = Pipeline(get_method("scaffold-gs").config.pipeline, tiny_scene, "cpu")
+    model = pipeline.model
+    n, voxel = model.num_primitives(), float(model.voxel)
+    old = model.anchor["anchors"].detach().clone()
+    far = old.amax(0) + 10 * voxel
+    xyz = torch.stack([far, far + 0.1 * voxel, far + torch.tensor([3 * voxel, 0.0, 0.0])])  # two voxels
+    xyz = torch.cat([xyz, old[:4]])  # voxels already anchored: skipped
+    assert model.add_initial_points(xyz, torch.full((len(xyz), 3), 0.5)) == 2
+    assert model.num_primitives() == n + 2 and model.anchor["offsets"].shape[0] == n + 2
+    added = model.anchor["anchors"][n:]
+    assert torch.allclose(torch.round(added / voxel) * voxel, added) and bool((torch.cdist(added, far[None]) < 4 * voxel).all())
+    assert torch.isfinite(model.anchor["scaling"]).all()
+    out = model.render_camera(pipeline.datamanager.train_images.cameras[0])
+    assert torch.isfinite(out["rgb"]).all()

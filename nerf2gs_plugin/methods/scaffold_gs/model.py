@@ -126,6 +126,32 @@ class ScaffoldGSModel(Model):
         self.strategy = self._make_strategy()
         self._last: Optional[dict[str, Any]] = None
 
+    @torch.no_grad()
+    def add_initial_points(self, xyz: Tensor, rgb: Tensor) -> int:
+        """New anchors on the voxels of ``xyz`` that hold none yet, made as the sparse points' anchors are
+        (zero feature and offsets, kNN scaling among all); before training only. ``rgb`` is unused: an
+        anchor's colours come from its feature. The growth budget stays the sparse points' (as Splatfacto's)."""
+        if len(xyz) == 0:
+            return 0
+        a = self.anchor
+        old = a["anchors"].detach()
+        voxel = float(self.voxel)
+        cells = torch.unique(torch.round(xyz.to(old.device, torch.float32) / voxel).long(), dim=0)
+        taken = torch.round(old / voxel).long()
+        new = cells[~(cells[:, None] == taken[None]).all(-1).any(1)] if len(taken) else cells
+        n = len(new)
+        if n == 0:
+            return 0
+        anchors = new.float() * voxel
+        dist = knn_mean_distance(torch.cat([old, anchors])).clamp_min(1e-4)[-n:]
+        rows = {"anchors": anchors, "anchor_feat": torch.zeros(n, a["anchor_feat"].shape[1], device=old.device),
+                "offsets": torch.zeros(n, *a["offsets"].shape[1:], device=old.device),
+                "scaling": torch.log(dist)[:, None].repeat(1, a["scaling"].shape[1])}
+        for name, extra in rows.items():
+            a[name] = nn.Parameter(torch.cat([a[name].detach(), extra.to(a[name].dtype)]), requires_grad=a[name].requires_grad)
+        self.strategy = self._make_strategy()
+        return n
+
     def _make_strategy(self) -> AnchorStrategy:
         strategy = AnchorStrategy(self.config, float(self.voxel))  # the buffer's (float32) value, as after a reload
         strategy.budget.pixels_fn = self.training_pixels
