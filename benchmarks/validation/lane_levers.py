@@ -42,7 +42,20 @@ RUNS: dict[str, tuple[int, Optional[dict]]] = {  # name -> (target steps, --augm
     f"birds-eye, {LONG_STEPS} steps": (LONG_STEPS, {}),
     f"lane +-3 m, share 0.15, {LONG_STEPS} steps": (LONG_STEPS, {"views": BOTH, "lane_shift": DEFAULT_LANE}),
 }
-LEVERS = [n for n, (_, a) in RUNS.items() if a and "lane-shift" in a.get("views", [])]
+DEFAULT_SCALE_RUNS: dict[str, tuple[Optional[int], Optional[dict]]] = {  # --scale default: the registered steps (None)
+    "alone": (None, None),
+    "birds-eye": (None, {}),
+    **{name: (None, augment) for name, (steps, augment) in RUNS.items() if steps == QUICK_STEPS and augment},
+}
+SCALE = "quick"
+"""The bench scale of runs whose steps are None (the reference too when trained here)."""
+
+
+def levers(runs: dict) -> list[str]:
+    return [n for n, (_, a) in runs.items() if a and "lane-shift" in a.get("views", [])]
+
+
+LEVERS = levers(RUNS)
 BEV_TOL = 0.2
 TEST = ("street", "bev_1", "bev_2", "lane_2", "lane_4")
 
@@ -50,20 +63,21 @@ TEST = ("street", "bev_1", "bev_2", "lane_2", "lane_4")
 def baseline(name: str, kind: str) -> str:
     """The run ``name`` is compared with: the target alone or the bird's-eye views alone, at its steps."""
     steps = RUNS[name][0]
-    return kind if steps == QUICK_STEPS else f"{kind}, {steps} steps"
+    return kind if steps == RUNS[kind][0] else f"{kind}, {steps} steps"
 
 
 def train_street(work: Path, seed: int, given: Optional[str]) -> dict[str, dict[str, dict]]:
     """Every run of :data:`RUNS` on one street -> {"val": {name: result}, "test": {name: result}}."""
     data = street(work, seed)
-    ref_dir, ref_key, ref_test = reference(data, work / "runs", given)  # its own bench's test evaluation when saved
+    ref_dir, ref_key, ref_test = reference(data, work / "runs", given, scale=SCALE)  # its own bench's test evaluation when saved
     out: dict[str, dict[str, dict]] = {"val": {}, "test": {"StreetNeRF": ref_test}}  # the reference: the bound its views set
     for split_set, splits in (("val", VAL_SPLITS), ("test", EVAL_SPLITS)):
         runner = BenchRunner(work / "runs", splits=splits)
         if split_set == "val":
             out["val"]["StreetNeRF"] = runner._evaluate(ref_dir, ref_key, load_run, evaluate_run)
         for name, (steps, augment) in RUNS.items():  # the second pass reuses the first's training
-            out[split_set][name] = run_augmented(runner, data, (ref_dir, ref_key), f"{TARGET} {name}", augment, steps=steps)
+            out[split_set][name] = run_augmented(runner, data, (ref_dir, ref_key), f"{TARGET} {name}", augment, steps=steps,
+                                                      scale=SCALE)
     return out
 
 
@@ -94,24 +108,25 @@ def summarise(per_seed: dict[str, dict[str, dict[str, dict]]]) -> dict:
                         "test_street_over_alone": gain(test, name, "alone", "street")}
     kept = [n for n in LEVERS if levers[n]["keeps_bev"] and levers[n]["mean_val_lane_over_alone"] is not None]
     chosen = max(kept, key=lambda n: levers[n]["mean_val_lane_over_alone"], default=None)
-    return {"machine": machine_line(), "runs": {n: {"steps": s, "augment": a} for n, (s, a) in RUNS.items()},
+    return {"machine": machine_line(), "scale": SCALE, "runs": {n: {"steps": s, "augment": a} for n, (s, a) in RUNS.items()},
             "val_psnr": val, "test_psnr": test, "train_seconds": seconds, "levers": levers, "chosen": chosen}
 
 
 def markdown(doc: dict) -> str:
     seeds = list(doc["val_psnr"])
+    ref_steps = 1500 if doc.get("scale", "quick") == "quick" else 3000
     lines = ["# What lifts lane_4: offsets, share, steps (`benchmarks/validation/lane_levers.py`)", "",
              f"Machine: {doc['machine']}", "",
-             "Splatfacto (+ StreetNeRF's bird's-eye and lane-shift views), one StreetNeRF reference per street (quick, 1500 "
-             f"steps), streets seed {' and '.join(seeds)}. Chosen on the validation views: the best mean val_lane gain over "
+             f"Splatfacto (+ StreetNeRF's bird's-eye and lane-shift views), one StreetNeRF reference per street ({doc.get('scale', 'quick')}, "
+             f"{ref_steps} steps), streets seed {' and '.join(seeds)}. Chosen on the validation views: the best mean val_lane gain over "
              f"the target alone at the same steps, val_bev within {BEV_TOL} dB of the bird's-eye views alone on both streets. "
              "Test splits of the same runs reported, not used to choose.", "",
              "## Validation views (PSNR)", "",
              "| run | steps | " + " | ".join(f"seed {s} {v}" for s in seeds for v in VAL_SPLITS) + " |",
              "|---" * (2 + len(seeds) * len(VAL_SPLITS)) + "|"]
-    for name, spec in {"StreetNeRF": {"steps": "1500 (reference)"}, **doc["runs"]}.items():
+    for name, spec in {"StreetNeRF": {"steps": f"{ref_steps} (reference)"}, **doc["runs"]}.items():
         cells = [f"{doc['val_psnr'][s][name][v]:.2f}" if doc["val_psnr"][s].get(name) else "failed" for s in seeds for v in VAL_SPLITS]
-        lines.append(f"| {name} | {spec['steps']} | " + " | ".join(cells) + " |")
+        lines.append(f"| {name} | {spec['steps'] or 'registered'} | " + " | ".join(cells) + " |")
     lines += ["", "| lever | " + " | ".join(f"d val_lane vs alone seed {s}" for s in seeds) + " | mean | "
               + " | ".join(f"d val_bev vs birds-eye seed {s}" for s in seeds) + " | kept |", "|---" * (3 + 2 * len(seeds)) + "|"]
     for name, lv in doc["levers"].items():
@@ -140,13 +155,19 @@ def main() -> None:
     ap.add_argument("work", type=Path)
     ap.add_argument("references", nargs="*", metavar="SEED=REFERENCE_RUN")
     ap.add_argument("--only", type=int, default=None, help="train this street's runs and write nothing")
+    ap.add_argument("--scale", choices=("quick", "default"), default="quick",
+                    help="default: every run at the registered steps (alone, birds-eye, the three lane levers); "
+                         "writes lane_levers_default.{json,md}")
     args = ap.parse_args()
+    global RUNS, LEVERS, SCALE
+    if args.scale == "default":
+        RUNS, LEVERS, SCALE = DEFAULT_SCALE_RUNS, levers(DEFAULT_SCALE_RUNS), "default"
     given = dict(a.split("=", 1) for a in args.references)
     if args.only is not None:
         train_street(args.work, args.only, given.get(str(args.only)))
         return
     doc = summarise({str(seed): train_street(args.work, seed, given.get(str(seed))) for seed in SEEDS})
-    out = Path(__file__).resolve().parents[1] / "results" / "lane_levers"
+    out = Path(__file__).resolve().parents[1] / "results" / ("lane_levers" + ("" if SCALE == "quick" else "_" + SCALE))
     atomic_write_text(out.with_suffix(".json"), json.dumps(doc, indent=1))
     atomic_write_text(out.with_suffix(".md"), markdown(doc))
     print(markdown(doc))
