@@ -13,7 +13,8 @@ Usage: python benchmarks/validation/view_families.py WORK [SEED] [REFERENCE_RUN]
   REFERENCE_RUN: a finished StreetNeRF bench run of that street to render the views from (else one is
   trained at the quick bench's steps).
   --target: scaffold-gs or 2dgs instead of Splatfacto (alone, + birds-eye, + birds-eye lane-shift).
-Writes benchmarks/results/view_families[_TARGET].{json,md,png} (seed 0) or view_families[_TARGET]_seedN.{json,md,png}.
+  --scale default: every method's registered steps (alone, + birds-eye, + birds-eye lane-shift only).
+Writes benchmarks/results/view_families[_default][_TARGET].{json,md,png} (seed 0) or view_families[_default][_TARGET]_seedN.{json,md,png}.
 """
 import argparse
 import json
@@ -118,21 +119,22 @@ def main() -> None:
     pairs = [(f"{t} + birds-eye", t), (f"{t} + lane-shift", t), (f"{t} + birds-eye lane-shift", t), (f"{t} + birds-eye lane-shift", f"{t} + birds-eye"),
              (f"{t} + birds-eye lane-shift (one share)", f"{t} + birds-eye")]
     pairs = [p for p in pairs if p[0] in rows]
-    name = results_name(t, seed)
-    note = (f"Street seed {seed} (200x112, generator version 3), quick-bench steps (StreetNeRF 1500, {t} 800), one run each, "
+    name = results_name(t, seed, scale)
+    steps = "quick-bench steps (StreetNeRF 1500, {t} 800)" if scale == "quick" else "the registered steps (StreetNeRF 3000, {t} 3000)"
+    note = (f"Street seed {seed} (200x112, generator version 3), {steps.format(t=t)}, one run each, "
             f"reference {ref_dir.name}. lane-shift: {chosen} ({json.dumps(lane)}), the options lane_shift_sweep.py chose on the "
             "validation views (the family's defaults)"
             + ("; (one share): offsets -2 and +2 m, every additional view drawn alike, as before the per-family shares "
                "(bird's-eye 0.25, lane-shift 0.5 of the samples). " if t == TARGET else ". ")
             + "`python benchmarks/validation/view_families.py WORK" + (f" {seed}" if seed else "") + " [REFERENCE_RUN]"
-            + ("" if t == TARGET else f" --target {t}") + "`.\n\n")
-    write_results(RESULTS, name, rows, f"View families (synthetic street, quick scale){'' if t == TARGET else ', ' + t}",
+            + ("" if t == TARGET else f" --target {t}") + ("" if scale == "quick" else f" --scale {scale}") + "`.\n\n")
+    write_results(RESULTS, name, rows, f"View families (synthetic street, {scale} scale){'' if t == TARGET else ', ' + t}",
                   extra_md=note + "Differences, same bench run:\n\n" + ratios_md(rows, pairs) + "\n")
 
 
-def results_name(target: str, seed: int) -> str:
-    """view_families[_TARGET][_seedN]: Splatfacto's files keep their names."""
-    return "view_families" + ("" if target == TARGET else "_" + target.replace("-", "_")) + ("" if seed == 0 else f"_seed{seed}")
+def results_name(target: str, seed: int, scale: str = "quick") -> str:
+    """view_families[_SCALE][_TARGET][_seedN] (no _SCALE for quick): Splatfacto's quick files keep their names."""
+    return "view_families" + ("" if scale == "quick" else "_" + scale) + ("" if target == TARGET else "_" + target.replace("-", "_")) + ("" if seed == 0 else f"_seed{seed}")
 
 
 if __name__ == "__main__":

@@ -47,3 +47,5 @@ def test_view_families_result_names():
     vf = _script("view_families")
     assert vf.results_name("splatfacto", 0) == "view_families" and vf.results_name("splatfacto", 7) == "view_families_seed7"
     assert vf.results_name("scaffold-gs", 7) == "view_families_scaffold_gs_seed7" and vf.results_name("2dgs", 0) == "view_families_2dgs"
+    assert vf.results_name("splatfacto", 7, "default") == "view_families_default_seed7"
+    assert vf.results_name("2dgs", 0, "default") == "view_families_default_2dgs"
