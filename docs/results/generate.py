@@ -553,6 +553,77 @@ def lane_bound_targets() -> str:
     return "Every target at lane_4 (the quick bench's steps, the same reference per street). " + said + "\n\n" + "\n".join(lines)
 
 
+DEFAULT_SCALE_STREETS = (("", "seed 0"), ("_seed7", "seed 7"))
+
+
+def default_scale_rows() -> list[tuple[str, str, dict]]:
+    """(target, street, results) of every view_families_default* result file there is."""
+    out = []
+    for t in TARGET_NAMES:
+        stem = "view_families_default" + ("" if t == "splatfacto" else "_" + t.replace("-", "_"))
+        for suffix, street in DEFAULT_SCALE_STREETS:
+            if (RESULTS / f"{stem}{suffix}.json").is_file():
+                out.append((t, street, load(f"{stem}{suffix}.json")["results"]))
+    return out
+
+
+def default_scale_section() -> str:
+    """Every target at its registered steps (and StreetNeRF at its): the issue's criteria per target and street."""
+    rows = default_scale_rows()
+    if not rows:
+        return ""
+    head = ["| target | street | row | street | bev_1 | bev_2 | lane_2 | lane_4 | primitives | MB |", "|---" * 10 + "|"]
+    crit = ["| target | street | StreetNeRF - alone at lane_4 | d lane_4 vs alone | d lane_2 vs alone | d bev_1 / bev_2 vs birds-eye "
+            "| d street vs alone / vs birds-eye | lane_4 >= +2 | bird's-eye within 0.2 | street not worse |", "|---" * 10 + "|"]
+    gains, leads = [], []
+    for t, street, res in rows:
+        names = ("StreetNeRF", t, f"{t} + birds-eye", f"{t} + birds-eye lane-shift")
+        for n in names:
+            if n in res and not res[n].get("failed"):
+                size = res[n].get("size", {})
+                prims = size.get("primitives") if size.get("primitive_kind") != "parameters" else None
+                head.append(f"| {TARGET_NAMES[t]} | {street} | {n} | " + " | ".join(f"{psnr(res[n], s):.2f}" for s in ("street", "bev_1", "bev_2", "lane_2", "lane_4"))
+                            + f" | {prims if prims is not None else '-'} | {size.get('megabytes', float('nan')):.1f} |")
+        if any(res.get(n, {}).get("failed", n not in res) for n in names):
+            continue
+        nerf, alone, bev, lanes = (res[n] for n in names)
+        g4 = psnr(lanes, "lane_4") - psnr(alone, "lane_4")
+        lead = psnr(nerf, "lane_4") - psnr(alone, "lane_4")
+        dbev = [psnr(lanes, s) - psnr(bev, s) for s in ("bev_1", "bev_2")]
+        dst = (psnr(lanes, "street") - psnr(alone, "street"), psnr(lanes, "street") - psnr(bev, "street"))
+        gains.append(g4)
+        leads.append(lead)
+        crit.append(f"| {TARGET_NAMES[t]} | {street} | {db(lead)} | {db(g4)} | {db(psnr(lanes, 'lane_2') - psnr(alone, 'lane_2'))} | "
+                    f"{db(dbev[0])} / {db(dbev[1])} | {db(dst[0])} / {db(dst[1])} | {'yes' if g4 >= 2 else 'no'} | "
+                    f"{'yes' if min(dbev) >= -0.2 else 'no'} | {'yes' if min(dst) >= 0 else 'no'} |")
+    met = sum(g >= 2 for g in gains)
+    said = (f"lane_4 with the bird's-eye and lane-shift views against the target alone: {span(gains)} dB over {len(gains)} "
+            f"target-street pairs, {met} of them at +2 dB or more; StreetNeRF's own lane_4 is {span(leads)} dB above the "
+            "target alone at the same scale." if gains else "")
+    levers = ""
+    if (RESULTS / "lane_levers_default.json").is_file():
+        doc = load("lane_levers_default.json")
+        seeds = list(doc["val_psnr"])
+        lv = ["| lever | " + " | ".join(f"d val_lane vs alone seed {s}" for s in seeds) + " | mean | "
+              + " | ".join(f"d val_bev vs birds-eye seed {s}" for s in seeds) + " | kept |", "|---" * (3 + 2 * len(seeds)) + "|"]
+        for name, x in doc["levers"].items():
+            mean = x["mean_val_lane_over_alone"]
+            lv.append(f"| {name} | " + " | ".join(db(x["val_lane_over_alone"][s]) if s in x["val_lane_over_alone"] else "-" for s in seeds)
+                      + f" | {db(mean) if mean is not None else '-'} | "
+                      + " | ".join(db(x["val_bev_over_birds_eye"][s]) if s in x["val_bev_over_birds_eye"] else "-" for s in seeds)
+                      + f" | {'yes' if x['keeps_bev'] else 'no'} |")
+        levers = ("\n\nThe lane-shift options at this scale, chosen on the validation views only (val_lane gain over Splatfacto "
+                  f"alone, val_bev within 0.2 dB of the bird's-eye views alone on both streets): **{doc['chosen'] or 'none'}**. "
+                  f"Source: {source('lane_levers_default.json')} (test views of the same runs: {source('lane_levers_default.md')}), "
+                  "`python benchmarks/validation/lane_levers.py WORK 0=REFERENCE_RUN 7=REFERENCE_RUN --scale default`.\n\n" + "\n".join(lv))
+    files = ", ".join(source(f"view_families_default{'' if t == 'splatfacto' else '_' + t.replace('-', '_')}{'' if st == 'seed 0' else '_seed7'}.json")
+                      for t, st, _ in rows)
+    return ("Every target at its registered steps (3000) from a StreetNeRF at its registered steps (3000), one per street, "
+            "the lane-shift family's defaults, one run each. " + said + f" Sources: {files}, "
+            "`python benchmarks/validation/view_families.py WORK [7] [REFERENCE_RUN] [--target METHOD] --scale default`.\n\n"
+            + "\n".join(crit) + "\n\n" + "\n".join(head) + levers)
+
+
 def sweep_section() -> str:
     doc = load("lane_shift_sweep.json")
     seeds = list(doc["psnr"])
@@ -576,6 +647,7 @@ def page_view_families() -> str:
              "share of the samples) and both, from one StreetNeRF reference per street at the quick bench's steps, "
              "scored on the test views (lane_2 / lane_4: 2 and 4 m to the side at camera height).", "",
              "## What the reference holds at the next lanes", "", lane_bound_section(), "",
+             *(["## At the default scale", "", default_scale_section(), ""] if default_scale_rows() else []),
              "## Choosing the lane-shift options", "", sweep_section()]
     for rel, street in (("view_families.json", "The embedded street (seed 0)"), ("view_families_seed7.json", "A second street (seed 7)")):
         results = load(rel)["results"]
@@ -659,7 +731,9 @@ PAGES: dict[str, tuple[str, Callable[[], str], tuple[str, ...]]] = {
     "view-families.md": ("lane-shift views beside the bird's-eye views, their options chosen on validation views",
                          page_view_families, ("lane_shift_sweep", "view_families", "view_families_seed7", "lane_levers",
                                              "view_families_scaffold_gs", "view_families_scaffold_gs_seed7",
-                                             "view_families_2dgs", "view_families_2dgs_seed7")),
+                                             "view_families_2dgs", "view_families_2dgs_seed7", "lane_levers_default",
+                                             *(f"view_families_default{t}{st}" for t in ("", "_scaffold_gs", "_2dgs")
+                                               for st in ("", "_seed7")))),
     "findings.md": ("why the targets stay below the reference, and the evidence behind the defaults", page_findings,
                     ("fit_vs_generalise", "augment_spread", "appearance_reg", "depth_loss", "path_clearance",
                      "augment_weight_val", "reference_length_val", "castle_confidence", "confidence_depth_val",
