@@ -624,6 +624,23 @@ def default_scale_section() -> str:
             + "\n".join(crit) + "\n\n" + "\n".join(head) + levers)
 
 
+def scaffold_seeds_section() -> str:
+    """Scaffold-GS's anchors from the seed points: holes from above and PSNR with and without them."""
+    doc = load("scaffold_seed_points.json")
+    lines = ["| street | holes from above without / with | d street | d bev_1 | d bev_2 | d lane_4 | anchors without / with |", "|---" * 7 + "|"]
+    for seed, r in doc["streets"].items():
+        on, off = r.get("seed points", {}), r.get("no seed points", {})
+        if "psnr" not in on or "psnr" not in off:
+            continue
+        d = {s: on["psnr"][s] - off["psnr"][s] for s in ("street", "bev_1", "bev_2", "lane_4")}
+        lines.append(f"| seed {seed} | {100 * off['holes_from_above']:.1f}% / {100 * on['holes_from_above']:.1f}% | "
+                     + " | ".join(db(d[s]) for s in ("street", "bev_1", "bev_2", "lane_4")) + f" | {off['anchors']} / {on['anchors']} |")
+    return ("Scaffold-GS + the bird's-eye views with the seed points (`--augment.seed-points 1.0`, the default: anchors on their "
+            "voxels, as from the sparse points) against without, at the quick bench's steps, one run each. Source: "
+            f"{source('scaffold_seed_points.json')}, `python benchmarks/validation/scaffold_seed_points.py WORK 0=REFERENCE_RUN "
+            "7=REFERENCE_RUN`.\n\n" + "\n".join(lines))
+
+
 def sweep_section() -> str:
     doc = load("lane_shift_sweep.json")
     seeds = list(doc["psnr"])
@@ -657,6 +674,8 @@ def page_view_families() -> str:
                   lane_sentence(results), "", "Differences, same bench run:", "", paper.ratios_md(results, pairs)]
     if (RESULTS / "lane_levers.json").is_file():
         parts += ["", "## What lifts lane_4: offsets, share, steps", "", levers_section()]
+    if (RESULTS / "scaffold_seed_points.json").is_file():
+        parts += ["", "## Scaffold-GS and the seed points", "", scaffold_seeds_section()]
     for t in ("scaffold-gs", "2dgs"):
         rels = [r for r in (f"view_families_{t.replace('-', '_')}.json", f"view_families_{t.replace('-', '_')}_seed7.json") if (RESULTS / r).is_file()]
         if rels:
@@ -731,7 +750,7 @@ PAGES: dict[str, tuple[str, Callable[[], str], tuple[str, ...]]] = {
     "view-families.md": ("lane-shift views beside the bird's-eye views, their options chosen on validation views",
                          page_view_families, ("lane_shift_sweep", "view_families", "view_families_seed7", "lane_levers",
                                              "view_families_scaffold_gs", "view_families_scaffold_gs_seed7",
-                                             "view_families_2dgs", "view_families_2dgs_seed7", "lane_levers_default",
+                                             "view_families_2dgs", "view_families_2dgs_seed7", "lane_levers_default", "scaffold_seed_points",
                                              *(f"view_families_default{t}{st}" for t in ("", "_scaffold_gs", "_2dgs")
                                                for st in ("", "_seed7")))),
     "findings.md": ("why the targets stay below the reference, and the evidence behind the defaults", page_findings,
