@@ -572,7 +572,7 @@ def default_scale_section() -> str:
     rows = default_scale_rows()
     if not rows:
         return ""
-    head = ["| target | street | row | street | bev_1 | bev_2 | lane_2 | lane_4 | primitives | MB |", "|---" * 10 + "|"]
+    head = ["| target | street | row | street | bev_1 | bev_2 | lane_2 | lane_4 | Gaussians / anchors / surfels | MB |", "|---" * 10 + "|"]
     crit = ["| target | street | StreetNeRF - alone at lane_4 | d lane_4 vs alone | d lane_2 vs alone | d bev_1 / bev_2 vs birds-eye "
             "| d street vs alone / vs birds-eye | lane_4 >= +2 | bird's-eye within 0.2 | street not worse |", "|---" * 10 + "|"]
     gains, leads = [], []
@@ -581,9 +581,9 @@ def default_scale_section() -> str:
         for n in names:
             if n in res and not res[n].get("failed"):
                 size = res[n].get("size", {})
-                prims = size.get("primitives") if size.get("primitive_kind") != "parameters" else None
+                prims = size.get("primitives") if size.get("primitive_kind") else f"({size.get('parameters', 0) / 1e6:.2f}M params)"
                 head.append(f"| {TARGET_NAMES[t]} | {street} | {n} | " + " | ".join(f"{psnr(res[n], s):.2f}" for s in ("street", "bev_1", "bev_2", "lane_2", "lane_4"))
-                            + f" | {prims if prims is not None else '-'} | {size.get('megabytes', float('nan')):.1f} |")
+                            + f" | {prims} | {size.get('megabytes', float('nan')):.1f} |")
         if any(res.get(n, {}).get("failed", n not in res) for n in names):
             continue
         nerf, alone, bev, lanes = (res[n] for n in names)
