@@ -1,7 +1,7 @@
 """A/B interleaved in one process: the --augment-from bird's-eye renders (every-n N) of a StreetNeRF run, one view at a time
 (torch's threads, before) vs side by side in forked workers (now); CPU s, wall s, renders compared.
 Usage: python benchmarks/validation/augment_render_workers_ab.py DATA RUN_COPY N (RUN_COPY: a copy of the run: its augment_cache is removed)."""
-import dataclasses, json, shutil, sys, time, torch
+import argparse, shutil, time, torch
 from pathlib import Path
 from nerf2gs_plugin.augment.config import AugmentConfig
 from nerf2gs_plugin.augment.datamanager import render_augmented_views
@@ -9,7 +9,12 @@ from nerf2gs_plugin.augment.reference import load_reference
 from nerf2gs_plugin.data.fingerprint import dataset_fingerprint
 from nerf2gs_plugin.datamanagers.full_image import FullImageDataManagerConfig
 from nerf2gs_plugin.utils.parallel import cpu_seconds
-data, run, every = Path(sys.argv[1]), Path(sys.argv[2]), int(sys.argv[3])
+ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+ap.add_argument("data", type=Path, help="the dataset")
+ap.add_argument("run", type=Path, help="a copy of the StreetNeRF run (its augment_cache is removed)")
+ap.add_argument("every", type=int, help="bird's-eye every-n")
+args = ap.parse_args()
+data, run, every = args.data, args.run, args.every
 dm = FullImageDataManagerConfig().setup(data=data, device="cpu")
 ref = load_reference(run, dm, "cpu")
 td = dm.train_data

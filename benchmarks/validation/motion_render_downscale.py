@@ -113,5 +113,5 @@ for label, r, full_size in (("full renders", full, False), ("every other pixel, 
     rows[label] = {**{k: score(res["train"], k) for k in kinds}, "maths_cpu_s": cpu}
     print(label, json.dumps(rows[label]), flush=True)
 doc = json.loads(args.out.read_text()) if args.out.is_file() else {}
-doc[str(work)] = {"views": len(names), "size": list(shape[::-1]), "step": d, "rows": rows}
+doc[work.name] = {"views": len(names), "size": list(shape[::-1]), "step": d, "rows": rows}
 atomic_write_text(args.out, json.dumps(doc, indent=1))

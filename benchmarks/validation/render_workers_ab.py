@@ -1,10 +1,15 @@
 """A/B interleaved in one process: N training views of a StreetNeRF run rendered one after another with torch at 2 threads
 (before) vs by two forked processes, 1 thread each (utils/parallel.py); CPU s (with the children's), wall s, max difference.
 Usage: python benchmarks/validation/render_workers_ab.py RUN N ROUNDS"""
-import sys, time, resource, torch, multiprocessing as mp
+import argparse, time, resource, torch, multiprocessing as mp
 from nerf2gs_plugin.runs.model import load_run_model
-run = load_run_model(sys.argv[1]); m = run.model; m.eval()
-n = len(run.train_cameras); nv = int(sys.argv[2]); reps = int(sys.argv[3])
+ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+ap.add_argument("run", help="a StreetNeRF run folder")
+ap.add_argument("views", type=int, help="training views to render")
+ap.add_argument("rounds", type=int, help="interleaved A/B rounds")
+args = ap.parse_args()
+run = load_run_model(args.run); m = run.model; m.eval()
+n = len(run.train_cameras); nv = args.views; reps = args.rounds
 cams = [run.train_cameras[i:i+1] for i in range(0, n, n // nv)][:nv]
 def cpu():
     a, b = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
