@@ -51,9 +51,20 @@ VARIANTS: dict[str, dict] = {
     "drop_outside_box + reference sky": {"augment": {"drop_outside_box": True, "reference_sky": True}},
     "drop_outside_box + reference sky, sky_alpha 0.5": {"augment": {"drop_outside_box": True, "reference_sky": True},
                                                          "model": {"sky_alpha_weight": 0.5}},
+    "no seed points": {"augment": {"seed_points": 0.0}},
+    "seed points only": {"augment": {"composites": False, "extra_prob": 0.0}},
+    "bev only, no seed points": {"augment": {"composites": False, "seed_points": 0.0}},
+    "default, input samples matched": {"augment": {}, "steps_factor": 1.8},
+    "target, 1.8x steps": {"steps_factor": 1.8},
+    "extra_decay": {"augment": {"extra_decay": True}},
+    "birds_eye_share 0.25": {"augment": {"birds_eye_share": 0.25}},
+    "extra_decay + drop_outside_box + sky_alpha 0": {"augment": {"extra_decay": True, "drop_outside_box": True},
+                                                     "model": {"sky_alpha_weight": 0.0}},
 }
 """Label -> the augment overrides of a Splatfacto run (no ``augment`` key: the target alone) and
-``model``: overrides of its model config (the sky / far levers live there)."""
+``model``: overrides of its model config (the sky / far levers live there); ``steps_factor``: the run
+trains this many times the bench's steps (1.8: the input views get as many samples as the target
+alone's, where the views from above take about half of the samples until the last 10% of the run)."""
 
 
 def variant_overrides(base: dict, variant: dict) -> dict:
@@ -221,7 +232,8 @@ def run(captures: Sequence[str], from_runs: Path, runs_root: Path, out_dir: Path
             v = VARIANTS[label]
             errs, holes, run_dirs = [], [], []
             for seed in seeds:
-                overrides = variant_overrides({**run_overrides(opts, "splatfacto", steps), "seed": seed}, v)
+                v_steps = int(round(steps * v.get("steps_factor", 1.0)))
+                overrides = variant_overrides({**run_overrides(opts, "splatfacto", v_steps), "seed": seed}, v)
                 spec = RunSpec(label, "splatfacto", overrides, augment_from="StreetNeRF" if "augment" in v else None,
                                augment={"delta_h": aug.delta_h, "theta_pitch": aug.theta_pitch, **v.get("augment", {})})
                 log(f"[street-level] {name}: {label}, seed {seed}")

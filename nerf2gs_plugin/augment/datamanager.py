@@ -410,6 +410,9 @@ class AugmentedDataManager(DataManager):
             raise ConfigError(f"must be in (0, 1], got {augment.real_only_from}", "--augment.real-only-from")
         self.real_only_step: Optional[int] = (
             int(round(augment.real_only_from * total_steps)) if total_steps is not None and augment.real_only_from < 1.0 else None)
+        # --augment.extra-decay: the share falls to 0 at this step (None: it stays)
+        self.decay_end: Optional[int] = (self.real_only_step or total_steps) if augment.extra_decay else None
+        self.full_extra_prob = 0.0
         self.inner = inner
         self.reference = reference
         self.augment = augment
@@ -435,6 +438,7 @@ class AugmentedDataManager(DataManager):
             families = self.views.manifest.extra_families or ["birds-eye"] * len(self.views.extra)
             prob, view_probs = extra_sampling(families, len(inner.train_images), augment)
             inner.set_extra_images(self.views.extra, prob, view_probs)
+            self.full_extra_prob = prob
 
     def initial_points(self) -> Optional[tuple[Tensor, Tensor]]:
         """The reference's depth in the additional views, thinned where the sparse points leave gaps
@@ -500,6 +504,8 @@ class AugmentedDataManager(DataManager):
     def next_train(self, step: int) -> tuple[Any, dict[str, Any]]:
         if self.real_only_step is not None and step >= self.real_only_step:
             self.inner.extra_prob = 0.0  # the final phase: input views only (the draw still happens: streams stay aligned)
+        elif self.decay_end:
+            self.inner.extra_prob = self.full_extra_prob * max(0.0, 1.0 - step / self.decay_end)
         return self.inner.next_train(step)
 
     def next_eval(self, step: int) -> tuple[Cameras, dict[str, Any]]:

@@ -136,6 +136,11 @@ class AugmentConfig:
     """Fraction of the run after which only the input views (composites) are sampled: 0.9 gives the last
     10% of the steps to the target's own street evidence (1.0: the additional views to the end; 0.9 was
     chosen on validation views of two streets and a real capture: benchmarks/results/augment_variants.md)."""
+    extra_decay: bool = False
+    """The additional views' share of the training samples falls linearly from its full value at the
+    first step to 0 at real-only-from (the end of the run when that is 1.0): the views from above still
+    shape the model while it densifies, and the input views get the samples they lose in a run of fixed
+    length (on average half of the views from above's share returns to them)."""
     drop_outside_box: bool = False
     """Zero the loss weight of the additional views' pixels whose reference surface lies outside the scene
     box (the far background a NeRF contracts) or that show sky (accumulation < 0.5): the target learns from

@@ -274,3 +274,20 @@ def test_a_reference_with_refined_poses_renders_the_input_views_from_them(tiny_s
     assert all(was_rendered(c) for c in views.extra.cameras.centers)
     torch.testing.assert_close(views.extra.cameras.camera_to_worlds, bev[torch.tensor(views.manifest.extra_indices)].camera_to_worlds)
     assert torch.equal(views.composites.cameras.camera_to_worlds, cams.camera_to_worlds)
+
+
+def test_extra_decay_gives_the_input_views_the_later_samples(tiny_scene, tmp_path):
+    """--augment.extra-decay over 80 steps (real-only-from 1.0): the views from above are drawn about as
+    often as without it in the first steps, far less in the second half, and the share falls to 0 at the end."""
+
+    def drawn(decay):
+        dm = AugmentedDataManager(_dm(tiny_scene), Reference(CountingRenderer(), "ref:r", tmp_path),
+                                  AugmentConfig(delta_h=3.0, extra_prob=0.5, real_only_from=1.0, extra_decay=decay), total_steps=80)
+        n_real = len(dm.train_images)
+        draws = [int(dm.next_train(s)[1]["image_idx"]) >= n_real for s in range(80)]
+        return draws, dm.extra_prob
+
+    (flat, p_flat), (decayed, p_end) = drawn(False), drawn(True)
+    assert p_flat == 0.5 and p_end < 0.5 / 70
+    assert sum(decayed[40:]) < sum(flat[40:]) / 2
+    assert sum(decayed[:10]) > 0
