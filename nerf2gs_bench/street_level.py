@@ -58,6 +58,8 @@ VARIANTS: dict[str, dict] = {
     "target, 1.8x steps": {"steps_factor": 1.8},
     "extra_decay": {"augment": {"extra_decay": True}},
     "birds_eye_share 0.25": {"augment": {"birds_eye_share": 0.25}},
+    "appearance nearest": {"augment": {"appearance": "nearest"}},
+    "appearance nearest + extra_decay": {"augment": {"appearance": "nearest", "extra_decay": True}},
     "extra_decay + drop_outside_box + sky_alpha 0": {"augment": {"extra_decay": True, "drop_outside_box": True},
                                                      "model": {"sky_alpha_weight": 0.0}},
 }
