@@ -46,6 +46,9 @@ DEFAULT_SCALE_RUNS: dict[str, tuple[Optional[int], Optional[dict]]] = {  # --sca
     "alone": (None, None),
     "birds-eye": (None, {}),
     **{name: (None, augment) for name, (steps, augment) in RUNS.items() if steps == QUICK_STEPS and augment},
+    # every lane lever above cost val_bev more than the tolerance at these steps: fewer lane samples
+    **{f"lane +-3 m, share {share}": (None, {"views": BOTH, "lane_shift": {"offsets": [-3.0, 3.0], "share": share}})
+       for share in (0.05, 0.08)},
 }
 SCALE = "quick"
 """The bench scale of runs whose steps are None (the reference too when trained here)."""
