@@ -49,6 +49,10 @@ DEFAULT_SCALE_RUNS: dict[str, tuple[Optional[int], Optional[dict]]] = {  # --sca
     # every lane lever above cost val_bev more than the tolerance at these steps: fewer lane samples
     **{f"lane +-3 m, share {share}": (None, {"views": BOTH, "lane_shift": {"offsets": [-3.0, 3.0], "share": share}})
        for share in (0.05, 0.08)},
+    # one seed-point grid for all the views coarsens it where the views from above see the road
+    **{f"lane +-3 m, share {share}, seed points per family": (None, {"views": BOTH, "seed_points_per_family": True,
+                                                                     "lane_shift": {"offsets": [-3.0, 3.0], "share": share}})
+       for share in (0.05, 0.15)},
 }
 SCALE = "quick"
 """The bench scale of runs whose steps are None (the reference too when trained here)."""

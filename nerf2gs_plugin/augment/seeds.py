@@ -78,16 +78,28 @@ def seed_points(xyz: Tensor, rgb: Tensor, occupied: Optional[Tensor], max_points
         size *= 2.0
 
 
-def views_seed_points(manifest: Any, extra: Any, depth_along: str, train_data: Any, ratio: float) -> Optional[tuple[Tensor, Tensor]]:
+def views_seed_points(manifest: Any, extra: Any, depth_along: str, train_data: Any, ratio: float,
+                      per_family: bool = False) -> Optional[tuple[Tensor, Tensor]]:
     """:func:`seed_points` of a cache entry's additional views (``manifest``: their depths beside the raw
     renders; ``extra``: the ImageSet the target trains on), at most ``ratio`` x the dataset's sparse points
-    (at least :data:`MIN_SEED_BASE`); None when the entry has no depths (a reference that renders none)."""
+    (at least :data:`MIN_SEED_BASE`); None when the entry has no depths (a reference that renders none).
+    ``per_family``: each family's views in turn on their own grid and budget, clear of the points before."""
     depth_files = [manifest.extra_png(j, raw=True).with_name(f"{j:05d}_depth.npy") for j in range(manifest.num_extra)]
     if not depth_files or not all(f.is_file() for f in depth_files):
         return None
     images = [extra.image(j).cpu() for j in range(len(extra))]
     depths = [torch.from_numpy(np.load(f).astype(np.float32)).reshape(*img.shape[:2], 1) for f, img in zip(depth_files, images)]
-    xyz, rgb = lifted_points(extra.cameras.to("cpu"), depths, images, depth_along, train_data.scene_box)
     sparse = train_data.points3D_xyz.float().cpu() if train_data.points3D_xyz is not None else None
-    base = max(len(sparse) if sparse is not None else 0, MIN_SEED_BASE)
-    return seed_points(xyz, rgb, sparse, int(round(ratio * base)))
+    budget = int(round(ratio * max(len(sparse) if sparse is not None else 0, MIN_SEED_BASE)))
+    families = manifest.extra_families if per_family and manifest.extra_families else ["all"] * len(images)
+    cams = extra.cameras.to("cpu")
+    out_xyz, out_rgb, occupied = [], [], sparse
+    for family in dict.fromkeys(families):
+        ids = [j for j, f in enumerate(families) if f == family]
+        xyz, rgb = lifted_points(cams[torch.tensor(ids)] if len(ids) < len(images) else cams, [depths[j] for j in ids],
+                                 [images[j] for j in ids], depth_along, train_data.scene_box)
+        pts, cols = seed_points(xyz, rgb, occupied, budget)
+        out_xyz.append(pts)
+        out_rgb.append(cols)
+        occupied = pts if occupied is None else torch.cat([occupied, pts])
+    return torch.cat(out_xyz), torch.cat(out_rgb)

@@ -122,3 +122,30 @@ def test_scaffold_gs_anchors_the_initial_points_on_its_grid(tiny_scene):
     assert torch.isfinite(model.anchor["scaling"]).all()
     out = model.render_camera(pipeline.datamanager.train_images.cameras[0])
     assert torch.isfinite(out["rgb"]).all()
+
+
+def test_seed_points_per_family_give_the_first_family_its_own_grid(tmp_path):
+    """A low view of a small patch and a high view of a wide one: on one grid the wide view coarsens the
+    patch's points; per family the first family's seeds are those of its views alone, the second's stay clear of them."""
+    from types import SimpleNamespace
+
+    from nerf2gs_plugin.augment.seeds import views_seed_points
+
+    centres, heights = torch.tensor([[0.0, 0.0, 3.0], [40.0, 0.0, 60.0]]), torch.tensor([3.0, 60.0])
+    cams = Cameras(look_at(centres, centres * torch.tensor([1.0, 1.0, 0.0]) + torch.tensor([0.5, 0.0, 0.0]),
+                           torch.tensor([0.0, 0.0, 1.0])), fx=16.0, fy=16.0, cx=16.0, cy=12.0, width=32, height=24)
+    images = [torch.full((24, 32, 3), 0.3), torch.full((24, 32, 3), 0.7)]
+    for j in range(2):
+        np.save(tmp_path / f"{j:05d}_depth.npy", _plane_depth(cams[j], torch.zeros(3), torch.tensor([0.0, 0.0, 1.0])).numpy())
+    manifest = SimpleNamespace(num_extra=2, extra_families=["birds-eye", "lane-shift"],
+                               extra_png=lambda j, raw: tmp_path / f"{j:05d}.png")
+    extra = type("Extra", (), {"cameras": cams, "image": staticmethod(lambda j: images[j]), "__len__": lambda self: 2})()
+    train = SimpleNamespace(points3D_xyz=None, scene_box=None)
+    ratio = 0.05  # 50 points each
+    joint, _ = views_seed_points(manifest, extra, "ray", train, ratio)
+    per, per_rgb = views_seed_points(manifest, extra, "ray", train, ratio, per_family=True)
+    first = seed_points(*lifted_points(cams[0], [torch.from_numpy(np.load(tmp_path / "00000_depth.npy"))], images[:1], "ray"), None, 50)
+    assert torch.allclose(per[: len(first[0])], first[0]) and len(per) > len(first[0])
+    assert torch.allclose(per_rgb[len(first[0]):], torch.full((len(per) - len(first[0]), 3), 0.7))  # the second family's
+    near = lambda p: int((p[:, :2].norm(dim=1) < heights[0]).sum())  # noqa: E731
+    assert near(per) > near(joint)  # the patch keeps its fine points
