@@ -135,8 +135,8 @@ class AugmentConfig:
     points (at least 1000): a splatting target only grows primitives by splitting those it has, so without
     them the road seen from above stays a hole (0: off)."""
     seed_points_per_family: bool = True
-    """Each view family's seed points on their own grid, with their own budget of ``seed_points`` (in the
-    order of ``--augment.views``, none where an earlier family put one): one grid for all of them coarsens
+    """Each view family's seed points on their own grid, with their own budget of --augment.seed-points (in the
+    order of --augment.views, none where an earlier family put one): one grid for all of them coarsens
     where the views from above see the road once the lane views see the street's sides too."""
     real_only_from: float = 0.9
     """Fraction of the run after which only the input views (composites) are sampled: 0.9 gives the last
