@@ -78,6 +78,12 @@ class MotionOptions:
     vote: float = 1.0
     """... in at least this fraction of its valid neighbour pairs on each side (1: all of them; lower
     values let in more of the road a mover uncovers)."""
+    one_sided_grey: float = 5.0
+    """Where only the pairs on one side are valid (what leaves the frame on the other: the road near
+    the bottom, the side walls), a pair counts only where frame ``j`` warped by the prior's rigid flow
+    also differs from frame ``i`` by more than this (grey levels, 5x5 means; 0: off): DIS spreads a
+    mover's flow onto the plain road beside it, which the static warp matches; without the other
+    side's vote nothing else removes it."""
     grow: float = 1.0
     """A superpixel joins a moving region where this fraction of its pixels move (1: off; 0.3 and 0.5
     measured no better than closing and hole filling alone on the synthetic street with movers)."""
@@ -220,7 +226,10 @@ def pair_moving(fi: "MotionFrame", fj: "MotionFrame", grey_i: np.ndarray, grey_j
       * the neighbour warped by the observed flow differs by ``photo_grey`` grey levels: a small
         mover DIS lost still fails to line up.
 
-    Returns (moving, valid, the observed flow)."""
+    Returns (moving, valid, the observed flow, the static mismatch: ``|i - j warped by the prior|``,
+    5x5 means, grey levels)."""
+    import cv2
+
     rig, ok = rigid_flow(fi.c2w, fi.intr, fi.dist, fj.c2w, fj.intr)
     wj, inside = warp(grey_j, rig.numpy())
     wj = np.where(inside, wj, grey_i)  # outside frame j: nothing to compare, no flow to invent there
@@ -244,18 +253,19 @@ def pair_moving(fi: "MotionFrame", fj: "MotionFrame", grey_i: np.ndarray, grey_j
         s_r = along(rig, p_inf, u)
         moving |= line_ok & ok & (s_obs - s_r > torch.clamp(opts.ref_close_rel * s_r.abs(), min=opts.floor_px))
     if opts.photo_grey > 0:
-        import cv2
-
         wo, _ = warp(grey_j, obs.numpy())  # not by the prior's flow: where the reference's depth is off, that misaligns static texture
         diff = np.abs(cv2.blur(grey_i.astype(np.float32), (3, 3)) - cv2.blur(wo.astype(np.float32), (3, 3)))
         moving |= torch.from_numpy(diff > opts.photo_grey)
-    return moving, ok & torch.from_numpy(inside), obs
+    static = np.abs(cv2.blur(grey_i.astype(np.float32), (5, 5)) - cv2.blur(wj.astype(np.float32), (5, 5)))
+    return moving, ok & torch.from_numpy(inside), obs, torch.from_numpy(static)
 
 
 def frame_votes(frames: Sequence[MotionFrame], i: int, opts: MotionOptions, greys: Optional[Sequence[np.ndarray]] = None) -> tuple[Tensor, dict[int, Tensor]]:
     """``[H, W]``: the share of frame ``i``'s valid neighbour pairs in which a pixel moves, the
     smaller of the shares before and after it (where both have a valid pair): what a mover hid in
     the frames before (the road it uncovers) is seen moving only on one side, the mover on both.
+    Where only one side has a valid pair, its pairs count only where the static warp fails too
+    (``one_sided_grey``).
     0 where no pair is valid, and where the static scene is at infinity (sky: no parallax to test).
     Also the observed flows into the frames just before and after (by index)."""
     greys = greys if greys is not None else [grey(f.image) for f in frames]
@@ -263,19 +273,21 @@ def frame_votes(frames: Sequence[MotionFrame], i: int, opts: MotionOptions, grey
     shares, flows = [], {}
     for side in (-1, 1):
         votes = torch.zeros(f.dist.shape)
+        confirmed = torch.zeros(f.dist.shape)
         valid_n = torch.zeros(f.dist.shape)
         for off in opts.neighbours:
             j = i + off
             if off * side <= 0 or j < 0 or j >= len(frames):
                 continue
-            moving, valid, obs = pair_moving(f, frames[j], greys[i], greys[j], opts)
+            moving, valid, obs, static = pair_moving(f, frames[j], greys[i], greys[j], opts)
             votes += (moving & valid).float()
+            confirmed += (moving & valid & ((static > opts.one_sided_grey) | (opts.one_sided_grey <= 0))).float()
             valid_n += valid.float()
             if abs(off) == 1:
                 flows[j] = obs
-        shares.append((votes / valid_n.clamp(min=1), valid_n > 0))
-    (back, has_b), (fwd, has_f) = shares
-    share = torch.where(has_b & has_f, torch.minimum(back, fwd), torch.where(has_b, back, fwd))
+        shares.append((votes / valid_n.clamp(min=1), valid_n > 0, confirmed / valid_n.clamp(min=1)))
+    (back, has_b, back_c), (fwd, has_f, fwd_c) = shares
+    share = torch.where(has_b & has_f, torch.minimum(back, fwd), torch.where(has_b, back_c, fwd_c))
     return torch.where(torch.isfinite(f.dist), share, torch.zeros_like(share)), flows
 
 
