@@ -14,13 +14,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import resource
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Optional
 
 from nerf2gs_plugin.utils.io import atomic_write_text
+from nerf2gs_plugin.utils.parallel import cpu_seconds
 
 STEM = "real_path_speed"
 TARGET_MINUTES = 12.0
@@ -45,12 +45,6 @@ class RealPathOptions:
     """StreetNeRF continues from the masks' reference (its first steps are the reference's)."""
     render_downscale: Optional[int] = None
     """The masks' renders at every d-th pixel per side (ns2gs-data masks --render-downscale); None: its default."""
-
-
-def cpu_seconds() -> float:
-    """User + system seconds of this process and its finished children."""
-    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 class Stages:
