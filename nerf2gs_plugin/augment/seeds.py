@@ -19,6 +19,7 @@ from torch import Tensor
 
 from nerf2gs_plugin.augment.confidence import inside_box, lift
 from nerf2gs_plugin.cameras import Cameras
+from nerf2gs_plugin.utils.voxels import unique_cells
 
 MIN_SEED_BASE = 1000
 """The count of points ``--augment.seed-points`` multiplies when the capture has fewer sparse points."""
@@ -53,7 +54,7 @@ def thin_on_grid(xyz: Tensor, rgb: Tensor, occupied: Optional[Tensor], size: flo
         return xyz, rgb
     both = xyz if occupied is None or len(occupied) == 0 else torch.cat([xyz, occupied.to(xyz)])
     cells = torch.floor((both - both.min(0).values) / size).long()
-    _, inverse = torch.unique(cells, dim=0, return_inverse=True)
+    _, inverse = unique_cells(cells)
     n_cells = int(inverse.max()) + 1
     taken = torch.zeros(n_cells, dtype=torch.bool)
     taken[inverse[len(xyz):]] = True
