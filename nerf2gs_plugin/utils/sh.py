@@ -7,6 +7,8 @@ coefficient stores ``(rgb - 0.5) / SH_C0`` (the rasterizer adds 0.5 back).
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch import Tensor
 
@@ -66,3 +68,22 @@ def sh_basis(degree: int, dirs: Tensor) -> Tensor:
             0.62583573544917614 * (xx * (xx - 3.0 * yy) - yy * (3.0 * xx - yy)),
         ]
     return torch.stack(out, dim=-1)
+
+
+def _sphere_points(n: int) -> Tensor:
+    """``n`` well-spread unit directions ``[n, 3]`` (float64, a Fibonacci sphere)."""
+    i = torch.arange(n, dtype=torch.float64) + 0.5
+    z = 1.0 - 2.0 * i / n
+    r = torch.sqrt(1.0 - z * z)
+    phi = i * math.pi * (3.0 - math.sqrt(5.0))
+    return torch.stack([r * torch.cos(phi), r * torch.sin(phi), z], dim=-1)
+
+
+def sh_rotation(degree: int, rotation: Tensor) -> Tensor:
+    """``[K, K]`` (K = (degree+1)^2, float64) with ``sh_basis(degree, d @ rotation.T) == sh_basis(degree, d) @ D``
+    for every unit ``d``: a rotation of the directions is a linear map of their SH basis (each band onto
+    itself). Solved by least squares on fixed directions, exact to float64 rounding."""
+    k = num_sh_bases(degree)
+    dirs = _sphere_points(4 * k)
+    rot = rotation.detach().to("cpu", torch.float64)
+    return torch.linalg.lstsq(sh_basis(degree, dirs), sh_basis(degree, dirs @ rot.T)).solution

@@ -13,7 +13,7 @@ from torch import Tensor, nn
 from nerf2gs_plugin.cameras import Cameras
 from nerf2gs_plugin.engine.model import ModelConfig
 from nerf2gs_plugin.utils.image_metrics import ssim, ssim_map
-from nerf2gs_plugin.utils.sh import num_sh_bases, sh_basis
+from nerf2gs_plugin.utils.sh import num_sh_bases, sh_basis, sh_rotation
 
 BackgroundMode = Literal["sky", "random", "learned", "black", "white"]
 
@@ -65,6 +65,7 @@ class Background(nn.Module):
         super().__init__()
         self.mode = mode
         self.sh_degree = sh_degree
+        self._bases: dict[tuple, Tensor] = {}  # camera-frame SH bases by intrinsics (see _camera_basis)
         if mode == "sky":
             coeffs = torch.zeros(num_sh_bases(sh_degree), 3)
             self.coeffs = nn.Parameter(coeffs)
@@ -74,12 +75,36 @@ class Background(nn.Module):
     def parameters_list(self) -> list[nn.Parameter]:
         return list(self.parameters())
 
+    def _sky_logits(self, camera: Cameras) -> Tensor:
+        """``basis(world directions) @ coeffs`` ``[H, W, 3]``. The SH basis of the camera-frame directions
+        depends only on the intrinsics and is kept; the camera's rotation turns the coefficients instead
+        (a 16 x 16 map): the same values to float rounding, without a basis per pixel every step."""
+        c2w = camera.camera_to_worlds[0]
+        rot = c2w[:, :3]
+        eye = torch.eye(3, dtype=rot.dtype, device=rot.device)
+        if c2w.requires_grad or not torch.allclose(rot.T @ rot, eye, atol=1e-5):
+            return sh_basis(self.sh_degree, camera_directions(camera)) @ self.coeffs
+        turn = sh_rotation(self.sh_degree, rot).to(self.coeffs)
+        return self._camera_basis(camera) @ (turn @ self.coeffs)
+
+    def _camera_basis(self, camera: Cameras) -> Tensor:
+        """SH basis ``[H, W, K]`` of the camera-frame ray directions of a one-camera ``camera``, per intrinsics."""
+        key = (int(camera.height[0]), int(camera.width[0]), str(camera.device),
+               *(float(v) for v in (camera.fx[0], camera.fy[0], camera.cx[0], camera.cy[0])),
+               *(float(v) for v in camera.distortion_params[0]))
+        cache = self._bases
+        if key not in cache:
+            if len(cache) >= 8:  # a few image sizes at most in one run; never grow without bound
+                cache.clear()
+            pose = torch.eye(4, device=camera.device)[None, :3]
+            cache[key] = sh_basis(self.sh_degree, camera_directions(camera.with_poses(pose))).to(self.coeffs.dtype)
+        return cache[key]
+
     def forward(self, camera: Cameras, training: bool) -> Tensor:
         """Background ``[H, W, 3]`` or ``[3]`` (broadcastable) on the camera's device."""
         dev = camera.device
         if self.mode == "sky":
-            d = camera_directions(camera)
-            return torch.sigmoid(sh_basis(self.sh_degree, d) @ self.coeffs)
+            return torch.sigmoid(self._sky_logits(camera))
         if self.mode == "learned":
             return torch.sigmoid(self.color)
         if self.mode == "random":
