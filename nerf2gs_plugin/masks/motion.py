@@ -145,12 +145,13 @@ def static_distance(dist: Tensor, c2w: Tensor, intr: Intrinsics, up: Tensor, hei
     return torch.minimum(dist.double(), t.clamp(min=0)).to(dist.dtype)
 
 
-def rigid_flow(c2w_i: Tensor, intr_i: Intrinsics, dist_i: Tensor, c2w_j: Tensor, intr_j: Intrinsics) -> tuple[Tensor, Tensor]:
+def rigid_flow(c2w_i: Tensor, intr_i: Intrinsics, dist_i: Tensor, c2w_j: Tensor, intr_j: Intrinsics,
+               rays: Optional[Tensor] = None) -> tuple[Tensor, Tensor]:
     """The flow ``[H, W, 2]`` (pixels, x then y) that frame ``i``'s static scene (distance ``dist_i``
     along its rays; inf: a direction only) makes into frame ``j``, and where it is defined (in front
-    of camera ``j``)."""
+    of camera ``j``). ``rays``: frame ``i``'s :func:`ray_directions`, where already at hand."""
     h, w = dist_i.shape
-    d = ray_directions(c2w_i, intr_i, h, w)
+    d = ray_directions(c2w_i, intr_i, h, w) if rays is None else rays
     dist = dist_i.double()
     finite = torch.isfinite(dist)
     p = c2w_i[:, 3].double() + d * torch.where(finite, dist, torch.zeros_like(dist))[..., None]
@@ -192,15 +193,15 @@ def warp(image: np.ndarray, flow: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return cv2.remap(image, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE), inside
 
 
-def epipolar_line(fi: "MotionFrame", fj: "MotionFrame") -> tuple[Tensor, Tensor, Tensor]:
+def epipolar_line(fi: "MotionFrame", fj: "MotionFrame", rays: Optional[Tensor] = None) -> tuple[Tensor, Tensor, Tensor]:
     """Where frame ``i``'s pixels can land in frame ``j`` if static: on the epipolar line from
     ``p_inf`` (the pixel's flow at infinity: the rotation alone) along the unit direction ``u``
     (``[H, W, 2]`` each, as flows from the pixel) in which parallax grows as the surface comes closer;
     and where that direction is defined (not at the epipole)."""
     h, w = fi.dist.shape
-    p_inf, _ = rigid_flow(fi.c2w, fi.intr, torch.full((h, w), math.inf), fj.c2w, fj.intr)
+    p_inf, _ = rigid_flow(fi.c2w, fi.intr, torch.full((h, w), math.inf), fj.c2w, fj.intr, rays)
     far = 100.0 * max(float((fi.c2w[:, 3] - fj.c2w[:, 3]).norm()), 1e-9)  # in front of both cameras
-    p_far, ok = rigid_flow(fi.c2w, fi.intr, torch.full((h, w), far), fj.c2w, fj.intr)
+    p_far, ok = rigid_flow(fi.c2w, fi.intr, torch.full((h, w), far), fj.c2w, fj.intr, rays)
     d = (p_far - p_inf).double()
     n = d.norm(dim=-1, keepdim=True)
     return p_inf, (d / n.clamp(min=1e-12)).float(), ok & (n[..., 0] > 1e-6)
@@ -211,7 +212,8 @@ def along(flow: Tensor, p_inf: Tensor, u: Tensor) -> Tensor:
     return ((flow - p_inf) * u).sum(-1)
 
 
-def pair_moving(fi: "MotionFrame", fj: "MotionFrame", grey_i: np.ndarray, grey_j: np.ndarray, opts: "MotionOptions") -> tuple[Tensor, Tensor]:
+def pair_moving(fi: "MotionFrame", fj: "MotionFrame", grey_i: np.ndarray, grey_j: np.ndarray, opts: "MotionOptions",
+                rays: Optional[Tensor] = None) -> tuple[Tensor, Tensor, Tensor, Tensor]:
     """Frame ``j`` warped onto frame ``i`` by the rigid flow of ``i``'s prior depth: what is static
     lines up roughly, so DIS measures the rest of the observed flow where it is reliable (small
     flows). The observed flow is then judged against what any static surface could do, not against
@@ -230,18 +232,19 @@ def pair_moving(fi: "MotionFrame", fj: "MotionFrame", grey_i: np.ndarray, grey_j
     5x5 means, grey levels)."""
     import cv2
 
-    rig, ok = rigid_flow(fi.c2w, fi.intr, fi.dist, fj.c2w, fj.intr)
+    rays = ray_directions(fi.c2w, fi.intr, *fi.dist.shape) if rays is None else rays  # one set for the four flows below
+    rig, ok = rigid_flow(fi.c2w, fi.intr, fi.dist, fj.c2w, fj.intr, rays)
     wj, inside = warp(grey_j, rig.numpy())
     wj = np.where(inside, wj, grey_i)  # outside frame j: nothing to compare, no flow to invent there
     resid = torch.from_numpy(optical_flow(grey_i, wj))
     obs = rig + resid  # the residual is measured on i's grid: the composition is rig + resid where rig is smooth
-    p_inf, u, line_ok = epipolar_line(fi, fj)
+    p_inf, u, line_ok = epipolar_line(fi, fj, rays)
     off = obs - p_inf
     perp = (off[..., 0] * u[..., 1] - off[..., 1] * u[..., 0]).abs()
     moving = line_ok & (perp > torch.clamp(opts.perp_rel * off.norm(dim=-1), min=opts.perp_px))
     s_obs = along(obs, p_inf, u)
     if fi.bound is not None:
-        rb, ok_b = rigid_flow(fi.c2w, fi.intr, fi.bound, fj.c2w, fj.intr)
+        rb, ok_b = rigid_flow(fi.c2w, fi.intr, fi.bound, fj.c2w, fj.intr, rays)
         s_b = torch.where(ok_b, along(rb, p_inf, u), torch.zeros_like(s_obs))
     else:
         s_b = torch.zeros_like(s_obs)
@@ -270,6 +273,7 @@ def frame_votes(frames: Sequence[MotionFrame], i: int, opts: MotionOptions, grey
     Also the observed flows into the frames just before and after (by index)."""
     greys = greys if greys is not None else [grey(f.image) for f in frames]
     f = frames[i]
+    rays = ray_directions(f.c2w, f.intr, *f.dist.shape)  # shared by the frame's pairs
     shares, flows = [], {}
     for side in (-1, 1):
         votes = torch.zeros(f.dist.shape)
@@ -279,7 +283,7 @@ def frame_votes(frames: Sequence[MotionFrame], i: int, opts: MotionOptions, grey
             j = i + off
             if off * side <= 0 or j < 0 or j >= len(frames):
                 continue
-            moving, valid, obs, static = pair_moving(f, frames[j], greys[i], greys[j], opts)
+            moving, valid, obs, static = pair_moving(f, frames[j], greys[i], greys[j], opts, rays)
             votes += (moving & valid).float()
             confirmed += (moving & valid & ((static > opts.one_sided_grey) | (opts.one_sided_grey <= 0))).float()
             valid_n += valid.float()
