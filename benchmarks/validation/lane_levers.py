@@ -8,22 +8,34 @@ val_lane gain over the target alone at the same steps (val_lane: 1.5 and 3 m to 
 val_bev within 0.2 dB of the bird's-eye views alone at the same steps, on two streets; the test
 splits (lane_2, lane_4, bev_1, bev_2, street) of the same runs are reported, never used to choose.
 
+With --targets (other target methods, the registered steps): each target alone, + the bird's-eye views,
++ the lane lever lane_levers_default.json chose for Splatfacto, then whether lane-shift meets the issue's
+bar on the validation views for every target (Splatfacto's rows from lane_levers_default.json): val_lane
+>= +2 dB over the target alone, val_bev and val_street within 0.2 dB of the bird's-eye views alone, on
+both streets.
+
 Usage: python benchmarks/validation/lane_levers.py WORK SEED=REFERENCE_RUN ... [--only SEED]
+           [--scale default] [--targets scaffold-gs 2dgs] [--reuse RUN_DIR ...]
   WORK as view_families.py's (streets WORK/street-seedN, runs WORK/runs). --only trains one street's
   runs and writes nothing (two streets in two processes); the run without it reuses them and writes
-  benchmarks/results/lane_levers.{json,md}.
+  benchmarks/results/lane_levers[_default].{json,md} (--targets: lane_levers_targets.{json,md}).
+  --reuse: finished bench runs that an earlier code version trained (view_families.py --scale default's
+  rows), each standing for the row with its target, overrides and augment settings on its street: for
+  code changes that leave those runs' training as it was (the caller vouches; their trained dates are kept).
 """
 import argparse
 import json
+import re
 import sys
 from pathlib import Path
 from typing import Optional
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from view_families import TARGET, reference, run_augmented, street  # noqa: E402
+from view_families import RESULTS, TARGET, reference, run_augmented, street, target_overrides  # noqa: E402
 from nerf2gs_bench.machine import machine_line  # noqa: E402
 from nerf2gs_bench.runner import EVAL_SPLITS, VAL_SPLITS, BenchRunner  # noqa: E402
+from nerf2gs_bench.runs import RunSpec  # noqa: E402
 from nerf2gs_plugin.eval.evaluate import evaluate_run  # noqa: E402
 from nerf2gs_plugin.runs.load import load_run  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
@@ -74,7 +86,36 @@ def baseline(name: str, kind: str) -> str:
     return kind if steps == RUNS[kind][0] else f"{kind}, {steps} steps"
 
 
-def train_street(work: Path, seed: int, given: Optional[str]) -> dict[str, dict[str, dict]]:
+def reused_run(dirs: list[Path], data: Path, spec: RunSpec) -> Optional[Path]:
+    """The run of ``dirs`` (finished bench runs) trained on ``data`` with ``spec``'s target, overrides and augment settings."""
+    for d in dirs:
+        done, config = d / "bench_run.json", d / "config.yml"
+        if not (done.is_file() and config.is_file()):
+            continue
+        run = json.loads(done.read_text())
+        trained_on = re.search(r"^\s*data: (.+)$", config.read_text(), re.M)
+        if (run["method"] == spec.method and run["overrides"] == spec.overrides and run["augment"] == spec.augment
+                and bool(run["augment_from"]) == bool(spec.augment_from) and trained_on and Path(trained_on[1]).name == data.name):
+            return d
+    return None
+
+
+def run_row(runner: BenchRunner, data: Path, ref: tuple[Path, str], name: str, steps: Optional[int], augment: Optional[dict],
+            target: str, reuse: list[Path]) -> dict:
+    """One row: a run of ``reuse`` that matches it, evaluated on the runner's splits, else trained (or reused) here."""
+    label = f"{target} {name}"
+    spec = RunSpec(label, target, target_overrides(target, steps, SCALE), augment_from="StreetNeRF" if augment is not None else None,
+                   augment=augment or {})
+    done = reused_run(reuse, data, spec)
+    if done is None:
+        return run_augmented(runner, data, ref, label, augment, target=target, steps=steps, scale=SCALE)
+    key = json.loads((done / "bench_run.json").read_text())["key"]
+    runner.log(f"[bench] reuse {label} (trained by an earlier code version): {done}")
+    return runner._evaluate(done, key, load_run, evaluate_run) | {"label": label, "target": target, "run_dir": str(done)}
+
+
+def train_street(work: Path, seed: int, given: Optional[str], target: str = TARGET,
+                 reuse: Optional[list[Path]] = None) -> dict[str, dict[str, dict]]:
     """Every run of :data:`RUNS` on one street -> {"val": {name: result}, "test": {name: result}}."""
     data = street(work, seed)
     ref_dir, ref_key, ref_test = reference(data, work / "runs", given, scale=SCALE)  # its own bench's test evaluation when saved
@@ -84,8 +125,7 @@ def train_street(work: Path, seed: int, given: Optional[str]) -> dict[str, dict[
         if split_set == "val":
             out["val"]["StreetNeRF"] = runner._evaluate(ref_dir, ref_key, load_run, evaluate_run)
         for name, (steps, augment) in RUNS.items():  # the second pass reuses the first's training
-            out[split_set][name] = run_augmented(runner, data, (ref_dir, ref_key), f"{TARGET} {name}", augment, steps=steps,
-                                                      scale=SCALE)
+            out[split_set][name] = run_row(runner, data, (ref_dir, ref_key), name, steps, augment, target, reuse or [])
     return out
 
 
@@ -158,11 +198,97 @@ def markdown(doc: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+LANE_GAIN = 2.0
+"""The issue's bar: the lane views' val_lane gain over the target alone, dB, on every street."""
+
+
+def chosen_lever() -> tuple[str, dict]:
+    """The lane lever chosen for Splatfacto at the registered steps (lane_levers_default.json) and its --augment."""
+    doc = json.loads((RESULTS / "lane_levers_default.json").read_text())
+    return doc["chosen"], doc["runs"][doc["chosen"]]["augment"]
+
+
+def target_runs(lever: str, augment: dict) -> dict[str, tuple[Optional[int], Optional[dict]]]:
+    return {"alone": (None, None), "birds-eye": (None, {}), lever: (None, augment)}
+
+
+def criteria(val: dict[str, dict[str, Optional[dict]]], lever: str) -> dict:
+    """The lever against the issue's bar on the validation views of every street: val_lane over the target
+    alone, val_bev and val_street over the bird's-eye views alone."""
+    def gain(split: str, base: str) -> dict[str, Optional[float]]:
+        return {seed: (t[lever][split] - t[base][split] if t.get(lever) and t.get(base) else None) for seed, t in val.items()}
+
+    lane, bev, st = gain("val_lane", "alone"), gain("val_bev", "birds-eye"), gain("val_street", "birds-eye")
+    ok = {"val_lane": all(v is not None and v >= LANE_GAIN for v in lane.values()),
+          "val_bev": all(v is not None and v >= -BEV_TOL for v in bev.values()),
+          "val_street": all(v is not None and v >= -BEV_TOL for v in st.values())}
+    return {"val_lane_over_alone": lane, "val_bev_over_birds_eye": bev, "val_street_over_birds_eye": st, "met": ok,
+            "meets": all(ok.values())}
+
+
+def summarise_targets(per_target: dict[str, dict[str, dict[str, dict[str, dict]]]], lever: str) -> dict:
+    """Each target's rows (:func:`summarise`) and the bar per target; Splatfacto's from lane_levers_default.json."""
+    global RUNS, LEVERS
+    RUNS, LEVERS = target_runs(lever, chosen_lever()[1]), [lever]
+    targets = {t: summarise(per_seed) for t, per_seed in per_target.items()}
+    splatfacto = json.loads((RESULTS / "lane_levers_default.json").read_text())
+    bar = {TARGET: criteria({seed: {n: t.get(n) for n in ("alone", "birds-eye", lever)} for seed, t in splatfacto["val_psnr"].items()}, lever)}
+    bar |= {t: criteria(doc["val_psnr"], lever) for t, doc in targets.items()}
+    return {"machine": machine_line(), "scale": SCALE, "lever": lever, "augment": RUNS[lever][1], "targets": targets, "bar": bar,
+            "lane_shift_joins_default": all(b["meets"] for b in bar.values())}
+
+
+def _cell(v: Optional[float], fmt: str = "{:.2f}") -> str:
+    return "failed" if v is None else fmt.format(v)
+
+
+def markdown_targets(doc: dict, cost: str = "") -> str:
+    lever, seeds = doc["lever"], list(next(iter(doc["targets"].values()))["val_psnr"])
+    lines = ["# The chosen lane lever on other targets (`benchmarks/validation/lane_levers.py --targets`)", "",
+             f"Machine: {doc['machine']}", "",
+             f"Each target at its registered steps (3000) alone, + the bird's-eye views, + bird's-eye and lane-shift views with "
+             f"the lever lane_levers_default chose for Splatfacto (**{lever}**: `{json.dumps(doc['augment'])}`), from one 3000-step "
+             f"StreetNeRF per street (streets seed {' and '.join(seeds)}), one run each. The bar (issue 44, validation views only): "
+             f"val_lane >= +{LANE_GAIN:g} dB over the target alone, val_bev and val_street within {BEV_TOL} dB of the bird's-eye "
+             "views alone, on both streets. Test splits of the same runs reported, not used to decide.", ""]
+    for t, td in doc["targets"].items():
+        lines += [f"## {t}: validation views (PSNR)", "",
+                  "| run | " + " | ".join(f"seed {s} {v}" for s in seeds for v in VAL_SPLITS) + " |", "|---" * (1 + len(seeds) * len(VAL_SPLITS)) + "|"]
+        for name in td["val_psnr"][seeds[0]]:
+            lines.append(f"| {name} | " + " | ".join(_cell((td["val_psnr"][s].get(name) or {}).get(v)) for s in seeds for v in VAL_SPLITS) + " |")
+        lines += ["", f"## {t}: test views (PSNR), the same runs", "",
+                  "| run | " + " | ".join(f"seed {s} {v}" for s in seeds for v in TEST) + " |", "|---" * (1 + len(seeds) * len(TEST)) + "|"]
+        for name in td["test_psnr"][seeds[0]]:
+            lines.append(f"| {name} | " + " | ".join(_cell((td["test_psnr"][s].get(name) or {}).get(v)) for s in seeds for v in TEST) + " |")
+        lv = td["levers"][lever]
+        lines += ["", "| test gain of the lever | " + " | ".join(f"seed {s}" for s in seeds) + " |", "|---" * (1 + len(seeds)) + "|"]
+        for k, what in (("test_lane_4_over_alone", "lane_4 vs alone"), ("test_lane_2_over_alone", "lane_2 vs alone"),
+                        ("test_bev_1_over_birds_eye", "bev_1 vs birds-eye"), ("test_street_over_alone", "street vs alone")):
+            lines.append(f"| {what} | " + " | ".join(_cell(lv[k].get(s), "{:+.2f}") for s in seeds) + " |")
+        lines.append("")
+    lines += ["## The bar, validation views", "",
+              "| target | " + " | ".join(f"d val_lane vs alone seed {s}" for s in seeds) + " | "
+              + " | ".join(f"d val_bev vs birds-eye seed {s}" for s in seeds) + " | "
+              + " | ".join(f"d val_street vs birds-eye seed {s}" for s in seeds) + " | meets |", "|---" * (2 + 3 * len(seeds)) + "|"]
+    for t, b in doc["bar"].items():
+        cells = [_cell(b[k].get(s), "{:+.2f}") for k in ("val_lane_over_alone", "val_bev_over_birds_eye", "val_street_over_birds_eye") for s in seeds]
+        missed = [k for k, ok in b["met"].items() if not ok]
+        lines.append(f"| {t} | " + " | ".join(cells) + f" | {'yes' if b['meets'] else 'no (' + ', '.join(missed) + ')'} |")
+    lines += ["", f"lane-shift joins the default `--augment.views`: **{'yes' if doc['lane_shift_joins_default'] else 'no'}** "
+              "(it must meet the bar for every target)." + (f" {cost}" if cost else ""), ""]
+    return "\n".join(lines)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("work", type=Path)
     ap.add_argument("references", nargs="*", metavar="SEED=REFERENCE_RUN")
     ap.add_argument("--only", type=int, default=None, help="train this street's runs and write nothing")
+    ap.add_argument("--targets", nargs="+", default=None, metavar="METHOD",
+                    help="other targets at the registered steps: alone, + birds-eye, + the lever lane_levers_default chose; "
+                         "writes lane_levers_targets.{json,md}")
+    ap.add_argument("--reuse", nargs="+", type=Path, default=[], metavar="RUN_DIR",
+                    help="finished runs of an earlier code version that stand for the rows they match (see the module docstring)")
     ap.add_argument("--scale", choices=("quick", "default"), default="quick",
                     help="default: every run at the registered steps (alone, birds-eye, the three lane levers); "
                          "writes lane_levers_default.{json,md}")
@@ -171,6 +297,9 @@ def main() -> None:
     if args.scale == "default":
         RUNS, LEVERS, SCALE = DEFAULT_SCALE_RUNS, levers(DEFAULT_SCALE_RUNS), "default"
     given = dict(a.split("=", 1) for a in args.references)
+    if args.targets:
+        main_targets(args, given)
+        return
     if args.only is not None:
         train_street(args.work, args.only, given.get(str(args.only)))
         return
@@ -179,6 +308,22 @@ def main() -> None:
     atomic_write_text(out.with_suffix(".json"), json.dumps(doc, indent=1))
     atomic_write_text(out.with_suffix(".md"), markdown(doc))
     print(markdown(doc))
+
+
+def main_targets(args, given: dict[str, str]) -> None:
+    global RUNS, LEVERS, SCALE
+    lever, augment = chosen_lever()
+    RUNS, LEVERS, SCALE = target_runs(lever, augment), [lever], "default"
+    seeds = SEEDS if args.only is None else (args.only,)
+    per_target = {t: {str(s): train_street(args.work, s, given.get(str(s)), target=t, reuse=args.reuse) for s in seeds}
+                  for t in args.targets}
+    if args.only is not None:
+        return
+    doc = summarise_targets(per_target, lever)
+    out = RESULTS / "lane_levers_targets"
+    atomic_write_text(out.with_suffix(".json"), json.dumps(doc, indent=1))
+    atomic_write_text(out.with_suffix(".md"), markdown_targets(doc))
+    print(markdown_targets(doc))
 
 
 if __name__ == "__main__":

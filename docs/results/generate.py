@@ -586,6 +586,38 @@ def chosen_test_rows(doc: dict) -> str:
             + "\n".join(lines))
 
 
+def targets_bar_section() -> str:
+    """The chosen lane lever on every target against the issue's bar (validation views), and the test views of its runs."""
+    doc = load("lane_levers_targets.json")
+    seeds = list(next(iter(doc["bar"].values()))["val_lane_over_alone"])
+
+    def cells(x: dict) -> str:
+        return " | ".join(db(x[s]) if x.get(s) is not None else "-" for s in seeds)
+
+    bar = ["| target | d val_lane vs alone (" + ", ".join(f"seed {s}" for s in seeds) + ") | d val_bev vs birds-eye | "
+           "d val_street vs birds-eye | meets |", "|---|---|---|---|---|"]
+    for t, b in doc["bar"].items():
+        bar.append(f"| {TARGET_NAMES[t]} | " + " | ".join(cells(b[k]).replace(" | ", " / ") for k in
+                                                         ("val_lane_over_alone", "val_bev_over_birds_eye", "val_street_over_birds_eye"))
+                   + f" | {'yes' if b['meets'] else 'no (' + ', '.join(k for k, ok in b['met'].items() if not ok) + ')'} |")
+    test = ["| target | street | lane_4 vs alone | lane_2 vs alone | bev_1 / bev_2 vs birds-eye | street vs alone / vs birds-eye |", "|---" * 6 + "|"]
+    for t, td in doc["targets"].items():
+        for seed, r in td["test_psnr"].items():
+            x, alone, bev = r.get(doc["lever"]), r.get("alone"), r.get("birds-eye")
+            if x and alone and bev:
+                test.append(f"| {TARGET_NAMES[t]} | seed {seed} | {db(x['lane_4'] - alone['lane_4'])} | {db(x['lane_2'] - alone['lane_2'])} | "
+                            f"{db(x['bev_1'] - bev['bev_1'])} / {db(x['bev_2'] - bev['bev_2'])} | "
+                            f"{db(x['street'] - alone['street'])} / {db(x['street'] - bev['street'])} |")
+    joins = "joins" if doc["lane_shift_joins_default"] else "does not join"
+    return (f"The chosen lever (**{doc['lever']}**) on every target at the registered steps, against the issue's bar on the validation "
+            "views (val_lane >= +2 dB over the target alone, val_bev and val_street within 0.2 dB of the bird's-eye views alone, on both "
+            f"streets): lane-shift **{joins}** the default `--augment.views`. Source: {source('lane_levers_targets.json')} "
+            f"(every run's PSNR, both split sets: {source('lane_levers_targets.md')}), "
+            "`python benchmarks/validation/lane_levers.py WORK 0=REFERENCE_RUN 7=REFERENCE_RUN --targets scaffold-gs 2dgs [--reuse RUN_DIR ...]`"
+            " (Splatfacto's row from lane_levers_default).\n\n" + "\n".join(bar)
+            + "\n\nThe test views of the same runs (reported, not used to decide):\n\n" + "\n".join(test))
+
+
 def default_scale_section() -> str:
     """Every target at its registered steps (and StreetNeRF at its): the issue's criteria per target and street."""
     rows = default_scale_rows()
@@ -642,6 +674,8 @@ def default_scale_section() -> str:
                   "`python benchmarks/validation/lane_levers.py WORK 0=REFERENCE_RUN 7=REFERENCE_RUN --scale default`.\n\n" + "\n".join(lv))
         if doc["chosen"]:
             levers += "\n\n" + chosen_test_rows(doc)
+        if (RESULTS / "lane_levers_targets.json").is_file():
+            levers += "\n\n" + targets_bar_section()
     files = ", ".join(source(f"view_families_default{'' if t == 'splatfacto' else '_' + t.replace('-', '_')}{'' if st == 'seed 0' else '_seed7'}.json")
                       for t, st, _ in rows)
     return ("Every target at its registered steps (3000) from a StreetNeRF at its registered steps (3000), one per street, "

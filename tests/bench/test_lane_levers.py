@@ -49,3 +49,47 @@ def test_view_families_result_names():
     assert vf.results_name("scaffold-gs", 7) == "view_families_scaffold_gs_seed7" and vf.results_name("2dgs", 0) == "view_families_2dgs"
     assert vf.results_name("splatfacto", 7, "default") == "view_families_default_seed7"
     assert vf.results_name("2dgs", 0, "default") == "view_families_default_2dgs"
+
+
+def test_reused_run_matches_target_settings_and_street(tmp_path):
+    lv = _script("lane_levers")
+    spec = lv.RunSpec("2dgs birds-eye", "2dgs", {"steps_per_eval_image": 0}, augment_from="StreetNeRF", augment={})
+
+    def run(name: str, street: str, **kw) -> Path:
+        d = tmp_path / name
+        d.mkdir()
+        doc = {"method": "2dgs", "overrides": {"steps_per_eval_image": 0}, "augment_from": "StreetNeRF", "augment": {}, "key": name} | kw
+        (d / "bench_run.json").write_text(lv.json.dumps(doc))
+        (d / "config.yml").write_text(f"config:\n  method_name: 2dgs\n  data: /old/work/{street}\n")
+        return d
+
+    dirs = [run("alone", "street-seed0", augment_from=None), run("lane", "street-seed0", augment={"views": ["lane-shift"]}),
+            run("other-street", "street-seed7"), run("scaffold", "street-seed0", method="scaffold-gs"), run("it", "street-seed0")]
+    assert lv.reused_run(dirs, tmp_path / "street-seed0", spec) == dirs[-1]
+    assert lv.reused_run(dirs[:-1], tmp_path / "street-seed0", spec) is None  # none with these settings on this street
+
+
+def test_lane_shift_joins_the_default_only_when_every_target_meets_the_bar(monkeypatch, tmp_path):
+    lv = _script("lane_levers")
+    lever = "lane lever"
+    monkeypatch.setattr(lv, "chosen_lever", lambda: (lever, {"views": ["birds-eye", "lane-shift"]}))
+    base = {"alone": dict(val_street=20, val_bev=18, val_lane=19), "birds-eye": dict(val_street=21, val_bev=21, val_lane=20)}
+    splatfacto = {"val_psnr": {s: base | {lever: dict(val_street=21, val_bev=21, val_lane=21.5)} for s in ("0", "7")}}
+    (tmp_path / "lane_levers_default.json").write_text(lv.json.dumps(splatfacto))
+    monkeypatch.setattr(lv, "RESULTS", tmp_path)
+
+    def street(lane: float, bev: float, st: float = 21.0) -> dict:
+        val = {n: _res(**p) for n, p in base.items()} | {lever: _res(val_street=st, val_bev=bev, val_lane=lane)}
+        return {"val": val, "test": {n: _res(street=20, bev_1=20, bev_2=20, lane_2=20, lane_4=20) for n in val}}
+
+    good = {"0": street(21.5, 20.9), "7": street(21.0, 21.0)}
+    doc = lv.summarise_targets({"scaffold-gs": good}, lever)
+    assert doc["bar"]["scaffold-gs"]["meets"] and doc["bar"]["splatfacto"]["meets"] and doc["lane_shift_joins_default"]
+    # one street's val_lane short of +2 dB, another target's bird's-eye views 0.3 dB down: not the default
+    doc = lv.summarise_targets({"scaffold-gs": {"0": street(21.5, 21), "7": street(20.9, 21)}, "2dgs": {"0": street(22, 20.7), "7": good["7"]}}, lever)
+    assert doc["bar"]["scaffold-gs"]["met"] == {"val_lane": False, "val_bev": True, "val_street": True}
+    assert doc["bar"]["2dgs"]["met"]["val_bev"] is False and not doc["lane_shift_joins_default"]
+    md = lv.markdown_targets(doc)
+    assert "| 2dgs | +3.00 | +2.00 | -0.30 | +0.00 | +0.00 | +0.00 | no (val_bev) |" in md and "default `--augment.views`: **no**" in md
+    # val_street 0.3 dB below the bird's-eye views alone fails too
+    assert not lv.summarise_targets({"2dgs": {"0": street(22, 21, st=20.7), "7": good["7"]}}, lever)["bar"]["2dgs"]["met"]["val_street"]
