@@ -106,7 +106,8 @@ def run_row(runner: BenchRunner, data: Path, ref: tuple[Path, str], name: str, s
     label = f"{target} {name}"
     spec = RunSpec(label, target, target_overrides(target, steps, SCALE), augment_from="StreetNeRF" if augment is not None else None,
                    augment=augment or {})
-    done = reused_run(reuse, data, spec)
+    current = runner.key(spec, data, ref if augment is not None else None)  # a run of this code is never stood in for
+    done = reused_run([d for d in reuse if d.name != current], data, spec)
     if done is None:
         return run_augmented(runner, data, ref, label, augment, target=target, steps=steps, scale=SCALE)
     key = json.loads((done / "bench_run.json").read_text())["key"]
@@ -223,7 +224,7 @@ def criteria(val: dict[str, dict[str, Optional[dict]]], lever: str) -> dict:
           "val_bev": all(v is not None and v >= -BEV_TOL for v in bev.values()),
           "val_street": all(v is not None and v >= -BEV_TOL for v in st.values())}
     return {"val_lane_over_alone": lane, "val_bev_over_birds_eye": bev, "val_street_over_birds_eye": st, "met": ok,
-            "meets": all(ok.values())}
+            "meets": all(ok.values()), "val_lane_over_birds_eye": gain("val_lane", "birds-eye")}  # what the lane views add, not in the bar
 
 
 def summarise_targets(per_target: dict[str, dict[str, dict[str, dict[str, dict]]]], lever: str) -> dict:
@@ -269,13 +270,16 @@ def markdown_targets(doc: dict, cost: str = "") -> str:
     lines += ["## The bar, validation views", "",
               "| target | " + " | ".join(f"d val_lane vs alone seed {s}" for s in seeds) + " | "
               + " | ".join(f"d val_bev vs birds-eye seed {s}" for s in seeds) + " | "
-              + " | ".join(f"d val_street vs birds-eye seed {s}" for s in seeds) + " | meets |", "|---" * (2 + 3 * len(seeds)) + "|"]
+              + " | ".join(f"d val_street vs birds-eye seed {s}" for s in seeds) + " | meets | "
+              + " | ".join(f"d val_lane vs birds-eye seed {s}" for s in seeds) + " |", "|---" * (2 + 4 * len(seeds)) + "|"]
     for t, b in doc["bar"].items():
         cells = [_cell(b[k].get(s), "{:+.2f}") for k in ("val_lane_over_alone", "val_bev_over_birds_eye", "val_street_over_birds_eye") for s in seeds]
         missed = [k for k, ok in b["met"].items() if not ok]
-        lines.append(f"| {t} | " + " | ".join(cells) + f" | {'yes' if b['meets'] else 'no (' + ', '.join(missed) + ')'} |")
+        lines.append(f"| {t} | " + " | ".join(cells) + f" | {'yes' if b['meets'] else 'no (' + ', '.join(missed) + ')'} | "
+                     + " | ".join(_cell(b["val_lane_over_birds_eye"].get(s), "{:+.2f}") for s in seeds) + " |")
     lines += ["", f"lane-shift joins the default `--augment.views`: **{'yes' if doc['lane_shift_joins_default'] else 'no'}** "
-              "(it must meet the bar for every target)." + (f" {cost}" if cost else ""), ""]
+              "(it must meet the bar for every target). d val_lane vs birds-eye: what the lane views add to the bird's-eye "
+              "views alone (not part of the bar)." + (f" {cost}" if cost else ""), ""]
     return "\n".join(lines)
 
 

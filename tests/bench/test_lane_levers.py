@@ -90,6 +90,6 @@ def test_lane_shift_joins_the_default_only_when_every_target_meets_the_bar(monke
     assert doc["bar"]["scaffold-gs"]["met"] == {"val_lane": False, "val_bev": True, "val_street": True}
     assert doc["bar"]["2dgs"]["met"]["val_bev"] is False and not doc["lane_shift_joins_default"]
     md = lv.markdown_targets(doc)
-    assert "| 2dgs | +3.00 | +2.00 | -0.30 | +0.00 | +0.00 | +0.00 | no (val_bev) |" in md and "default `--augment.views`: **no**" in md
+    assert "| 2dgs | +3.00 | +2.00 | -0.30 | +0.00 | +0.00 | +0.00 | no (val_bev) | +2.00 | +1.00 |" in md and "default `--augment.views`: **no**" in md
     # val_street 0.3 dB below the bird's-eye views alone fails too
     assert not lv.summarise_targets({"2dgs": {"0": street(22, 21, st=20.7), "7": good["7"]}}, lever)["bar"]["2dgs"]["met"]["val_street"]
