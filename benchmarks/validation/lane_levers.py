@@ -112,7 +112,8 @@ def run_row(runner: BenchRunner, data: Path, ref: tuple[Path, str], name: str, s
         return run_augmented(runner, data, ref, label, augment, target=target, steps=steps, scale=SCALE)
     key = json.loads((done / "bench_run.json").read_text())["key"]
     runner.log(f"[bench] reuse {label} (trained by an earlier code version): {done}")
-    return runner._evaluate(done, key, load_run, evaluate_run) | {"label": label, "target": target, "run_dir": str(done)}
+    return runner._evaluate(done, key, load_run, evaluate_run) | {"label": label, "target": target, "run_dir": str(done),
+                                                                   "earlier_code": True}
 
 
 def train_street(work: Path, seed: int, given: Optional[str], target: str = TARGET,
@@ -235,15 +236,17 @@ def summarise_targets(per_target: dict[str, dict[str, dict[str, dict[str, dict]]
     splatfacto = json.loads((RESULTS / "lane_levers_default.json").read_text())
     bar = {TARGET: criteria({seed: {n: t.get(n) for n in ("alone", "birds-eye", lever)} for seed, t in splatfacto["val_psnr"].items()}, lever)}
     bar |= {t: criteria(doc["val_psnr"], lever) for t, doc in targets.items()}
+    earlier = {t: sorted({n for rows in per_seed.values() for n, r in rows["test"].items() if r.get("earlier_code")})
+               for t, per_seed in per_target.items()}
     return {"machine": machine_line(), "scale": SCALE, "lever": lever, "augment": RUNS[lever][1], "targets": targets, "bar": bar,
-            "lane_shift_joins_default": all(b["meets"] for b in bar.values())}
+            "earlier_code_rows": earlier, "lane_shift_joins_default": all(b["meets"] for b in bar.values())}
 
 
 def _cell(v: Optional[float], fmt: str = "{:.2f}") -> str:
     return "failed" if v is None else fmt.format(v)
 
 
-def markdown_targets(doc: dict, cost: str = "") -> str:
+def markdown_targets(doc: dict) -> str:
     lever, seeds = doc["lever"], list(next(iter(doc["targets"].values()))["val_psnr"])
     lines = ["# The chosen lane lever on other targets (`benchmarks/validation/lane_levers.py --targets`)", "",
              f"Machine: {doc['machine']}", "",
@@ -251,7 +254,9 @@ def markdown_targets(doc: dict, cost: str = "") -> str:
              f"the lever lane_levers_default chose for Splatfacto (**{lever}**: `{json.dumps(doc['augment'])}`), from one 3000-step "
              f"StreetNeRF per street (streets seed {' and '.join(seeds)}), one run each. The bar (issue 44, validation views only): "
              f"val_lane >= +{LANE_GAIN:g} dB over the target alone, val_bev and val_street within {BEV_TOL} dB of the bird's-eye "
-             "views alone, on both streets. Test splits of the same runs reported, not used to decide.", ""]
+             "views alone, on both streets. Test splits of the same runs reported, not used to decide."
+             + "".join(f" {t}'s rows {', '.join(rows)}: runs of an earlier code version (--reuse)." for t, rows in
+                       doc.get("earlier_code_rows", {}).items() if rows), ""]
     for t, td in doc["targets"].items():
         lines += [f"## {t}: validation views (PSNR)", "",
                   "| run | " + " | ".join(f"seed {s} {v}" for s in seeds for v in VAL_SPLITS) + " |", "|---" * (1 + len(seeds) * len(VAL_SPLITS)) + "|"]
@@ -279,7 +284,7 @@ def markdown_targets(doc: dict, cost: str = "") -> str:
                      + " | ".join(_cell(b["val_lane_over_birds_eye"].get(s), "{:+.2f}") for s in seeds) + " |")
     lines += ["", f"lane-shift joins the default `--augment.views`: **{'yes' if doc['lane_shift_joins_default'] else 'no'}** "
               "(it must meet the bar for every target). d val_lane vs birds-eye: what the lane views add to the bird's-eye "
-              "views alone (not part of the bar)." + (f" {cost}" if cost else ""), ""]
+              "views alone (not part of the bar).", ""]
     return "\n".join(lines)
 
 
