@@ -349,6 +349,9 @@ def outline(mask: Tensor, image: Tensor, ring_frac: float) -> Tensor:
     g[m > 0] = cv2.GC_PR_FGD
     g[cv2.erode(m, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (5, 5))) > 0] = cv2.GC_FGD
     bgr = np.ascontiguousarray((image.clamp(0, 1).numpy()[..., ::-1] * 255).astype(np.uint8))
+    # grabCut's k-means starts its colour models from OpenCV's global (per-thread) random stream: reseed it so
+    # a frame's outline does not depend on the calls before it (0 is the state a fresh process starts in)
+    cv2.setRNGSeed(0)
     cv2.grabCut(bgr, g, None, np.zeros((1, 65)), np.zeros((1, 65)), 3, cv2.GC_INIT_WITH_MASK)
     return torch.from_numpy((g == cv2.GC_FGD) | (g == cv2.GC_PR_FGD))
 

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import torch
 
-from nerf2gs_plugin.masks.motion import MotionFrame, MotionOptions, motion_masks, rigid_flow, static_distance
+from nerf2gs_plugin.masks.motion import MotionFrame, MotionOptions, motion_masks, outline, rigid_flow, static_distance
 
 W, H, F = 160, 96, 100.0
 INTR = (F, F, W / 2, H / 2)
@@ -203,6 +203,29 @@ def test_outlines_complete_the_movers():
     assert _pooled(votes, truth, "crossing") < 0.72
     assert _pooled(outlined, truth, "crossing") > 0.78
     assert _pooled(outlined, truth, "parked") < 0.15 and _static_fp(outlined, truth) < 0.003
+
+
+def _noisy_block(seed: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """A block's mask on a noise image: grabCut's colour models then depend on where its k-means starts."""
+    img = torch.from_numpy(np.random.default_rng(seed).random((48, 64, 3))).float()
+    m = torch.zeros(48, 64, dtype=torch.bool)
+    m[12:36, 16:44] = True
+    return m, img
+
+
+def test_a_frames_outline_does_not_depend_on_the_grabcut_calls_before_it():
+    """grabCut draws from OpenCV's global random stream; the same frame's outline is the same whether it
+    is the process's first call or follows other calls and another seed of that stream."""
+    import cv2
+
+    for seed in range(5):
+        m, img = _noisy_block(seed)
+        first = outline(m, img, 0.1)
+        cv2.setRNGSeed(seed + 7)
+        for other in range(3):
+            outline(*_noisy_block(100 + other), 0.1)
+        again = outline(m, img, 0.1)
+        assert 0 < int(first.sum()) < m.numel() and torch.equal(first, again), seed
 
 
 def test_the_route_runs_on_sequences_only():
