@@ -60,6 +60,8 @@ VARIANTS: dict[str, dict] = {
     "birds_eye_share 0.25": {"augment": {"birds_eye_share": 0.25}},
     "appearance nearest": {"augment": {"appearance": "nearest"}},
     "appearance nearest + extra_decay": {"augment": {"appearance": "nearest", "extra_decay": True}},
+    "extra appearance per-view": {"augment": {}, "model": {"extra_view_appearance": "per-view"}},
+    "extra appearance shared": {"augment": {}, "model": {"extra_view_appearance": "shared"}},
     "extra_decay + drop_outside_box + sky_alpha 0": {"augment": {"extra_decay": True, "drop_outside_box": True},
                                                      "model": {"sky_alpha_weight": 0.0}},
 }

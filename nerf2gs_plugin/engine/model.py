@@ -94,6 +94,10 @@ class Model(nn.Module, metaclass=ABCMeta):
             self._train_cameras = lambda: attrs.pipeline.datamanager.all_train_cameras
             self._train_batch = lambda i: attrs.pipeline.datamanager.train_batch(i)
 
+    def add_extra_views(self, count: int) -> None:
+        """The training views gain ``count`` additional views (``image_idx`` from ``num_train_images`` on),
+        before the optimizers are built: for a model that learns something per view (none by default)."""
+
     def training_pixels(self) -> Optional[int]:
         """Pixels in every training view (real and extra), or None before training named them."""
         return None if self._train_cameras is None else self._train_cameras().pixel_count()

@@ -39,6 +39,7 @@ class Pipeline(nn.Module):
         self.model: Model = config.model.setup(train_data=self.datamanager.train_data).to(self.device)
         if wrap_datamanager is not None:
             self.datamanager = wrap_datamanager(self.datamanager)
+            self.model.add_extra_views(len(self.datamanager.all_train_cameras) - self.model.num_train_images)
             points = self.datamanager.initial_points()
             if points is not None and len(points[0]):
                 added = self.model.add_initial_points(points[0].to(self.device), points[1].to(self.device))

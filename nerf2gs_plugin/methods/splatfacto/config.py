@@ -50,6 +50,7 @@ def gaussian_optimizers(max_steps: int) -> dict[str, OptimizerConfig]:
         "features_dc": OptimizerConfig(lr=2.5e-3, eps=1e-15),
         "features_rest": OptimizerConfig(lr=2.5e-3 / 20, eps=1e-15),
         "background": OptimizerConfig(lr=1e-2, eps=1e-15),
+        "extra_appearance": OptimizerConfig(lr=5e-3, eps=1e-15),
     }
 
 

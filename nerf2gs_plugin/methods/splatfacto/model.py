@@ -21,6 +21,7 @@ from nerf2gs_plugin.data.dataparser_outputs import DataparserOutputs
 from nerf2gs_plugin.engine.callbacks import TrainingCallback, TrainingCallbackAttributes, TrainingCallbackLocation as Loc
 from nerf2gs_plugin.utils.image_metrics import psnr_from_mse
 from nerf2gs_plugin.engine.model import Model
+from nerf2gs_plugin.fields.appearance import AppearanceTransforms
 from nerf2gs_plugin.methods.capture_path import CapturePath, capture_path
 from nerf2gs_plugin.methods.gaussian_utils import knn_mean_distance, logit
 from nerf2gs_plugin.utils.quaternions import normalize_quats, random_quats
@@ -87,6 +88,13 @@ class SplatfactoModelConfig(SplatModelConfig):
     """False: the additional views (from above) do not train the background: where the target leaves them
     transmittance the background shows but takes no gradient, so a view-direction sky fitted to the ground
     seen from above cannot spill into the street views' sky (the Gaussians must fill those pixels instead)."""
+    extra_view_appearance: Literal["off", "per-view", "shared"] = "off"
+    """A learned affine colour transform (3x3 + bias, identity at the start) applied to the render of an
+    additional (NeRF-rendered) view before its loss: the NeRF's exposure and white balance in those views
+    go into the transform, so they teach the Gaussians geometry and leave colour to the input views.
+    per-view: one per additional view; shared: one for all of them; renders outside training use none."""
+    extra_view_appearance_reg: float = 1.0
+    """Weight of the mean squared distance of the transform in use from the identity (keeps it small)."""
     mcmc: MCMCStrategyConfig = field(default_factory=lambda: MCMCStrategyConfig(
         cap_max=30000, refine_start_iter=300, refine_stop_iter=2500))
     """The MCMC strategy at CPU scale (with --pipeline.model.strategy-type mcmc): 30k-Gaussian hard budget."""
@@ -123,6 +131,7 @@ class SplatfactoModel(Model):
         self.register_buffer("step", torch.zeros((), dtype=torch.long))
         self._meta: Optional[dict[str, Any]] = None
         self._extra_batch = False  # the last training batch was an additional view (set by get_loss_dict)
+        self.extra_appearance: Optional[AppearanceTransforms] = None  # set by add_extra_views
         self._sparse_points = len(train_data.points3D_xyz) if train_data.points3D_xyz is not None else 0
         self._path = self._capture_path(train_data, means if train_data.points3D_xyz is not None else None)
         self._depth_targets = self._sparse_depth_targets(train_data) if cfg.depth_loss_weight > 0 else None
@@ -231,7 +240,24 @@ class SplatfactoModel(Model):
     def get_param_groups(self) -> dict[str, list[nn.Parameter]]:
         groups = {name: [p] for name, p in self.gauss.items()}
         groups["background"] = self.background.parameters_list()
+        if self.extra_appearance is not None:
+            groups["extra_appearance"] = list(self.extra_appearance.parameters())
         return groups
+
+    def add_extra_views(self, count: int) -> None:
+        """``count`` additional views follow the input views (see ``extra_view_appearance``)."""
+        mode = self.config.extra_view_appearance
+        if mode != "off" and count > 0:
+            self.extra_appearance = AppearanceTransforms(count if mode == "per-view" else 1).to(self.device)
+
+    def _extra_view_colour(self, rgb: Tensor, image_idx: int) -> tuple[Tensor, Tensor]:
+        """An additional view's render in its colour transform, and the transform's regulariser."""
+        app = self.extra_appearance
+        j = min(image_idx - self.num_train_images, app.num_images - 1)
+        A = app.transforms[j]
+        out = (rgb.reshape(-1, 3) @ A[:, :3].T + A[:, 3]).reshape(rgb.shape)
+        eye = torch.eye(3, 4, device=A.device, dtype=A.dtype)
+        return out, self.config.extra_view_appearance_reg * ((A - eye) ** 2).mean()
 
     # ------------------------------------------------------------------ rendering
     @property
@@ -353,8 +379,14 @@ class SplatfactoModel(Model):
         if self._extra_batch and "foreground" in outputs:
             bg = outputs["background"].detach()
             outputs = {**outputs, "rgb": composite(outputs["foreground"], outputs["accumulation"], bg).clamp(0.0, 1.0)}
+        reg = None
+        if self._extra_batch and self.extra_appearance is not None:
+            rgb, reg = self._extra_view_colour(outputs["rgb"], int(batch["image_idx"]))
+            outputs = {**outputs, "rgb": rgb}
         sky_bg = outputs.get("background") if c.background == "random" else None
         losses = image_loss(outputs, batch, c.ssim_lambda, c.mask_transients, c.sky_alpha_weight, sky_bg)
+        if reg is not None:
+            losses["extra_appearance_reg"] = reg
         depth = self._depth_loss(outputs, int(batch["image_idx"])) if self.training and "image_idx" in batch else None
         if depth is not None:
             losses["depth_loss"] = depth
@@ -399,7 +431,11 @@ class SplatfactoModel(Model):
         return int(self.gauss["means"].shape[0])
 
     def load_model_state(self, state: dict[str, Tensor]) -> None:
-        """Resize the Gaussian parameters to the checkpoint's count, then load."""
+        """Resize the Gaussian parameters to the checkpoint's count (and take its additional views'
+        colour transforms, if it trained any), then load."""
+        saved_app = state.get("extra_appearance.transforms")
+        if saved_app is not None:
+            self.extra_appearance = AppearanceTransforms(saved_app.shape[0]).to(self.device)
         for name in list(self.gauss.keys()):
             saved = state.get(f"gauss.{name}")
             if saved is not None and saved.shape != self.gauss[name].shape:
