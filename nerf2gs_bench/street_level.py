@@ -62,20 +62,25 @@ VARIANTS: dict[str, dict] = {
     "appearance nearest + extra_decay": {"augment": {"appearance": "nearest", "extra_decay": True}},
     "extra appearance per-view": {"augment": {}, "model": {"extra_view_appearance": "per-view"}},
     "extra appearance shared": {"augment": {}, "model": {"extra_view_appearance": "shared"}},
+    "extra appearance per-view, lr 0.02, reg 0.1": {"augment": {}, "optimizers": {"extra_appearance": {"lr": 0.02}},
+                                                    "model": {"extra_view_appearance": "per-view", "extra_view_appearance_reg": 0.1}},
     "extra_decay + drop_outside_box + sky_alpha 0": {"augment": {"extra_decay": True, "drop_outside_box": True},
                                                      "model": {"sky_alpha_weight": 0.0}},
 }
 """Label -> the augment overrides of a Splatfacto run (no ``augment`` key: the target alone) and
-``model``: overrides of its model config (the sky / far levers live there); ``steps_factor``: the run
+``model``: overrides of its model config (the sky / far levers live there); ``optimizers``: of its
+optimizers' configs; ``steps_factor``: the run
 trains this many times the bench's steps (1.8: the input views get as many samples as the target
 alone's, where the views from above take about half of the samples until the last 10% of the run)."""
 
 
 def variant_overrides(base: dict, variant: dict) -> dict:
-    """``base`` run overrides with the variant's ``model`` overrides merged into ``pipeline.model``."""
+    """``base`` run overrides with the variant's ``model`` overrides merged into ``pipeline.model`` and its
+    ``optimizers`` overrides into ``optimizers``."""
     from nerf2gs_bench.paper import _merge
 
-    return _merge(base, {"pipeline": {"model": variant["model"]}}) if variant.get("model") else base
+    out = _merge(base, {"pipeline": {"model": variant["model"]}}) if variant.get("model") else base
+    return _merge(out, {"optimizers": variant["optimizers"]}) if variant.get("optimizers") else out
 
 
 @dataclass(frozen=True)
