@@ -81,3 +81,28 @@ def test_a_checkpoint_brings_its_transforms_back():
     fresh, *_ = _model("off", extra=0)  # e.g. ns2gs-eval: no additional views
     fresh.load_model_state(state)
     assert float(fresh.extra_appearance.transforms[1, 0, 3]) == pytest.approx(0.25)
+
+
+class _TwiceTheViews:
+    """A data-manager wrapper that adds as many (extra) views as the input views: all the pipeline asks of it."""
+
+    def __init__(self, inner) -> None:
+        self.inner = inner
+
+    @property
+    def all_train_cameras(self):
+        from nerf2gs_plugin.cameras import Cameras
+
+        return Cameras.cat([self.inner.train_images.cameras] * 2)
+
+    def initial_points(self):
+        return None
+
+
+def test_the_pipeline_gives_the_model_one_transform_per_additional_view(tiny_scene):
+    from nerf2gs_plugin.engine.pipeline import Pipeline
+
+    pipeline_cfg = dataclasses.replace(splatfacto_config.pipeline, model=dataclasses.replace(
+        splatfacto_config.pipeline.model, extra_view_appearance="per-view"))
+    pipeline = Pipeline(pipeline_cfg, tiny_scene, "cpu", wrap_datamanager=_TwiceTheViews)
+    assert pipeline.model.extra_appearance.transforms.shape[0] == pipeline.model.num_train_images > 0
