@@ -57,6 +57,7 @@ VARIANTS: dict[str, dict] = {
     "default, input samples matched": {"augment": {}, "steps_factor": 1.8},
     "target, 1.8x steps": {"steps_factor": 1.8},
     "extra_decay": {"augment": {"extra_decay": True}},
+    "extra_decay floor 0.5": {"augment": {"extra_decay": True, "extra_decay_floor": 0.5}},
     "birds_eye_share 0.25": {"augment": {"birds_eye_share": 0.25}},
     "appearance nearest": {"augment": {"appearance": "nearest"}},
     "appearance nearest + extra_decay": {"augment": {"appearance": "nearest", "extra_decay": True}},

@@ -408,6 +408,8 @@ class AugmentedDataManager(DataManager):
         # no DataManager.__init__: the dataset is inner's, parsed once
         if not 0.0 < augment.real_only_from <= 1.0:
             raise ConfigError(f"must be in (0, 1], got {augment.real_only_from}", "--augment.real-only-from")
+        if not 0.0 <= augment.extra_decay_floor <= 1.0:
+            raise ConfigError(f"must be in [0, 1], got {augment.extra_decay_floor}", "--augment.extra-decay-floor")
         self.real_only_step: Optional[int] = (
             int(round(augment.real_only_from * total_steps)) if total_steps is not None and augment.real_only_from < 1.0 else None)
         # --augment.extra-decay: the share falls to 0 at this step (None: it stays)
@@ -505,7 +507,8 @@ class AugmentedDataManager(DataManager):
         if self.real_only_step is not None and step >= self.real_only_step:
             self.inner.extra_prob = 0.0  # the final phase: input views only (the draw still happens: streams stay aligned)
         elif self.decay_end:
-            self.inner.extra_prob = self.full_extra_prob * max(0.0, 1.0 - step / self.decay_end)
+            fall = (1.0 - self.augment.extra_decay_floor) * min(step / self.decay_end, 1.0)
+            self.inner.extra_prob = self.full_extra_prob * (1.0 - fall)
         return self.inner.next_train(step)
 
     def next_eval(self, step: int) -> tuple[Cameras, dict[str, Any]]:

@@ -147,6 +147,9 @@ class AugmentConfig:
     first step to 0 at real-only-from (the end of the run when that is 1.0): the views from above still
     shape the model while it densifies, and the input views get the samples they lose in a run of fixed
     length (on average half of the views from above's share returns to them)."""
+    extra_decay_floor: float = 0.0
+    """With --augment.extra-decay: the share falls to this fraction of its full value instead of to 0
+    (0.5: a quarter of the views from above's share returns to the input views)."""
     drop_outside_box: bool = False
     """Zero the loss weight of the additional views' pixels whose reference surface lies outside the scene
     box (the far background a NeRF contracts) or that show sky (accumulation < 0.5): the target learns from

@@ -291,3 +291,15 @@ def test_extra_decay_gives_the_input_views_the_later_samples(tiny_scene, tmp_pat
     assert p_flat == 0.5 and p_end < 0.5 / 70
     assert sum(decayed[40:]) < sum(flat[40:]) / 2
     assert sum(decayed[:10]) > 0
+
+
+
+def test_extra_decay_floor_keeps_a_share_of_the_views_from_above(tiny_scene, tmp_path):
+    """--augment.extra-decay-floor 0.5: the share falls to half of its full value at the end, not to 0."""
+    dm = AugmentedDataManager(_dm(tiny_scene), Reference(CountingRenderer(), "ref:r", tmp_path),
+                              AugmentConfig(delta_h=3.0, extra_prob=0.5, real_only_from=1.0, extra_decay=True,
+                                            extra_decay_floor=0.5), total_steps=80)
+    dm.next_train(40)
+    assert dm.extra_prob == pytest.approx(0.5 * 0.75)
+    dm.next_train(80)
+    assert dm.extra_prob == pytest.approx(0.25)
