@@ -149,7 +149,8 @@ class AugmentConfig:
     length (on average half of the views from above's share returns to them)."""
     extra_decay_floor: float = 0.0
     """With --augment.extra-decay: the share falls to this fraction of its full value instead of to 0
-    (0.5: a quarter of the views from above's share returns to the input views)."""
+    (0.5: a quarter of the views from above's share returns to the input views;
+    benchmarks/results/street_level_decay_floor.md)."""
     drop_outside_box: bool = False
     """Zero the loss weight of the additional views' pixels whose reference surface lies outside the scene
     box (the far background a NeRF contracts) or that show sky (accumulation < 0.5): the target learns from

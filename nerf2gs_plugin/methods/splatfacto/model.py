@@ -92,7 +92,8 @@ class SplatfactoModelConfig(SplatModelConfig):
     """A learned affine colour transform (3x3 + bias, identity at the start) applied to the render of an
     additional (NeRF-rendered) view before its loss: the NeRF's exposure and white balance in those views
     go into the transform, so they teach the Gaussians geometry and leave colour to the input views.
-    per-view: one per additional view; shared: one for all of them; renders outside training use none."""
+    per-view: one per additional view; shared: one for all of them; renders outside training use none.
+    Off: neither keeps more street-level quality on real captures (benchmarks/results/street_level_view_colour.md)."""
     extra_view_appearance_reg: float = 1.0
     """Weight of the mean squared distance of the transform in use from the identity (keeps it small)."""
     mcmc: MCMCStrategyConfig = field(default_factory=lambda: MCMCStrategyConfig(
