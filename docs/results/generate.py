@@ -130,14 +130,15 @@ def page_paper_table() -> str:
         "The paper's Table 1 on synthetic streets: StreetNeRF, then each target alone, with NeRF views "
         "(`--augment-from`), with NeRF views and the enhancer, and with NeRF views weighted by consistency "
         "confidence. Test views: `street` (street level), `bev_1` (10 m up, 25 deg down) and `bev_2` (13 m, "
-        "30 deg). \"Road\" is PSNR over the road and sidewalk pixels. FPS and training time were measured beside "
+        "30 deg); where the street was written with its lane ground truth (generator version 3), also `lane_2` and "
+        "`lane_4` (2 and 4 m to the side at camera height) and `extrapolated`, the mean over bev_1, bev_2, lane_2, "
+        "lane_4. \"Road\" is PSNR over the road and sidewalk pixels. FPS and training time were measured beside "
         "other jobs on a 2-core CPU: compare them within one table. Defaults were chosen on the validation views, "
         "never on these.", "",
         "## Quick scale, embedded street", "",
         paper_section("paper_table.json", "Paper table, synthetic street (quick scale)",
-                      "ns2gs-bench paper-table --scale quick --confidence consistency --enhancer-prior PRIOR.onnx",
+                      "ns2gs-bench paper-table --scale quick --confidence consistency",
                       "../../benchmarks/results/paper_table_renders_bev_1.png"), "",
-        *paper_lanes_section(),
         "## Default scale, embedded street", "",
         paper_section("default/paper_table.json", "Paper table, synthetic street (default scale)",
                       "ns2gs-bench paper-table --scale default --confidence consistency",
@@ -148,19 +149,6 @@ def page_paper_table() -> str:
         paper_section("second_scene/paper_table.json", "Paper table, second street (default scale)",
                       "ns2gs-bench paper-table --scale default --data DATA --no-enhancer",
                       "../../benchmarks/results/second_scene/paper_table_renders_bev_1.png"), ""])
-
-
-def paper_lanes_section() -> list[str]:
-    """The quick paper table again on the street with lane ground truth (no enhancer rows), when committed."""
-    if not (RESULTS / "paper_table_lanes.json").is_file():
-        return []
-    return ["## Quick scale, embedded street, with the lane columns", "",
-            "The same street written with its lane ground truth (generator version 3: lane_2 and lane_4, 2 and 4 m to the side "
-            "at camera height, and the extrapolated mean over bev_1, bev_2, lane_2, lane_4), a newer run without the enhancer "
-            "rows (the enhancer was not retrained for it). Targets at 800 steps and \"+ NeRF views\" the bird's-eye views, as above.", "",
-            paper_section("paper_table_lanes.json", "Paper table with lane columns (quick scale)",
-                          "ns2gs-bench paper-table --scale quick --confidence consistency --no-enhancer",
-                          "../../benchmarks/results/paper_table_lanes_renders_bev_1.png"), ""]
 
 
 def page_ablation() -> str:
@@ -185,25 +173,20 @@ def page_ablation() -> str:
         f"- Views rendered by Splatfacto itself change its bev_1 / bev_2 by {db(own['bev_1'])} / {db(own['bev_2'])} dB; "
         f"views rendered by StreetNeRF by {db(nerf['bev_1'])} / {db(nerf['bev_2'])} dB: the reference must be better "
         "from above than the target.", "",
-        "StreetNeRF without one term, against the full StreetNeRF (dB):", "", *rows, "", *ablation_families_section()])
+        "StreetNeRF without one term, against the full StreetNeRF (dB):", "", *rows, "", *ablation_families_section(results)])
 
 
-def ablation_families_section() -> list[str]:
-    """The ablation's target rows again on the street with lane ground truth, a row per view family."""
-    if not (RESULTS / "ablation_families.json").is_file():
-        return []
+def ablation_families_section(results: dict[str, dict]) -> list[str]:
+    """A row per view family: each family's views from StreetNeRF against Splatfacto alone."""
     paper = bench_module("bench_paper")
-    results = load("ablation_families.json")["results"]
-    base = results.get("splatfacto")
-    pairs = [(label, "splatfacto") for label in results if label.startswith("splatfacto + ")]
+    pairs = [(label, "splatfacto") for label in results if label.startswith("splatfacto + views from StreetNeRF")
+             and not label.endswith(("enhancer", "confidence)"))]
+    if len(pairs) < 2 or "splatfacto" not in results:
+        return []
     return ["## A row per view family", "",
-            "The ablation's target rows on the same street written with its lane ground truth (generator version 3: "
-            "lane_2, lane_4 and the extrapolated mean), each view family from StreetNeRF with its defaults "
-            "(`--augment.views`; the poses family needs a file of poses and has no row). A newer run than the table above: "
-            "no enhancer and no StreetNeRF terms (`ns2gs-bench ablation --scale quick --no-enhancer --no-streetnerf-terms "
-            f"--name ablation_families`). Source: {source('ablation_families.json')}.", "",
-            demote(paper.markdown_table(results, paper.target_groups(results), "Ablation with the view families (quick scale)")), "",
-            "Against Splatfacto alone:" if base else "", "", paper.ratios_md(results, pairs) if base else "", ""]
+            "\"splatfacto + views from StreetNeRF\" is the bird's-eye family (the default); the rows with a family in "
+            "brackets were trained with `--augment.views` those families, each with its defaults (the poses family "
+            "needs a file of poses and has no row). Against Splatfacto alone:", "", paper.ratios_md(results, pairs), ""]
 
 
 # ----------------------------------------------------------------------------- model size
@@ -793,8 +776,8 @@ def levers_section() -> str:
 
 PAGES: dict[str, tuple[str, Callable[[], str], tuple[str, ...]]] = {
     "paper-table.md": ("the paper's table: quick and default scale, a second street",
-                       page_paper_table, ("paper_table", "paper_table_lanes", "default/paper_table", "second_scene/paper_table")),
-    "ablation.md": ("the paper's ablation and StreetNeRF's terms", page_ablation, ("ablation", "ablation_families")),
+                       page_paper_table, ("paper_table", "default/paper_table", "second_scene/paper_table")),
+    "ablation.md": ("the paper's ablation and StreetNeRF's terms", page_ablation, ("ablation",)),
     "model-size.md": ("primitives against quality, the defaults' verdict", page_model_size, ("model_size",)),
     "stability.md": ("each method and the augmented pipeline to its breaking point", page_stability,
                      ("stability", "stability_masks/stability", "stability_augmented_today/stability")),
