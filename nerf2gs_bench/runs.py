@@ -128,9 +128,14 @@ def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, ref
     t_setup = time.perf_counter()
     try:
         trainer.setup()
+        setup_seconds = time.perf_counter() - t_setup  # an augmented run renders its NeRF views here
+        if step_hook is not None:
+            trainer.step_hooks.append(step_hook)
+        t0 = time.perf_counter()
+        trainer.train()  # takes the run's lock first
     except ConfigError as e:
-        # another bench sharing the runs folder took the run's lock between the wait above and this setup: wait for it
-        # and reuse its run (a few tries)
+        # another bench sharing the runs folder took the run's lock between the wait above and this training (during
+        # the setup's renders, say): wait for it and reuse its run (a few tries)
         if not (_lock_tries > 1 and IN_USE in str(e)):
             raise
         log(f"[bench] {spec.label}: another process started training it; waiting to reuse it")
@@ -138,11 +143,6 @@ def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, ref
         time.sleep(1.0)  # the other process may hold the lock only a moment (a setup that failed, a resume): let it go first
         return train_or_reuse(spec, data, runs_root, dataset, reference, progress, log, step_hook, device, False,
                               _lock_tries=_lock_tries - 1)
-    setup_seconds = time.perf_counter() - t_setup  # an augmented run renders its NeRF views here
-    if step_hook is not None:
-        trainer.step_hooks.append(step_hook)
-    t0 = time.perf_counter()
-    trainer.train()
     # saved with the run: a bench reusing it reports these seconds, not the ~0 s of the reuse
     trained = {"machine": machine_line(), "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "device": device_label(torch_device),
                "seconds": round(time.perf_counter() - t0 + setup_seconds, 3), "resumed": bool(ckpts)}

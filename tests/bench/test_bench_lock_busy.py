@@ -36,19 +36,30 @@ def test_a_user_error_is_remembered(tmp_path, monkeypatch):
     assert len(list((tmp_path / "runs").rglob("failures/*.json"))) == 1
 
 
+@pytest.mark.parametrize("where", ["setup", "train"])
 @pytest.mark.parametrize("tries", [1, 3])
-def test_train_or_reuse_tries_again_while_the_lock_is_busy(tmp_path, monkeypatch, tries):
+def test_train_or_reuse_tries_again_while_the_lock_is_busy(tmp_path, monkeypatch, tries, where):
+    """The trainer takes the lock when training starts, after the setup's renders: a collision there is retried too."""
     import nerf2gs_bench.runs as runs_mod
 
     calls = []
 
     class BusyTrainer:
+        step_hooks: list = []
+
         def __init__(self, cfg):
             pass
 
+        def _busy(self, stage):
+            if stage == where:
+                calls.append(1)
+                raise ConfigError(f"{IN_USE} (pid 1)", tmp_path)
+
         def setup(self):
-            calls.append(1)
-            raise ConfigError(f"{IN_USE} (pid 1)", tmp_path)
+            self._busy("setup")
+
+        def train(self):
+            self._busy("train")
 
     monkeypatch.setattr(runs_mod, "Trainer", BusyTrainer)
     monkeypatch.setattr(runs_mod.time, "sleep", lambda s: None)
