@@ -396,19 +396,19 @@ class RealCaptures:
 
 @dataclass
 class RealPathSpeed(RealPathOptions):
-    """The real path of a 100-frame 480x360 dashcam stand-in (process -> masks -> StreetNeRF -> Splatfacto +
-    NeRF views) timed stage by stage, CPU and wall seconds (``real_path_speed.*``)."""
+    """The real path of a 100-frame 480x360 dashcam stand-in, or of a real capture (--capture kitti), (process -> masks ->
+    StreetNeRF -> Splatfacto + NeRF views) timed stage by stage, CPU and wall seconds (``real_path_speed[_CAPTURE].*``)."""
 
     out: Path = RESULTS
     runs: Path = RUNS
 
     def main(self) -> None:
-        from nerf2gs_bench.real_path_speed import results_md, run
+        from nerf2gs_bench.real_path_speed import results_md, run, stem
 
         opts = RealPathOptions(**{f.name: getattr(self, f.name) for f in fields(RealPathOptions)})
-        doc = run(self.runs / "real_path_speed", self.out, opts)
+        doc = run(self.runs / stem(opts), self.out, opts)
         print(results_md(doc))
-        print(f"results: {self.out}/real_path_speed.md")
+        print(f"results: {self.out}/{stem(opts)}.md")
 
 
 @dataclass

@@ -162,16 +162,18 @@ def gain_ratio(est: dict, gt: dict, split: str) -> Optional[float]:
 
 
 # ----------------------------------------------------------------------------- stages
-def write_video(path: Path, images: list[Path], fps: float = 10.0) -> Path:
-    """The frames as an MJPG video (what a dashcam would hand over)."""
+def write_video(path: Path, images: list[Path], fps: float = 10.0, transform=None) -> Path:
+    """The frames (each through ``transform``, an image -> image function, when given) as an MJPG video
+    (what a dashcam would hand over)."""
     import cv2
 
-    first = cv2.imread(str(images[0]))
+    transform = transform or (lambda img: img)
+    first = transform(cv2.imread(str(images[0])))
     h, w = first.shape[:2]
     tmp = Path(path).with_name(Path(path).stem + ".tmp" + Path(path).suffix)
     wr = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"MJPG"), fps, (w, h))
     for p in images:
-        wr.write(cv2.imread(str(p)))
+        wr.write(transform(cv2.imread(str(p))))
     wr.release()
     os.replace(tmp, path)
     return Path(path)

@@ -45,6 +45,11 @@ class RealPathOptions:
     """StreetNeRF continues from the masks' reference (its first steps are the reference's)."""
     render_downscale: Optional[int] = None
     """The masks' renders at every d-th pixel per side (ns2gs-data masks --render-downscale); None: its default."""
+    capture: Optional[str] = None
+    """A real capture of real-captures (kitti, nuscenes, ...) instead of the stand-in: its first --frames frames as
+    a video, scaled to the pixel count of --width x --height (aspect kept), with its field of view and camera height."""
+    data_root: Optional[Path] = None
+    """Where the real captures' folders are (None: real-captures' default, $NERF2GS_REAL_DATA)."""
 
 
 class Stages:
@@ -79,9 +84,17 @@ class Stages:
         return round(sum(v[key] for v in self.rows.values()), 1)
 
 
+def stem(opts: RealPathOptions) -> str:
+    """The results' name: one per capture, the stand-in's the plain one."""
+    return f"{STEM}_{opts.capture}" if opts.capture else STEM
+
+
 def make_capture(root: Path, opts: RealPathOptions) -> tuple[Path, float, float]:
-    """The stand-in street and its forward drive as a video; ``(video, fov_deg, camera_height)``."""
+    """The stand-in street (or the real capture) and its forward drive as a video; ``(video, fov_deg, camera_height)``."""
     from nerf2gs_bench.real import write_video
+
+    if opts.capture:
+        return real_capture_video(root, opts)
     from nerf2gs_plugin.data.synthetic_street import GENERATOR_VERSION, SynthStreetConfig, generate_street, read_generator_version
 
     street = root / "street"
@@ -93,6 +106,33 @@ def make_capture(root: Path, opts: RealPathOptions) -> tuple[Path, float, float]
     frames = json.loads((street / "transforms.json").read_text())["frames"][: opts.frames]  # the forward drive
     video = write_video(root / "drive.avi", [street / f["file_path"] for f in frames])
     return video, cfg.fov_deg, cfg.cam_height
+
+
+def real_capture_video(root: Path, opts: RealPathOptions) -> tuple[Path, float, float]:
+    """The first ``opts.frames`` frames of a real capture (bonnet cropped) at the stand-in's pixel count, as a video."""
+    import cv2
+
+    from nerf2gs_bench.real import write_video
+    from nerf2gs_bench.real_captures import CAPTURES, capture_frames, default_data_root
+    from nerf2gs_plugin.errors import ConfigError
+
+    caps = {c.name: c for c in CAPTURES}
+    if opts.capture not in caps:
+        raise ConfigError(f"unknown capture '{opts.capture}' (known: {', '.join(sorted(caps))})")
+    cap = caps[opts.capture]
+    if cap.fov_deg is None:
+        raise ConfigError(f"capture '{cap.name}' has no fixed field of view (EXIF photos): not a video")
+    frames = capture_frames(cap, Path(opts.data_root or default_data_root()))[: opts.frames]
+    Path(root).mkdir(parents=True, exist_ok=True)
+    h0, w0 = cv2.imread(str(frames[0])).shape[:2]
+    h0 = int(round(h0 * (1 - cap.crop_bottom)))
+    f = (opts.width * opts.height / (w0 * h0)) ** 0.5
+    size = (2 * round(w0 * f / 2), 2 * round(h0 * f / 2))
+
+    def shaped(img):
+        return cv2.resize(img[: h0], size, interpolation=cv2.INTER_AREA)
+
+    return write_video(Path(root) / f"{cap.name}.avi", frames, transform=shaped), cap.fov_deg, cap.camera_height
 
 
 def _trainer_config(method: str, data: Path, run_dir: Path, steps: Optional[int], **kw):
@@ -130,7 +170,7 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
         shutil.rmtree(root / stale, ignore_errors=True)
     data, ref = root / "capture", root / "masks-reference"
     doc: dict = {"options": dict(dataclasses.asdict(opts)), "machine": machine_info(), "complete": False,
-                 "streetnerf_render_nerf_samples": _render_nerf_samples()}
+                 "streetnerf_render_nerf_samples": _render_nerf_samples(), "video_size": _video_size(video)}
 
     def record(final: bool = False) -> None:
         doc.update({"stage_seconds": stages.rows, "total_wall_s": stages.total("wall_s"), "total_cpu_s": stages.total("cpu_s"),
@@ -157,6 +197,16 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
     return doc
 
 
+def _video_size(video: Path) -> str:
+    import cv2
+
+    cap = cv2.VideoCapture(str(video))
+    try:
+        return f"{int(cap.get(cv2.CAP_PROP_FRAME_WIDTH))}x{int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))}"
+    finally:
+        cap.release()
+
+
 def _render_nerf_samples() -> Optional[int]:
     """StreetNeRF's fine samples per ray in a render (the masks' and the augmentation's renders)."""
     from nerf2gs_plugin.methods.streetnerf.model import StreetNeRFModelConfig
@@ -178,8 +228,7 @@ def results_md(doc: dict) -> str:
     lines = [f"# The real path, stage by stage ({o['frames']} frames, {o['width']}x{o['height']})", "",
              f"Machine: {machine_line(doc['machine'])}; torch threads {doc['machine'].get('torch_threads')}; "
              f"load average at the end {doc.get('load_average')}.",
-             f"Stand-in: the synthetic street (seed {o['street_seed']}{', movers' if o['movers'] else ''}) at {o['width']}x{o['height']}, "
-             f"its forward drive as a video; masks' reference {o['reference_steps']} steps, StreetNeRF "
+             f"{_source(doc)}; masks' reference {o['reference_steps']} steps, StreetNeRF "
              f"{o['streetnerf_steps'] or 'default'} steps ({'warm-started from the masks reference' if o['warm_start'] else 'from scratch'}), "
              f"Splatfacto {o['splatfacto_steps'] or 'default'} steps with NeRF views; masks' renders at 1/{_downscale(doc):g}; "
              f"StreetNeRF renders with {doc.get('streetnerf_render_nerf_samples') or 'all'} fine samples per ray. "
@@ -197,6 +246,15 @@ def results_md(doc: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _source(doc: dict) -> str:
+    o = doc["options"]
+    if o.get("capture"):
+        return (f"Real capture: {o['capture']}'s first {o['frames']} frames as a video at {doc.get('video_size', '?')} "
+                f"(the pixel count of {o['width']}x{o['height']})")
+    return (f"Stand-in: the synthetic street (seed {o['street_seed']}{', movers' if o['movers'] else ''}) at {o['width']}x{o['height']}, "
+            "its forward drive as a video")
+
+
 def _downscale(doc: dict) -> float:
     """The masks' render downscale of a run (older results: only the option, 1 when unset)."""
     return doc.get("masks_render_downscale") or doc["options"].get("render_downscale") or 1.0
@@ -205,5 +263,6 @@ def _downscale(doc: dict) -> float:
 def write_results(out_dir: Path, doc: dict) -> None:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out_dir / f"{STEM}.json", json.dumps(doc, indent=1, default=str))
-    atomic_write_text(out_dir / f"{STEM}.md", results_md(doc))
+    name = stem(RealPathOptions(capture=doc["options"].get("capture")))
+    atomic_write_text(out_dir / f"{name}.json", json.dumps(doc, indent=1, default=str))
+    atomic_write_text(out_dir / f"{name}.md", results_md(doc))

@@ -15,9 +15,9 @@ LAYERS: list[tuple[str, ...]] = [
     ("runs",),  # run specs, keys and reuse of trained runs
     ("runner",),  # training, evaluating and writing a bench's results
     ("paper", "speed_quality", "size", "stability", "raster", "field", "faults", "faults_capture", "real", "real_photos", "scale",
-     "capture_truth", "capture_compare", "real_path_speed",
+     "capture_truth", "capture_compare",
      "blocks", "enhancer", "demo", "plans"),  # plans: the validation studies' runner
-    ("real_captures",),  # each capture through the real-photos bench
+    ("real_captures", "real_path_speed"),  # each capture through the real-photos bench; the path timed (on a capture too)
     ("street_level",),  # levers of the augmentation on the real captures' runs
     ("cli",),
 ]

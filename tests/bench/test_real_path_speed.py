@@ -44,3 +44,34 @@ def test_results_state_machine_options_and_total(tmp_path):
     md = (tmp_path / "real_path_speed.md").read_text()
     assert "Machine: " in md and "| StreetNeRF | 110.0 | 120.0 |" in md and "160 (2.7 min)" in md
     assert "warm-started from the masks reference" in md and "100/100" in md
+
+
+def test_a_real_capture_becomes_a_video_of_its_first_frames_at_the_stand_ins_pixel_count(tmp_path):
+    import cv2
+    import numpy as np
+    import pytest
+
+    from nerf2gs_bench.real_path_speed import make_capture, stem
+    from nerf2gs_plugin.errors import ConfigError
+
+    folder = tmp_path / "data" / "kitti"
+    folder.mkdir(parents=True)
+    for i in range(12):
+        img = np.zeros((24, 80, 3), np.uint8)
+        img[:, : 5 * (i + 1)] = 200  # a bar growing frame by frame: the order is visible in the video
+        cv2.imwrite(str(folder / f"{i + 1:04d}.png"), img)
+    opts = RealPathOptions(capture="kitti", data_root=tmp_path / "data", frames=10, width=48, height=36)
+    video, fov, height = make_capture(tmp_path / "work", opts)
+    assert (fov, height) == (81.0, 1.65) and stem(opts) == "real_path_speed_kitti" and stem(RealPathOptions()) == "real_path_speed"
+    cap, frames = cv2.VideoCapture(str(video)), []
+    while True:
+        ok, frame = cap.read()
+        if not ok:
+            break
+        frames.append(frame)
+    assert len(frames) == 10
+    assert frames[0].shape == (22, 76, 3)  # 48 x 36 pixels' worth at 80:24, even sides
+    bright = [int((f[11, :, 1] > 100).sum()) for f in frames]
+    assert bright == sorted(bright) and bright[0] < bright[-1]
+    with pytest.raises(ConfigError, match="unknown capture"):
+        make_capture(tmp_path / "work", RealPathOptions(capture="nowhere", data_root=tmp_path / "data"))
