@@ -41,7 +41,14 @@ class AppearanceTransforms(nn.Module):
             A = torch.where(known[:, None, None], self.transforms[idx.clamp(0, self.num_images - 1)], fallback[None])
         return torch.einsum("rij,rj->ri", A[:, :, :3], rgb) + A[:, :, 3]
 
-    def deviation(self) -> Tensor:
-        """Mean squared distance of the transforms from the identity (a small regulariser)."""
-        eye = torch.eye(3, 4, device=self.transforms.device)
-        return ((self.transforms - eye) ** 2).mean()
+    def apply_one(self, rgb: Tensor, i: int) -> Tensor:
+        """``rgb [..., 3]`` in image ``i``'s transform (one transform for every pixel: no per-row gather)."""
+        A = self.transforms[i]
+        return rgb @ A[:, :3].T + A[:, 3]
+
+    def deviation(self, i: int | None = None) -> Tensor:
+        """Mean squared distance of the transforms (image ``i``'s alone, when given) from the identity (a
+        small regulariser)."""
+        A = self.transforms if i is None else self.transforms[i]
+        eye = torch.eye(3, 4, device=A.device, dtype=A.dtype)
+        return ((A - eye) ** 2).mean()

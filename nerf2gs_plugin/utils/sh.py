@@ -7,6 +7,7 @@ coefficient stores ``(rgb - 0.5) / SH_C0`` (the rasterizer adds 0.5 back).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import torch
@@ -83,7 +84,14 @@ def sh_rotation(degree: int, rotation: Tensor) -> Tensor:
     """``[K, K]`` (K = (degree+1)^2, float64) with ``sh_basis(degree, d @ rotation.T) == sh_basis(degree, d) @ D``
     for every unit ``d``: a rotation of the directions is a linear map of their SH basis (each band onto
     itself). Solved by least squares on fixed directions, exact to float64 rounding."""
-    k = num_sh_bases(degree)
-    dirs = _sphere_points(4 * k)
+    dirs, solve = _sphere_solve(degree)
     rot = rotation.detach().to("cpu", torch.float64)
-    return torch.linalg.lstsq(sh_basis(degree, dirs), sh_basis(degree, dirs @ rot.T)).solution
+    return solve @ sh_basis(degree, dirs @ rot.T)
+
+
+@functools.lru_cache(maxsize=None)
+def _sphere_solve(degree: int) -> tuple[Tensor, Tensor]:
+    """The fixed directions of :func:`sh_rotation` and the least-squares solve of their basis (its
+    pseudo-inverse), made once per degree: each call then costs one basis of the turned directions."""
+    dirs = _sphere_points(4 * num_sh_bases(degree))
+    return dirs, torch.linalg.pinv(sh_basis(degree, dirs))

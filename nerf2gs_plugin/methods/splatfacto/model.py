@@ -255,10 +255,7 @@ class SplatfactoModel(Model):
         """An additional view's render in its colour transform, and the transform's regulariser."""
         app = self.extra_appearance
         j = min(image_idx - self.num_train_images, app.num_images - 1)
-        A = app.transforms[j]
-        out = (rgb.reshape(-1, 3) @ A[:, :3].T + A[:, 3]).reshape(rgb.shape)
-        eye = torch.eye(3, 4, device=A.device, dtype=A.dtype)
-        return out, self.config.extra_view_appearance_reg * ((A - eye) ** 2).mean()
+        return app.apply_one(rgb, j), self.config.extra_view_appearance_reg * app.deviation(j)
 
     # ------------------------------------------------------------------ rendering
     @property
