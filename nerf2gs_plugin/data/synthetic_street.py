@@ -49,7 +49,7 @@ from nerf2gs_plugin.data.images import write_depth_atomic, write_image_atomic, w
 from nerf2gs_plugin.data.ply import write_ply_points
 from nerf2gs_plugin.data.synthetic.coverage import ground_coverage
 from nerf2gs_plugin.data.synthetic.layout import ROAD_HALF, SKY, TRANSIENT_MATERIALS, Boxes, build_layout, empty_boxes
-from nerf2gs_plugin.data.synthetic.movers import build_movers
+from nerf2gs_plugin.data.synthetic.movers import build_movers, frame_boxes
 from nerf2gs_plugin.data.synthetic.poses import bev_poses, street_poses, train_poses
 from nerf2gs_plugin.data.synthetic.raycast import Pinhole, ShadowMap, render_view
 from nerf2gs_plugin.errors import ConfigError
@@ -223,9 +223,7 @@ def _generate(cfg: SynthStreetConfig) -> dict[str, Any]:
         task = prog.add_task("synth-street", total=total, stats="")
         for i in range(cfg.num_train):
             c2w = tr_c2w[i]
-            cars = layout.car_boxes(float(tr_times[i]), avoid=(float(c2w[0, 3]), float(c2w[1, 3])))
-            if movers is not None:
-                cars = Boxes.cat([cars, movers.boxes(float(tr_times[i]), c2w)])
+            cars = frame_boxes(layout, movers, float(tr_times[i]), c2w)
             view = render_view(layout, c2w, intr, cars, shadows, cfg.spp)
             gain = exposure[i] * tint[i]
             fr = write(f"train_{i:04d}", view, gain)

@@ -93,3 +93,11 @@ def build_movers(layout: StreetLayout, num_pedestrians: int = 4, num_parked: int
         rows += _car_rows(x, y, 1.0, cols[rng.randrange(len(cols))], (PARKED_CAR, PARKED_CAR, POLE))
     parked = Boxes.build(rows) if rows else empty_boxes()
     return Movers(peds, cols[rng.randrange(len(cols))], cols[rng.randrange(len(cols))], parked)
+
+
+def frame_boxes(layout: StreetLayout, movers: "Movers | None", t: float, c2w: Tensor) -> Boxes:
+    """Everything that moves at a training frame (time ``t``, camera ``c2w [3, 4]``): the street's cars,
+    kept clear of the camera's car, and the movers (None: none). The same boxes in the same order at
+    every frame, so box ``k`` of two frames is one object."""
+    cars = layout.car_boxes(t, avoid=(float(c2w[0, 3]), float(c2w[1, 3])))
+    return cars if movers is None else Boxes.cat([cars, movers.boxes(t, c2w)])

@@ -296,3 +296,19 @@ def render_view(layout: StreetLayout, c2w: Tensor, intr: Pinhole, cars: Boxes, s
     transient = torch.isin(mat, torch.tensor(TRANSIENT_MATERIALS)).any(0)
     ground = torch.isin(m0, torch.tensor(GROUND_MATERIALS))
     return View(rgb, sky.reshape(H, W), ground.reshape(H, W), transient.reshape(H, W), depth.reshape(H, W), p0, m0)
+
+
+def centre_hits(layout: StreetLayout, c2w: Tensor, intr: Pinhole, cars: Boxes) -> tuple[Tensor, Tensor]:
+    """What :func:`render_view`'s pixel-centre rays hit: the distance along each unit ray ``[H, W]``
+    (inf: sky) and the object ``[H, W]`` long: a box's index in ``Boxes.cat([layout.static, cars])``,
+    ``len(boxes) + s`` for tree crown ``s``, -1 the ground plane, -2 the sky."""
+    c2w = c2w.float()
+    origin = c2w[:, 3]
+    dirs = camera_rays(c2w, intr, 1)
+    boxes = Boxes.cat([layout.static, cars])
+    h = cast(origin, dirs, boxes, layout.crowns, _pixel_rects(_prim_corners(boxes, layout.crowns), c2w, intr))
+    d, t, prim = dirs[0], h.t[0], h.prim[0]
+    tp = torch.where(d[..., 2] < -1e-6, -origin[2] / d[..., 2].clamp(max=-1e-6), torch.full_like(t, math.inf))
+    plane = (tp < _FAR) & (tp < t)
+    obj = torch.where(plane, -1, torch.where(prim >= 0, prim, -2))
+    return torch.where(plane, tp, torch.where(obj == -2, math.inf, t)), obj
