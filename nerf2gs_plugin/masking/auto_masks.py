@@ -210,7 +210,7 @@ def auto_masks(view: Path, reference: Path, splits: list[str], opts: AutoOptions
                stats: Optional[dict] = None) -> dict[str, list[FrameMasks]]:
     """:func:`render_views` then :func:`~nerf2gs_plugin.masks.auto.masks_from_renders`, plus what
     moves against the static scene's flow (``motion``: :class:`~nerf2gs_plugin.masks.motion.MotionOptions`);
-    ``stats`` receives ``render_seconds`` and ``render_cpu_seconds``."""
+    ``stats`` receives ``render_seconds`` and ``render_cpu_seconds`` (and the second pass's seconds)."""
     renders = render_views(view, reference, splits, log, progress, render_downscale)
     if stats is not None:
         stats["render_seconds"], stats["render_cpu_seconds"] = round(renders.seconds, 1), round(renders.cpu_seconds, 1)
@@ -219,5 +219,11 @@ def auto_masks(view: Path, reference: Path, splits: list[str], opts: AutoOptions
         from nerf2gs_plugin.masks.motion import add_motion, is_sequence
 
         meta = json.loads((Path(view) / "transforms.json").read_text())
-        add_motion(at_full_size(renders, result), result, motion, log, progress, sequence=is_sequence(meta))
+        full = at_full_size(renders, result)
+        if add_motion(full, result, motion, log, progress, sequence=is_sequence(meta)) and motion.second_pass_steps > 0:
+            from nerf2gs_plugin.masking.second_pass import second_pass
+
+            took = second_pass(view, reference, full, result, motion.second_pass_steps, motion.second_pass_margin, log, progress)
+            if stats is not None:
+                stats.update(took)
     return result

@@ -34,9 +34,6 @@ def ensure_reference(data: Path, run: Optional[Path], steps: int = DEFAULT_STEPS
     steps is trained on the mask-less view of ``data`` into ``run`` (resumed when partial)."""
     from nerf2gs_plugin.engine.checkpoints import list_checkpoints, load_checkpoint
     from nerf2gs_plugin.engine.config import read_config_doc
-    from nerf2gs_plugin.engine.trainer import Trainer
-    from nerf2gs_plugin.registry import get_method
-    from nerf2gs_plugin.utils.config import apply_plain
 
     run = Path(run) if run is not None else default_reference_dir(data)
     if run.is_file():
@@ -50,20 +47,34 @@ def ensure_reference(data: Path, run: Optional[Path], steps: int = DEFAULT_STEPS
         if done >= target - 1:
             log(f"masks: reusing reference {run} (step {done})")
             return run
+    cfg = reference_config(maskless_view(data), run, steps, downscale, progress)
+    cfg = dataclasses.replace(cfg, load_checkpoint=ckpts[-1] if ckpts else None)
+    log(f"masks: training a {steps}-step StreetNeRF reference without masks -> {run}")
+    train_reference(cfg, steps, log)
+    return run
+
+
+def reference_config(view: Path, run: Path, steps: int, downscale: float, progress: bool):
+    """The reference's trainer config: StreetNeRF with :data:`REFERENCE_OVERRIDES` on ``view`` into ``run``."""
+    from nerf2gs_plugin.registry import get_method
+    from nerf2gs_plugin.utils.config import apply_plain
+
     cfg = apply_plain(get_method("streetnerf").with_steps(steps),
                       {"steps_per_eval_image": 0, "steps_per_save": max(1, steps // 4), **REFERENCE_OVERRIDES}, where="masks reference")
     # trained on the mask-less view on purpose: its missing masks are not worth a warning
     cfg = apply_plain(cfg, {"pipeline": {"model": {"expect_masks": False}}}, where="masks reference")
     dm = cfg.pipeline.datamanager
     dm = dataclasses.replace(dm, dataparser=dataclasses.replace(dm.dataparser, downscale=downscale))
-    cfg = dataclasses.replace(cfg, data=maskless_view(data), progress=progress, run_dir=run,
-                              pipeline=dataclasses.replace(cfg.pipeline, datamanager=dm),
-                              load_checkpoint=ckpts[-1] if ckpts else None)
-    log(f"masks: training a {steps}-step StreetNeRF reference without masks -> {run}")
+    return dataclasses.replace(cfg, data=view, progress=progress, run_dir=run, pipeline=dataclasses.replace(cfg.pipeline, datamanager=dm))
+
+
+def train_reference(cfg, steps: int, log: Callable[[str], None] = print) -> None:
+    """Train ``cfg`` (:func:`reference_config`) in its own folder; without the bar, a line every tenth of the run."""
+    from nerf2gs_plugin.engine.trainer import Trainer
+
     trainer = Trainer(cfg)  # in the reference's own folder, not outputs/<data>/<method>/<stamp>
     trainer.setup()
-    if not progress:  # a line every tenth of the run instead of the bar
+    if not cfg.progress:
         every = max(1, steps // 10)
         trainer.step_hooks.append(lambda step, *_: log(f"masks: reference step {step + 1}/{steps}") if (step + 1) % every == 0 else None)
     trainer.train()
-    return run

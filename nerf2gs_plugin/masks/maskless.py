@@ -19,8 +19,9 @@ from nerf2gs_plugin.data.dataparser_outputs import MASK_KINDS
 from nerf2gs_plugin.utils.io import atomic_write_text
 
 VIEW_DIRNAME = ".ns2gs_maskless"
+SECOND_PASS_DIRNAME = ".ns2gs_second_pass"  # the motion route's second pass: the first pass's transient masks only
 MASK_KEYS = tuple(f"{k}_mask_path" for k in MASK_KINDS)
-_SKIP = {"masks", ".ns2gs_cache", VIEW_DIRNAME}
+_SKIP = {"masks", ".ns2gs_cache", VIEW_DIRNAME, SECOND_PASS_DIRNAME}
 
 
 def strip_frame_keys(meta: dict, keys: Iterable[str] = MASK_KEYS) -> dict:

@@ -108,6 +108,12 @@ class MotionOptions:
     the object, the region as probably object, a ring around it as probably not, the rest as not)."""
     outline_ring: float = 0.03
     """The ring's width, as a fraction of the image's shorter side."""
+    second_pass_steps: int = 300
+    """Second pass (``masks/second_pass.py``): the first reference continued for this many steps with the
+    marked pixels excluded from its loss and rendered where they are; a marked pixel stays where that
+    render differs from the image more than the first reference's does (0: off)."""
+    second_pass_margin: float = 0.2
+    """... by more than this, each residual divided by its frame's median."""
 
 
 @dataclass
@@ -441,19 +447,20 @@ def is_sequence(meta: dict) -> bool:
 
 
 def add_motion(renders, result: dict, opts: MotionOptions, log: Callable[[str], None] = print, progress: bool = True,
-               sequence: bool = True) -> None:
+               sequence: bool = True) -> bool:
     """Add the moving objects to ``result``'s transient masks (``masks_from_renders``' masks, in
     place): every split's frames in one sequence sorted by file name (a video's order); ``sequence``:
     whether the capture is one (:func:`is_sequence`; see ``sequences_only``). The ground
     and sky masks stay as the residual route made them: with a short reference's depth the motion
-    route also marks static road (docs/masks-motion.md), and the ground mask should not pay for it."""
+    route also marks static road (docs/masks-motion.md), and the ground mask should not pay for it.
+    Returns whether the route ran."""
     from nerf2gs_plugin.progress import make_progress
 
     if not opts.enabled:
-        return
+        return False
     if opts.sequences_only and not sequence:
         log("masks: motion route skipped: the capture was not processed as a sequence (a video or sequential matching)")
-        return
+        return False
     order = sorted(((v["name"], s, i) for s, vs in renders.views.items() for i, v in enumerate(vs)))
     frames = frames_from_renders([renders.views[s][i] for _, s, i in order], [result[s][i].sky for _, s, i in order],
                                  renders.up, renders.height, opts.ground_clamp)
@@ -465,3 +472,4 @@ def add_motion(renders, result: dict, opts: MotionOptions, log: Callable[[str], 
         result[s][i].transient = result[s][i].transient | m
         share += float(m.float().mean()) / max(len(order), 1)
     log(f"masks: motion marked {100 * share:.2f}% of the pixels as moving")
+    return True

@@ -40,7 +40,8 @@ def _sample(tex: np.ndarray, tx: np.ndarray, ty: np.ndarray) -> np.ndarray:
 
 
 def _sequence(n: int = 5):
-    """Frames, the static distance a reference would give, and the true masks of the three blocks."""
+    """Frames, the static distance a reference would give, and the true masks of the three blocks (and the
+    static scene's image: what a reference that learnt no mover renders)."""
     bg, parked_tex, mover_tex = _texture(0), _texture(1), _texture(2)
     v, u = np.meshgrid(np.arange(H) + 0.5, np.arange(W) + 0.5, indexing="ij")
     ray_len = np.sqrt(((u - INTR[2]) / F) ** 2 + ((v - INTR[3]) / F) ** 2 + 1)
@@ -65,6 +66,7 @@ def _sequence(n: int = 5):
         frames.append(MotionFrame(torch.from_numpy(img).float(), torch.from_numpy(dist).float(), _pose(cam_x), INTR))
         truth.append({k_: torch.from_numpy(m) for k_, m in (("parked", parked), ("rider", rider), ("crossing", crossing))})
         truth[-1]["residual"] = torch.from_numpy(np.abs(img - static).mean(-1))
+        truth[-1]["static"] = torch.from_numpy(static)
     return frames, truth
 
 

@@ -1,0 +1,115 @@
+"""The motion route's second pass, the part that trains and renders (the mask maths: ``masks/second_pass.py``):
+the first reference continued for ``second_pass_steps`` steps on the dataset with the first pass's
+transient masks (grown a little) excluded from its loss, then rendered where the first pass marked.
+
+The continued run lives in a temporary folder beside the first reference and is removed afterwards; the
+dataset it trains on is ``DATA/.ns2gs_second_pass`` (symlinks to the mask-less view's entries and the
+first pass's transient masks).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import shutil
+import tempfile
+import time
+import warnings
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from nerf2gs_plugin.masks.auto import FrameMasks, Renders
+from nerf2gs_plugin.masks.maskless import SECOND_PASS_DIRNAME
+from nerf2gs_plugin.masks.second_pass import render_pixels, second_pass_mask
+
+TRAIN_GROW = 0.025
+"""The first pass's masks grow by this fraction of the shorter image side before they are excluded from
+the loss: the mover's edge and shadow that the first pass cut off."""
+
+
+def masked_view(view: Path, transient: dict[str, Tensor]) -> Path:
+    """``view``'s sibling ``.ns2gs_second_pass``: ``view``'s entries (the mask-less dataset) with
+    ``masks/transient/<stem>.png`` from ``transient`` (stem -> bool mask, grown by :data:`TRAIN_GROW`)."""
+    import cv2
+
+    from nerf2gs_plugin.data.images import write_mask_atomic
+
+    view = Path(view)
+    out = view.parent / SECOND_PASS_DIRNAME
+    shutil.rmtree(out, ignore_errors=True)  # masks of an earlier run must not survive
+    out.mkdir()
+    for item in view.iterdir():
+        if item.name in ("masks", ".ns2gs_cache"):
+            continue
+        if item.name == "transforms.json":
+            shutil.copyfile(item, out / item.name)
+        else:
+            (out / item.name).symlink_to(item.resolve())
+    for stem, m in transient.items():
+        r = max(1, int(round(TRAIN_GROW * min(m.shape))))
+        grown = cv2.dilate(m.numpy().astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))) > 0
+        write_mask_atomic(out / "masks" / "transient" / f"{stem}.png", grown)
+    return out
+
+
+def continue_reference(view: Path, first: Path, run: Path, steps: int, progress: bool, log: Callable[[str], None]) -> None:
+    """``first`` (a run folder or checkpoint) continued for ``steps`` steps on ``view`` into ``run``."""
+    from nerf2gs_plugin.engine.checkpoints import load_checkpoint, resolve_checkpoint
+    from nerf2gs_plugin.engine.config import load_config
+    from nerf2gs_plugin.masking.mask_reference import reference_config, train_reference
+    from nerf2gs_plugin.registry import get_method
+
+    run_dir, ckpt = resolve_checkpoint(first)
+    done = int(load_checkpoint(ckpt, map_location="cpu")["step"]) + 1
+    # the first reference's image size: the warm start takes only the same cameras
+    downscale = load_config(run_dir / "config.yml", get_method("streetnerf").config).pipeline.datamanager.dataparser.downscale
+    cfg = reference_config(view, run, done + steps, downscale, progress)
+    cfg = dataclasses.replace(cfg, warm_start=Path(run_dir), steps_per_save=done + steps)
+    log(f"masks: second pass: the reference continued for {steps} steps without the first pass's transient pixels")
+    train_reference(cfg, done + steps, log)
+
+
+def second_pass(view: Path, reference: Path, full: Renders, result: dict[str, list[FrameMasks]], steps: int, margin: float,
+                log: Callable[[str], None] = print, progress: bool = True) -> dict:
+    """Replace ``result``'s transient masks (the first pass: residual route and motion route, at the
+    size of ``full``'s views) by the second pass's (``masks/second_pass.py``); returns its seconds."""
+    from nerf2gs_plugin.data import parse_dataset
+    from nerf2gs_plugin.progress import make_progress
+    from nerf2gs_plugin.runs.load import load_run
+
+    t0 = time.perf_counter()
+    train_names = [v["name"] for v in full.views.get("train", [])]
+    firsts = {Path(n).stem: m.transient for n, m in zip(train_names, result.get("train", []))}
+    mview = masked_view(view, firsts)
+    reference = Path(reference)
+    tmp = Path(tempfile.mkdtemp(prefix="second-pass-", dir=reference.parent))
+    try:
+        continue_reference(mview, reference, tmp / "run", steps, progress, log)
+        t_train = time.perf_counter() - t0
+        with warnings.catch_warnings():  # trained with transient masks only: no sky / ground masks on purpose
+            warnings.filterwarnings("ignore", message="StreetNeRF: the dataset has no .* masks")
+            run = load_run(tmp / "run", device="cpu", data=mview)
+        parser = run.config.pipeline.datamanager.dataparser
+        data = {s: run.pipeline.datamanager.train_data if s == "train" else parse_dataset(mview, s, downscale=parser.downscale, cache_dir=parser.cache_dir)
+                for s in full.views}
+        total = sum(len(v) for v in full.views.values())
+        with make_progress(progress) as prog, torch.no_grad():
+            task = prog.add_task("masks: second pass", total=total, stats="")
+            for s, views in full.views.items():
+                for i, v in enumerate(views):
+                    prog.advance(task)
+                    m = result[s][i]
+                    cam = data[s].cameras[i : i + 1]
+                    if not bool(m.transient.any()) or (int(cam.height[0]), int(cam.width[0])) != tuple(m.transient.shape):
+                        continue
+                    pixels, sample = render_pixels(m.transient)
+                    rgb = run.model.render_camera(cam, pixels=pixels)["rgb"].cpu()
+                    m.transient = second_pass_mask(m.transient, v["image"], v["rgb"], rgb, pixels, sample, m.sky, margin)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    seconds = time.perf_counter() - t0
+    log(f"masks: second pass in {seconds:.1f} s (its reference {t_train:.1f} s)")
+    return {"second_pass_seconds": round(seconds, 1), "second_pass_train_seconds": round(t_train, 1)}

@@ -1,0 +1,77 @@
+"""The motion route's second pass (``masks/second_pass.py``, ``masking/second_pass.py``): on the textured
+sequence of ``test_motion.py`` the first pass's mask holds the block riding with the camera, the flow
+spilt onto the background around it and a patch of background that the references render badly."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import torch
+
+from masks.test_motion import _iou, _sequence
+from nerf2gs_plugin.masks.maskless import SECOND_PASS_DIRNAME, maskless_view
+from nerf2gs_plugin.masks.second_pass import render_pixels, second_pass_mask
+
+
+def _first_pass(truth: dict) -> tuple[torch.Tensor, torch.Tensor]:
+    """The rider grown by 6 px (DIS's spill) and a patch of static background: ``(mask, the patch)``."""
+    rider = truth["rider"].numpy().astype(np.uint8)
+    spill = cv2.dilate(rider, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (13, 13))) > 0
+    patch = torch.zeros_like(truth["rider"])
+    patch[50:80, 100:140] = True
+    return torch.from_numpy(spill) | patch, patch
+
+
+def _renders(image: torch.Tensor, truth: dict, patch: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The first reference (trained without masks: it learnt the rider halfway, as something far away)
+    and the second (the rider excluded: the static scene); both render the patch as badly, the rest with
+    the same small noise."""
+    g = torch.Generator().manual_seed(0)
+    static = truth["static"] + 0.01 * torch.randn(truth["static"].shape, generator=g)
+    static[patch] += 0.3 * torch.rand(int(patch.sum()), 3, generator=g)
+    first = static.clone()
+    first[truth["rider"]] = 0.5 * (image + static)[truth["rider"]]
+    return first.clamp(0, 1), static.clamp(0, 1)
+
+
+def test_the_second_pass_keeps_the_rider_and_drops_the_spill_and_what_both_references_render_badly():
+    frames, truths = _sequence()
+    image, truth = frames[2].image, truths[2]
+    first, patch = _first_pass(truth)
+    render1, render2 = _renders(image, truth, patch)
+    pixels, sample = render_pixels(first)
+    assert bool((first <= pixels).all()) and 0.05 < float(sample.float().mean()) < 0.07  # every 4th pixel per side
+    sky = torch.zeros_like(first)
+    out = second_pass_mask(first, image, render1, render2 * pixels[..., None], pixels, sample, sky)
+    rider = truth["rider"]
+    assert _iou(out, rider) > 0.8 > _iou(first, rider) + 0.3, (_iou(out, rider), _iou(first, rider))
+    assert float((out & patch).float().sum()) == 0.0
+    # what tells the rider from the patch is the first reference having learnt it: a rider it missed as
+    # well (a render as far from it as the second's) goes too, and so does everything with a higher margin
+    missed = second_pass_mask(first, image, render2, render2 * pixels[..., None], pixels, sample, sky)
+    assert _iou(missed, rider) < 0.1
+    assert _iou(second_pass_mask(first, image, render1, render2 * pixels[..., None], pixels, sample, sky, margin=1e6), rider) == 0.0
+    assert not bool(second_pass_mask(first, image, render1, render2, pixels, sample, first).any())  # sky is never transient
+
+
+def test_the_masked_view_holds_the_first_pass_grown_and_stays_out_of_the_maskless_view(tmp_path):
+    data = tmp_path / "data"
+    (data / "images").mkdir(parents=True)
+    (data / "images" / "a.png").write_bytes(b"x")
+    (data / "transforms.json").write_text(json.dumps({"frames": [{"file_path": "images/a.png", "transient_mask_path": "masks/transient/a.png"}]}))
+    view = maskless_view(data)
+    from nerf2gs_plugin.masking.second_pass import TRAIN_GROW, masked_view
+
+    m = torch.zeros(100, 200, dtype=torch.bool)
+    m[40:60, 90:110] = True
+    out = masked_view(view, {"a": m})
+    assert out == data / SECOND_PASS_DIRNAME and (out / "images" / "a.png").read_bytes() == b"x"
+    assert "mask_path" not in (out / "transforms.json").read_text()  # only the masks written here count
+    from nerf2gs_plugin.data.images import load_mask
+
+    grown = load_mask(out / "masks" / "transient" / "a.png")
+    r = round(TRAIN_GROW * 100)
+    assert bool(grown[40 - r, 100]) and not bool(grown[40 - r - 1, 100]) and bool(grown[m].all())
+    assert not (maskless_view(data) / SECOND_PASS_DIRNAME).exists()
