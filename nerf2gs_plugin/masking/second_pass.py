@@ -2,9 +2,9 @@
 the first reference continued for ``second_pass_steps`` steps on the dataset with the first pass's
 transient masks (grown a little) excluded from its loss, then rendered where the first pass marked.
 
-The continued run lives in a temporary folder beside the first reference and is removed afterwards; the
-dataset it trains on is ``DATA/.ns2gs_second_pass`` (symlinks to the mask-less view's entries and the
-first pass's transient masks).
+The continued run lives in a temporary folder beside the first reference; the dataset it trains on is
+``DATA/.ns2gs_second_pass`` (symlinks to the mask-less view's entries and the first pass's transient
+masks). Both are removed afterwards.
 """
 
 from __future__ import annotations
@@ -110,6 +110,7 @@ def second_pass(view: Path, reference: Path, full: Renders, result: dict[str, li
                     m.transient = second_pass_mask(m.transient, v["image"], v["rgb"], rgb, pixels, sample, m.sky, margin)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+        shutil.rmtree(mview, ignore_errors=True)
     seconds = time.perf_counter() - t0
     log(f"masks: second pass in {seconds:.1f} s (its reference {t_train:.1f} s)")
     return {"second_pass_seconds": round(seconds, 1), "second_pass_train_seconds": round(t_train, 1)}

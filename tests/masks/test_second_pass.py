@@ -75,3 +75,33 @@ def test_the_masked_view_holds_the_first_pass_grown_and_stays_out_of_the_maskles
     r = round(TRAIN_GROW * 100)
     assert bool(grown[40 - r, 100]) and not bool(grown[40 - r - 1, 100]) and bool(grown[m].all())
     assert not (maskless_view(data) / SECOND_PASS_DIRNAME).exists()
+
+
+def test_the_second_pass_continues_the_first_reference_on_the_masked_view(tmp_path):
+    """The training and rendering half on the tiny scene: a 5-step first reference continued 3 steps
+    with a transient mask excluded (the warm start must accept the reference's own config), rendered
+    where the mask is; the temporary run and dataset view are removed, the masks keep their size."""
+    import shutil
+
+    from masks.test_masks import _tiny
+    from nerf2gs_plugin.masking.auto_masks import at_full_size, render_views
+    from nerf2gs_plugin.masking.mask_reference import ensure_reference
+    from nerf2gs_plugin.masking.second_pass import second_pass
+    from nerf2gs_plugin.masks.auto import AutoOptions, masks_from_renders
+
+    data = _tiny(tmp_path, "scene")
+    shutil.rmtree(data / "masks")
+    ref = ensure_reference(data, tmp_path / "refs" / "ref", steps=5, progress=False, log=lambda s: None)
+    view = maskless_view(data)
+    renders = render_views(view, ref, ["train"], log=lambda s: None, progress=False)
+    result = masks_from_renders(renders, AutoOptions(), log=lambda s: None)
+    full = at_full_size(renders, result)
+    for m in result["train"]:
+        m.transient = torch.zeros_like(m.transient)
+        m.transient[4:12, 4:14] = True
+    logs: list[str] = []
+    took = second_pass(view, ref, full, result, 3, 0.2, log=logs.append, progress=False)
+    assert any("continued for 3 steps" in line for line in logs) and took["second_pass_train_seconds"] > 0
+    assert [p.name for p in ref.parent.iterdir()] == ["ref"] and (ref / "config.yml").is_file()  # nothing left beside it
+    assert not (data / SECOND_PASS_DIRNAME).exists()
+    assert all(tuple(m.transient.shape) == tuple(v["image"].shape[:2]) for m, v in zip(result["train"], full.views["train"]))
