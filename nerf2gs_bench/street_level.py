@@ -36,6 +36,8 @@ VARIANTS: dict[str, dict] = {
     "real_only_from 0.6": {"augment": {"real_only_from": 0.6}},
     "real_only_from 0.75": {"augment": {"real_only_from": 0.75}},
     "confidence visibility": {"augment": {"confidence": "visibility"}},
+    "confidence unseen": {"augment": {"confidence": "unseen"}},
+    "confidence unseen 0.3": {"augment": {"confidence": "unseen", "confidence_seen_weight": 0.3}},
     "sky_alpha 0.5": {"augment": {}, "model": {"sky_alpha_weight": 0.5}},
     "sky_alpha 0": {"augment": {}, "model": {"sky_alpha_weight": 0.0}},
     "target sky_alpha 0.5": {"model": {"sky_alpha_weight": 0.5}},

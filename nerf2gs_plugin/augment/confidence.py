@@ -18,6 +18,10 @@ observation counts ``exp(-(d / color_tol)^2)``, ``d`` the mean absolute RGB diff
 reference's pixel and the real image at the point's projection, so a surface the reference renders
 softer or in other colours than every real view recorded it (a blurred facade seen again from above)
 weighs little, and the target keeps its own street-view evidence there.
+``unseen`` turns visibility around for the views from above: they should teach the target only what the
+input views do not show (rooftops, the road away from the path), since where the photos see a surface
+they teach it themselves and the reference's softer colour there only competes with them. A pixel's
+weight falls from 1 (no input view observed its point) to ``seen_weight`` at ``full_views`` observations.
 The cost is one projection of every rendered pixel into every training camera (``P x N`` work, a
 Python loop over the N cameras only), plus one reference render per training view for its depth.
 """
@@ -135,6 +139,17 @@ def visibility_confidence(depth: Tensor, camera: Cameras, along: DepthAlong, tra
     if accumulation is not None:
         conf = conf * accumulation.float().clamp(0.0, 1.0).to(conf)
     return conf
+
+
+def unseen_weight(depth: Tensor, camera: Cameras, along: DepthAlong, train_cameras: Cameras,
+                  train_depths_z: Sequence[Tensor], train_blind: Optional[Sequence[Optional[Tensor]]] = None,
+                  full_views: int = 3, rel_tol: float = 0.05, seen_weight: float = 0.0) -> Tensor:
+    """Per-pixel loss weight ``[H, W, 1]`` of one rendered view (``unseen``, see the module docstring):
+    ``1 - (1 - seen_weight) * min(observations / full_views, 1)``. The accumulation does not enter: a
+    pixel the reference renders empty shows nothing the input views could teach either."""
+    seen = visibility_confidence(depth, camera, along, train_cameras, train_depths_z, train_blind,
+                                 full_views=full_views, rel_tol=rel_tol)
+    return 1.0 - (1.0 - float(seen_weight)) * seen
 
 
 def inside_box(points: Tensor, box: Optional[Tensor]) -> Tensor:

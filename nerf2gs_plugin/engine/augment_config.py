@@ -113,17 +113,21 @@ class AugmentConfig:
     """none | builtin | builtin:PATH | onnx:PATH: image enhancement of the additional views."""
     use_cache: bool = True
     """Reuse the reference's cached renders when their manifest matches (False: render again)."""
-    confidence: Literal["none", "visibility", "consistency"] = "none"
+    confidence: Literal["none", "visibility", "consistency", "unseen"] = "none"
     """Per-pixel loss weight of the reference's pixels. none: all 1; visibility: how many training views
     observed the surface the pixel shows (depth-consistent, not sky/transient there), reaching 1 at
     confidence-full-views, times the render's accumulation; consistency: each of those observations
-    weighted by how well the reference's colour agrees with that real image (augment/confidence.py)."""
+    weighted by how well the reference's colour agrees with that real image; unseen: the opposite, for the
+    additional views only: 1 where no training view observed the surface, falling to
+    confidence-seen-weight at confidence-full-views observations (composites keep weight 1) (augment/confidence.py)."""
     confidence_full_views: int = 3
     """visibility: observations at which a pixel's confidence reaches 1."""
     confidence_depth_tol: float = 0.05
     """visibility, consistency: a training view observes a point when their depths agree within this fraction."""
     confidence_color_tol: float = 0.1
     """consistency: mean absolute RGB difference at which an observation counts exp(-1)."""
+    confidence_seen_weight: float = 0.0
+    """unseen: the loss weight of an additional view's pixel that confidence-full-views training views observed."""
     appearance: Literal["mean", "nearest"] = "mean"
     """How a reference with an appearance model (StreetNeRF's per-photo colour transforms) colours what
     it renders: mean: every view in the mean of the photos' transforms; nearest: each view in the
