@@ -77,6 +77,18 @@ def test_without_confidence_nothing_changes(tiny_scene, tmp_path):
     assert cache_key("r", "d", asdict(CFG), None, cams, "none") != cache_key("r", "d", asdict(AugmentConfig()), None, cams, "none")
 
 
+def test_unseen_weighs_the_extra_views_as_visibility_turned_around_and_keeps_composites_whole(tiny_scene, tmp_path):
+    vis = _augmented(tiny_scene, tmp_path / "v")
+    for seen_weight in (0.0, 0.3):
+        cfg = dataclasses.replace(CFG, confidence="unseen", confidence_seen_weight=seen_weight)
+        un = _augmented(tiny_scene, tmp_path / f"u{seen_weight}", cfg)
+        # the flat reference's accumulation is 1, so visibility is the seen fraction itself
+        expect = 1.0 - (1.0 - seen_weight) * vis.extra_images.confidence
+        assert torch.allclose(un.extra_images.confidence, expect, atol=2e-3)  # maps are stored in float16
+        assert torch.equal(un.train_images.confidence, torch.ones_like(un.train_images.confidence))
+    assert float(vis.extra_images.confidence.max()) > float(vis.extra_images.confidence.min())  # not a constant map
+
+
 def test_a_reference_without_depth_is_refused(tiny_scene, tmp_path):
     with pytest.raises(ConfigError, match="renders depth"):
         _augmented(tiny_scene, tmp_path, render=FlatRenderer(depth=False))

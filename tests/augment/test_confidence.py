@@ -4,7 +4,7 @@
 import torch
 
 from nerf2gs_plugin.cameras import Cameras, look_at
-from nerf2gs_plugin.augment.confidence import depth_to_z, lift, observation_counts, visibility_confidence
+from nerf2gs_plugin.augment.confidence import depth_to_z, lift, observation_counts, unseen_weight, visibility_confidence
 
 UP = torch.tensor([0.0, 0.0, 1.0])
 FRONT, BACK, HEIGHT = 5.0, 7.0, 2.0  # the block spans y in [FRONT, BACK], z in [0, HEIGHT], every x
@@ -132,3 +132,21 @@ def test_consistency_trusts_what_the_real_views_recorded_and_not_what_they_did_n
     grey = torch.full_like(truth, 0.5)
     soft = visibility_confidence(depth, bev, "ray", street, train_z, rel_tol=0.05, rgb=grey, train_images=images)[..., 0]
     assert float(soft[front].mean()) < 0.1  # (bar the cells' edges, where the real samples are grey too)
+
+
+def test_unseen_weighs_what_no_street_view_saw_over_what_they_all_saw():
+    street, bev = _street(), _bev()
+    train_z = [depth_to_z(_raycast(street, i)[0], street[torch.tensor([i])], "ray") for i in range(len(street))]
+    depth, kind = _raycast(bev, 0)
+    x, y = lift(depth, bev, "ray").reshape(*kind.shape, 3)[..., :2].unbind(-1)
+    roof, front_road = (kind == 2) & (y > FRONT + 0.3), (kind == 0) & (y > 2.5) & (x.abs() < 1)
+    for seen_weight in (0.0, 0.3):
+        w = unseen_weight(depth, bev, "ray", street, train_z, full_views=3, seen_weight=seen_weight)[..., 0]
+        assert bool(((w >= seen_weight - 1e-6) & (w <= 1)).all())
+        # the roof and the road behind the block, which no street camera saw, weigh 1 ...
+        assert float(w[roof].min()) == 1.0 and float(w[kind == 3].min()) == 1.0
+        # ... the road in front, which all five saw, only the seen weight
+        assert torch.allclose(w[front_road], torch.full_like(w[front_road], seen_weight))
+    # blind street pixels (all transient) observe nothing: every pixel is unseen
+    blind = [torch.ones_like(z, dtype=torch.bool) for z in train_z]
+    assert float(unseen_weight(depth, bev, "ray", street, train_z, blind).min()) == 1.0
