@@ -38,6 +38,7 @@ VARIANTS: dict[str, dict] = {
     "confidence visibility": {"augment": {"confidence": "visibility"}},
     "confidence unseen": {"augment": {"confidence": "unseen"}},
     "confidence unseen 0.3": {"augment": {"confidence": "unseen", "confidence_seen_weight": 0.3}},
+    "confidence unseen 0.5": {"augment": {"confidence": "unseen", "confidence_seen_weight": 0.5}},
     "sky_alpha 0.5": {"augment": {}, "model": {"sky_alpha_weight": 0.5}},
     "sky_alpha 0": {"augment": {}, "model": {"sky_alpha_weight": 0.0}},
     "target sky_alpha 0.5": {"model": {"sky_alpha_weight": 0.5}},
