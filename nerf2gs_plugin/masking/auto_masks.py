@@ -223,7 +223,8 @@ def auto_masks(view: Path, reference: Path, splits: list[str], opts: AutoOptions
         if add_motion(full, result, motion, log, progress, sequence=is_sequence(meta)) and motion.second_pass_steps > 0:
             from nerf2gs_plugin.masking.second_pass import second_pass
 
-            took = second_pass(view, reference, full, result, motion.second_pass_steps, motion.second_pass_margin, log, progress)
+            took = second_pass(view, reference, full, result, motion.second_pass_steps, motion.second_pass_margin, log, progress,
+                               render_step=max(1, int(render_downscale)))
             if stats is not None:
                 stats.update(took)
     return result

@@ -73,9 +73,11 @@ def continue_reference(view: Path, first: Path, run: Path, steps: int, progress:
 
 
 def second_pass(view: Path, reference: Path, full: Renders, result: dict[str, list[FrameMasks]], steps: int, margin: float,
-                log: Callable[[str], None] = print, progress: bool = True) -> dict:
+                log: Callable[[str], None] = print, progress: bool = True, render_step: int = 1) -> dict:
     """Replace ``result``'s transient masks (the first pass: residual route and motion route, at the
-    size of ``full``'s views) by the second pass's (``masks/second_pass.py``); returns its seconds."""
+    size of ``full``'s views) by the second pass's (``masks/second_pass.py``), its reference rendering
+    every ``render_step``-th pixel per side of the regions (the first reference's ``render_downscale``);
+    returns its seconds."""
     from nerf2gs_plugin.data import parse_dataset
     from nerf2gs_plugin.progress import make_progress
     from nerf2gs_plugin.runs.load import load_run
@@ -105,7 +107,7 @@ def second_pass(view: Path, reference: Path, full: Renders, result: dict[str, li
                     cam = data[s].cameras[i : i + 1]
                     if not bool(m.transient.any()) or (int(cam.height[0]), int(cam.width[0])) != tuple(m.transient.shape):
                         continue
-                    pixels, sample = render_pixels(m.transient)
+                    pixels, sample = render_pixels(m.transient, render_step)
                     rgb = run.model.render_camera(cam, pixels=pixels)["rgb"].cpu()
                     m.transient = second_pass_mask(m.transient, v["image"], v["rgb"], rgb, pixels, sample, m.sky, margin)
     finally:

@@ -33,15 +33,20 @@ def _disc(r: int) -> np.ndarray:
     return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1))
 
 
-def render_pixels(first: Tensor) -> tuple[Tensor, Tensor]:
+def render_pixels(first: Tensor, step: int = 1) -> tuple[Tensor, Tensor]:
     """``(pixels the second reference renders, the sample grid among them)`` for a frame whose first-pass
-    mask is ``first`` (bool ``[H, W]``)."""
+    mask is ``first`` (bool ``[H, W]``): the regions (every ``step``-th pixel per side of them, as the first
+    reference rendered the frame: the residual is a 5x5 mean over what was rendered) and the sample grid."""
     import cv2
 
     h, w = first.shape
     grid = torch.zeros(h, w, dtype=torch.bool)
     grid[SAMPLE_EVERY // 2::SAMPLE_EVERY, SAMPLE_EVERY // 2::SAMPLE_EVERY] = True
     near = torch.from_numpy(cv2.dilate(first.numpy().astype(np.uint8), _disc(SUPPORT_PX)) > 0)
+    if step > 1:
+        lattice = torch.zeros(h, w, dtype=torch.bool)
+        lattice[::step, ::step] = True
+        near = near & lattice
     return near | grid, grid
 
 

@@ -56,6 +56,19 @@ def test_the_second_pass_keeps_the_rider_and_drops_the_spill_and_what_both_refer
     assert not bool(second_pass_mask(first, image, render1, render2, pixels, sample, first).any())  # sky is never transient
 
 
+def test_rendering_every_second_pixel_of_the_regions_keeps_the_rider():
+    frames, truths = _sequence()
+    image, truth = frames[2].image, truths[2]
+    first, patch = _first_pass(truth)
+    render1, render2 = _renders(image, truth, patch)
+    full, sample = render_pixels(first)
+    half, sample2 = render_pixels(first, 2)
+    assert torch.equal(sample, sample2) and bool((half <= full).all())
+    assert 0.2 < float(half[first].float().mean()) < 0.3  # a quarter of the regions' pixels
+    out = second_pass_mask(first, image, render1, render2 * half[..., None], half, sample, torch.zeros_like(first))
+    assert _iou(out, truth["rider"]) > 0.8 and float((out & patch).float().sum()) == 0.0
+
+
 def test_the_masked_view_holds_the_first_pass_grown_and_stays_out_of_the_maskless_view(tmp_path):
     data = tmp_path / "data"
     (data / "images").mkdir(parents=True)
