@@ -24,6 +24,7 @@ from torch import Tensor
 from nerf2gs_plugin.masks.auto import FrameMasks, Renders
 from nerf2gs_plugin.masks.maskless import SECOND_PASS_DIRNAME
 from nerf2gs_plugin.masks.second_pass import render_pixels, second_pass_mask
+from nerf2gs_plugin.utils.parallel import render_ahead
 
 TRAIN_GROW = 0.025
 """The first pass's masks grow by this fraction of the shorter image side before they are excluded from
@@ -97,19 +98,25 @@ def second_pass(view: Path, reference: Path, full: Renders, result: dict[str, li
         parser = run.config.pipeline.datamanager.dataparser
         data = {s: run.pipeline.datamanager.train_data if s == "train" else parse_dataset(mview, s, downscale=parser.downscale, cache_dir=parser.cache_dir)
                 for s in full.views}
-        total = sum(len(v) for v in full.views.values())
+        def size(s: str, i: int) -> tuple[int, int]:
+            cam = data[s].cameras[i : i + 1]
+            return int(cam.height[0]), int(cam.width[0])
+
+        todo = [(s, i) for s, views in full.views.items() for i in range(len(views))
+                if bool(result[s][i].transient.any()) and size(s, i) == tuple(result[s][i].transient.shape)]
+
+        def render(si: tuple[str, int]) -> tuple[Tensor, Tensor, Tensor]:
+            s, i = si
+            pixels, sample = render_pixels(result[s][i].transient, render_step)
+            return pixels, sample, run.model.render_camera(data[s].cameras[i : i + 1], pixels=pixels)["rgb"].cpu()
+
         with make_progress(progress) as prog, torch.no_grad():
-            task = prog.add_task("masks: second pass", total=total, stats="")
-            for s, views in full.views.items():
-                for i, v in enumerate(views):
-                    prog.advance(task)
-                    m = result[s][i]
-                    cam = data[s].cameras[i : i + 1]
-                    if not bool(m.transient.any()) or (int(cam.height[0]), int(cam.width[0])) != tuple(m.transient.shape):
-                        continue
-                    pixels, sample = render_pixels(m.transient, render_step)
-                    rgb = run.model.render_camera(cam, pixels=pixels)["rgb"].cpu()
-                    m.transient = second_pass_mask(m.transient, v["image"], v["rgb"], rgb, pixels, sample, m.sky, margin)
+            task = prog.add_task("masks: second pass", total=len(todo), stats="")
+            # views rendered side by side (utils/parallel.py) while this loop makes each one's mask
+            for (s, i), (pixels, sample, rgb) in zip(todo, render_ahead(render, todo)):
+                m, v = result[s][i], full.views[s][i]
+                m.transient = second_pass_mask(m.transient, v["image"], v["rgb"], rgb, pixels, sample, m.sky, margin)
+                prog.advance(task)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         shutil.rmtree(mview, ignore_errors=True)
