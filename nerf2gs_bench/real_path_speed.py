@@ -187,6 +187,8 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
         data=data, reference=ref, splits=("train",), overwrite=True, progress=False, **down), log=log))
     doc["masks_render_downscale"] = summary.get("render_downscale")
     stages.split("masks: mask maths", "masks: renders", summary["render_seconds"], summary["render_cpu_seconds"])
+    if "second_pass_seconds" in summary:
+        stages.split("masks: mask maths", "masks: second pass", summary["second_pass_seconds"], summary["second_pass_cpu_seconds"])
     sn = _train(stages, "StreetNeRF", _trainer_config("streetnerf", data, root / "streetnerf", opts.streetnerf_steps,
                                                       warm_start=ref if opts.warm_start else None))
     _train(stages, "Splatfacto + NeRF views: training", _trainer_config("splatfacto", data, root / "splatfacto-nerf-views",

@@ -115,6 +115,7 @@ def test_the_second_pass_continues_the_first_reference_on_the_masked_view(tmp_pa
     logs: list[str] = []
     took = second_pass(view, ref, full, result, 3, 0.2, log=logs.append, progress=False)
     assert any("continued for 3 steps" in line for line in logs) and took["second_pass_train_seconds"] > 0
+    assert took["second_pass_cpu_seconds"] > 0 and took["second_pass_seconds"] >= took["second_pass_train_seconds"]
     assert [p.name for p in ref.parent.iterdir()] == ["ref"] and (ref / "config.yml").is_file()  # nothing left beside it
     assert not (data / SECOND_PASS_DIRNAME).exists()
     assert all(tuple(m.transient.shape) == tuple(v["image"].shape[:2]) for m, v in zip(result["train"], full.views["train"]))
