@@ -12,7 +12,12 @@ by eye on the frames at the size given there: approximate outlines of the clearl
 'ignore' regions, objects whose motion cannot be told, count neither way) on the labelled frames that
 are training frames.
 
+``--product D ...``: instead, the masks stage's code at each render_downscale D
+(``nerf2gs_bench/motion_product.py``, as ``ns2gs-data masks`` runs it, with the second pass; rows without
+motion, before the second pass and after it), into the entry's ``product``.
+
 Usage: python benchmarks/validation/motion_masks_real.py IMAGE_DIR WORK OUT_STEM [FIRST N] [--capture kitti]
+[--product D ...] [--reuse-reference]
 (WORK keeps the crops, capture, reference and renders). Writes OUT_STEM.json's ``real`` entry (nuScenes)
 or ``real_<capture>`` (merged).
 """
@@ -40,6 +45,8 @@ parser.add_argument("out", type=Path, help="results stem (OUT.json's 'real' entr
 parser.add_argument("first", type=int, nargs="?", default=25)
 parser.add_argument("n", type=int, nargs="?", default=30)
 parser.add_argument("--capture", choices=sorted(CAPTURES), default="nuscenes")
+parser.add_argument("--product", type=int, nargs="+", metavar="D", help="the masks stage at render_downscale D (ns2gs-data masks: 2)")
+parser.add_argument("--reuse-reference", action="store_true", help="--product: keep a reference trained by other model code (recorded as stale)")
 args = parser.parse_args()
 src, work, out, first, n = args.src, args.work, args.out, args.first, args.n
 CROP_ROWS, SIZE, FOV, CAM_H, DIGITS, KEY = CAPTURES[args.capture]
@@ -62,6 +69,51 @@ from nerf2gs_plugin.masking.mask_reference import ensure_reference  # noqa: E402
 from nerf2gs_plugin.masks.maskless import maskless_view  # noqa: E402
 from nerf2gs_plugin.masks.motion import MotionOptions, add_motion  # noqa: E402
 
+
+
+def score(names: list, masks: list, save_preds: bool = False) -> tuple[dict, list]:
+    """IoU / precision / recall of ``masks``' transients on the labelled training frames, and those frames."""
+    c, used = np.zeros(4, dtype=np.int64), []
+    for name, m in zip(names, masks):
+        key = f"{first + br.frame_index(Path(name)):0{DIGITS}d}"  # frame_000004 is the 5th frame of the drive
+        if key not in labels["frames"]:
+            continue
+        gt, ignore = np.zeros(SIZE[::-1], np.uint8), np.zeros(SIZE[::-1], np.uint8)
+        for what, poly in labels["frames"][key].items():
+            polys = poly if what == "ignore" else [poly]
+            cv2.fillPoly(ignore if what == "ignore" else gt, [np.array(q, np.int32) for q in polys], 1)
+        keep = ignore == 0  # an ignore region counts neither way
+        pred = (cv2.resize(m.transient.numpy().astype(np.uint8), SIZE, interpolation=cv2.INTER_NEAREST) > 0) & keep
+        gt = (gt > 0) & keep
+        if save_preds:
+            cv2.imwrite(str(work / f"pred_{key}.png"), np.stack([gt * 255, pred * 255, ignore * 120], -1).astype(np.uint8))
+        c += [int((pred & gt).sum()), int((pred | gt).sum()), int(pred.sum()), int(gt.sum())]
+        used.append(key)
+    i, u, p, t = (int(x) for x in c)
+    return {"iou": round(i / max(u, 1), 4), "precision": round(i / max(p, 1), 4), "recall": round(i / max(t, 1), 4)}, used
+
+
+def merge(entry: dict) -> None:
+    """``entry`` into OUT_STEM.json's entry for this capture (read just before: other runs write the file too)."""
+    doc = json.loads(out.with_suffix(".json").read_text()) if out.with_suffix(".json").is_file() else {"seeds": {}}
+    doc[KEY] = {**doc.get(KEY, {}), **entry}
+    atomic_write_text(out.with_suffix(".json"), json.dumps(doc, indent=1))
+    print(json.dumps(doc[KEY], indent=1))
+
+
+if args.product:
+    from nerf2gs_bench.motion_product import ensure_keyed_reference, product_masks  # noqa: E402
+
+    ref_key = ensure_keyed_reference(capture, work / "reference", args.reuse_reference)
+    prod = {}
+    for d in args.product:
+        res = product_masks(capture, work / "reference", d)
+        prod[str(d)] = {label: score(res["names"], res[label])[0] for label in ("without_motion", "first_pass", "second_pass")}
+        prod[str(d)].update(timings=res["timings"], reference=ref_key, train_views=len(res["names"]))
+        print("product", d, prod[str(d)], flush=True)
+    prev = json.loads(out.with_suffix(".json").read_text()).get(KEY, {}) if out.with_suffix(".json").is_file() else {}
+    merge({"product": {**prev.get("product", {}), **prod}})
+    raise SystemExit(0)
 view = maskless_view(capture)
 cache = work / "renders.pt"
 if cache.is_file():
@@ -87,27 +139,8 @@ for label, kw in LEVERS.items():
     add_motion(r, variants[-1][1], MotionOptions(**kw), log=lambda s: None, progress=False)
 rows, used = {}, []
 for label, res in (("without_motion", base), ("with_motion", motion), *variants):
-    c = np.zeros(4, dtype=np.int64)
-    for name, m in zip(names, res["train"]):
-        key = f"{first + br.frame_index(Path(name)):0{DIGITS}d}"  # frame_000004 is the 5th frame of the drive
-        if key not in labels["frames"]:
-            continue
-        gt, ignore = np.zeros(SIZE[::-1], np.uint8), np.zeros(SIZE[::-1], np.uint8)
-        for what, poly in labels["frames"][key].items():
-            polys = poly if what == "ignore" else [poly]
-            cv2.fillPoly(ignore if what == "ignore" else gt, [np.array(q, np.int32) for q in polys], 1)
-        keep = ignore == 0  # an ignore region counts neither way
-        pred = (cv2.resize(m.transient.numpy().astype(np.uint8), SIZE, interpolation=cv2.INTER_NEAREST) > 0) & keep
-        gt = (gt > 0) & keep
-        if label == "with_motion":
-            cv2.imwrite(str(work / f"pred_{key}.png"), np.stack([gt * 255, pred * 255, ignore * 120], -1).astype(np.uint8))
-        c += [int((pred & gt).sum()), int((pred | gt).sum()), int(pred.sum()), int(gt.sum())]
-        used.append(key) if label == "with_motion" else None
-    i, u, p, t = (int(x) for x in c)
-    rows[label] = {"iou": round(i / max(u, 1), 4), "precision": round(i / max(p, 1), 4), "recall": round(i / max(t, 1), 4)}
-doc = json.loads(out.with_suffix(".json").read_text()) if out.with_suffix(".json").is_file() else {"seeds": {}}
-doc[KEY] = {"capture": f"{labels['source']}; frames {first}-{first + n - 1}", "size": list(SIZE), "registered": len(names) and len(json.loads((capture / "transforms.json").read_text())["frames"]),
-               "train_views": len(names), "labelled_frames": used, "labels": labels["how"], "motion_s": seconds,
-           "without_motion": rows["without_motion"], "with_motion": rows["with_motion"], "levers": {k: rows[k] for k in LEVERS}}
-atomic_write_text(out.with_suffix(".json"), json.dumps(doc, indent=1))
-print(json.dumps(doc[KEY], indent=1))
+    rows[label], frames_used = score(names, res["train"], save_preds=label == "with_motion")
+    used = frames_used if label == "with_motion" else used
+merge({"capture": f"{labels['source']}; frames {first}-{first + n - 1}", "size": list(SIZE), "registered": len(names) and len(json.loads((capture / "transforms.json").read_text())["frames"]),
+       "train_views": len(names), "labelled_frames": used, "labels": labels["how"], "motion_s": seconds,
+       "without_motion": rows["without_motion"], "with_motion": rows["with_motion"], "levers": {k: rows[k] for k in LEVERS}})

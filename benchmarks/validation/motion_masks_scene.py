@@ -6,10 +6,16 @@ crossing, parked cars that are static), the 30-frame forward drive, at SIZE (def
     (the movers' pixels set to infinity, as a mask-less reference may render them; the ground plane
     then bounds them);
   * ``est``: the real-capture path: the drive as a video -> ``process video`` -> a 1000-step
-    mask-less reference -> its renders -> the masks with and without the motion route; IoU pooled
-    over the training frames against the exact masks (resampled onto the street's pixel grid).
+    mask-less reference -> its renders -> the masks with and without the motion route (the route
+    called directly, its levers); IoU pooled over the training frames against the exact masks
+    (resampled onto the street's pixel grid);
+  * ``product``: the same capture and reference through the masks stage's code
+    (``nerf2gs_bench/motion_product.py``: ``render_views`` at ``--render-downscale`` then
+    ``masks_for_renders``, as ``ns2gs-data masks`` runs it), with the second pass; rows without
+    motion, before the second pass and after it.
 
-Usage: python benchmarks/validation/motion_masks_scene.py SEED WORK OUT_STEM [gt|est|both|md] [WIDTH HEIGHT]
+Usage: python benchmarks/validation/motion_masks_scene.py SEED WORK OUT_STEM [gt|est|both|product|md] [WIDTH HEIGHT]
+[--render-downscale D ...] [--reuse-reference]
 (WORK keeps the street, the capture, the reference and its renders between runs). OUT_STEM.json gets
 this seed's rows (merged with what the file already has); OUT_STEM.md is written from the JSON.
 Produced benchmarks/results/motion_masks.{json,md} with seeds 0 and 3.
@@ -71,8 +77,10 @@ ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDe
 ap.add_argument("seed", type=int)
 ap.add_argument("work", type=Path)
 ap.add_argument("out_stem", type=Path)
-ap.add_argument("mode", nargs="?", default="both", choices=("gt", "est", "both", "md"), help="md: rewrite OUT_STEM.md from the JSON")
+ap.add_argument("mode", nargs="?", default="both", choices=("gt", "est", "both", "product", "md"), help="md: rewrite OUT_STEM.md from the JSON")
 ap.add_argument("size", type=int, nargs="*", default=[400, 224], help="WIDTH HEIGHT")
+ap.add_argument("--render-downscale", type=int, nargs="+", default=[1, 2], help="product: the masks' renders at 1/D (ns2gs-data masks: 2)")
+ap.add_argument("--reuse-reference", action="store_true", help="product: keep a reference trained by other model code (recorded as stale)")
 args = ap.parse_args()
 if len(args.size) != 2:
     ap.error("size: WIDTH HEIGHT")
@@ -171,19 +179,59 @@ def run_est() -> dict:
     return {"registered": len(em), "train_views": len(names), **rows, "levers": levers, **times}
 
 
-doc = json.loads(out.with_suffix(".json").read_text()) if out.with_suffix(".json").is_file() else {"seeds": {}}
-row = doc["seeds"].get(str(seed), {})
-row["scene"] = {"seed": seed, "size": list(size), "frames": FRAMES, "fov_deg": FOV, "cam_height": CAM_H, "movers": True}
+def run_product() -> dict:
+    """The masks stage's code on the capture and reference of ``est``, at each ``--render-downscale``."""
+    from nerf2gs_bench import real as br
+    from nerf2gs_bench.motion_product import ensure_keyed_reference, product_masks
+    from nerf2gs_plugin.masks.evaluate import resample_mask
+
+    capture = work / "estimated"
+    if not (capture / "transforms.json").is_file():
+        video = br.write_video(work / "drive.avi", [street / f["file_path"] for f in gt_frames])
+        br.process_capture(video, capture, FRAMES, FOV, CAM_H)
+    key = ensure_keyed_reference(capture, work / "reference", args.reuse_reference)
+    em = {Path(f["file_path"]).name: f for f in json.loads((capture / "transforms.json").read_text())["frames"]}
+    out = {}
+    for d in args.render_downscale:
+        res = product_masks(capture, work / "reference", d)
+
+        def score(masks: list, kind: str) -> dict:
+            c = np.zeros(4, dtype=np.int64)
+            for name, m in zip(res["names"], masks):
+                f, tf = em[name], meta["frames"][br.frame_index(Path(name))]
+                gt = load_mask(street / tf[f"{kind}_mask_path"])
+                pred = resample_mask(getattr(m, kind), (f["fl_x"], f["fl_y"], f["cx"], f["cy"]),
+                                     (meta["fl_x"], meta["fl_y"], meta["cx"], meta["cy"]), tuple(gt.shape))
+                c += counts(pred, gt)
+            return stats(c)
+
+        out[str(d)] = {label: {kind: score(res[label], kind) for kind in ("sky", "ground", "transient")}
+                       for label in ("without_motion", "first_pass", "second_pass")}
+        out[str(d)].update(timings=res["timings"], reference=key, train_views=len(res["names"]))
+        print("product", d, {k: v["transient"] for k, v in out[str(d)].items() if "transient" in v}, flush=True)
+    return out
+
+
+new = {}
 if mode in ("gt", "both"):
-    row["gt"] = run_gt()
-    print("gt", row["gt"], flush=True)
+    new["gt"] = run_gt()
+    print("gt", new["gt"], flush=True)
 if mode in ("est", "both"):
-    row["est"] = run_est()
-    print("est", row["est"], flush=True)
-doc["seeds"][str(seed)] = row
-doc["options"] = vars(MotionOptions())
-doc["machine"] = machine_line()
-atomic_write_text(out.with_suffix(".json"), json.dumps(doc, indent=1))
+    new["est"] = run_est()
+    print("est", new["est"], flush=True)
+if mode == "product":
+    new["product"] = run_product()
+# read only now: several seeds (and motion_masks_real.py) may run at once into the same file
+doc = json.loads(out.with_suffix(".json").read_text()) if out.with_suffix(".json").is_file() else {"seeds": {}}
+if mode != "md":
+    row = doc["seeds"].get(str(seed), {})
+    row["scene"] = {"seed": seed, "size": list(size), "frames": FRAMES, "fov_deg": FOV, "cam_height": CAM_H, "movers": True}
+    row.setdefault("product", {}).update(new.pop("product", {}))
+    row.update(new)
+    doc["seeds"][str(seed)] = row
+    doc["options"] = vars(MotionOptions())
+    doc["machine"] = machine_line()
+    atomic_write_text(out.with_suffix(".json"), json.dumps(doc, indent=1))
 
 md = ["# Motion masks on the synthetic street with movers", "",
       f"Machine: {doc['machine']}. Produced by `benchmarks/validation/motion_masks_scene.py`: the street with "
@@ -221,10 +269,42 @@ for key, name in REAL:
             e = rl[label]
             md.append(f"| real | {sz} | {name}, {len(rl['labelled_frames'])} hand-labelled frames, {label.replace('_', ' ')} | | | "
                       f"{e['iou']:.3f} | {e['precision']:.3f} | {e['recall']:.3f} |")
+PRODUCT = (("without_motion", "without motion"), ("first_pass", "motion, before the second pass"), ("second_pass", "motion + second pass"))
+prod_cols = [(f"seed {s}", rw.get("product", {})) for s, rw in sorted(doc["seeds"].items())]
+prod_cols += [(name, doc.get(key, {}).get("product", {})) for key, name in REAL]
+downscales = sorted({d for _, pr in prod_cols for d in pr}, key=int)
+if downscales:
+    md += ["", "Through the masks stage's code (`nerf2gs_bench/motion_product.py`: the renders and `masks_for_renders`, as "
+           "`ns2gs-data masks --segmenter auto` runs them, default `MotionOptions` with its 300-step second pass; the same "
+           "captures and first references as the rows above). `renders 1/2`: the masks' renders at every 2nd pixel "
+           "per side, upsampled (`--render-downscale 2`, the default of `ns2gs-data masks`); `1/1`: every pixel, as the "
+           "rows above. Transient IoU (precision / recall):", "",
+           "| renders | route | " + " | ".join(c for c, _ in prod_cols) + " |", "|---|---|" + "---|" * len(prod_cols)]
+    def cell(e: dict) -> str:
+        t = e.get("transient", e)
+        return f"{t['iou']:.3f} ({t['precision']:.2f} / {t['recall']:.2f})"
+    for d in downscales:
+        for label, text in PRODUCT:
+            md.append(f"| 1/{d} | {text} | " + " | ".join(cell(pr[d][label]) if d in pr else "" for _, pr in prod_cols) + " |")
+    md += ["", "Sky / ground IoU through the masks stage (the motion route and the second pass change only the transient masks):", "",
+           "| renders | " + " | ".join(c for c, _ in prod_cols[:2]) + " |", "|---|" + "---|" * len(prod_cols[:2])]
+    for d in downscales:
+        md.append(f"| 1/{d} | " + " | ".join(f"{pr[d]['second_pass']['sky']['iou']:.3f} / {pr[d]['second_pass']['ground']['iou']:.3f}"
+                                           if d in pr else "" for _, pr in prod_cols[:2]) + " |")
+    if any(v["reference"]["stale"] for _, pr in prod_cols for v in pr.values()):
+        md += ["", "The first references were trained by earlier model code (the motion bench's cached runs, made before "
+               "`render_nerf_samples` existed; their model config is today's but for that render-time key), reused "
+               "with `--reuse-reference` (the JSON's `reference.stale`); the renders, the masks and the second pass "
+               "ran on today's code."]
+    md += ["", "Seconds of the masks stage after the reference (renders, motion route, second pass; wall, 2 shared cores, "
+           "four runs at once, so noisy; CPU seconds in the JSON): " + "; ".join(
+               f"{c} 1/{d}: {pr[d]['timings']['seconds']:.0f} s ({pr[d]['timings'].get('second_pass_seconds', 0):.0f} s the second pass)"
+               for d in downscales for c, pr in prod_cols if d in pr) + "."]
 cols = [(f"seed {s}", rw["est"]) for s, rw in sorted(doc["seeds"].items()) if "levers" in rw.get("est", {})]
 cols += [(name, doc[key]) for key, name in REAL if "levers" in doc.get(key, {})]
 if cols:
-    md += ["", "Levers (transient IoU, estimated path; each row changes one default of the route):", "",
+    md += ["", "Levers (transient IoU, estimated path, the route called directly on full-size renders, without the "
+           "second pass; each row changes one default of the route):", "",
            "| route | " + " | ".join(c for c, _ in cols) + " |", "|---|" + "---|" * len(cols)]
     iou = lambda e: e["iou"] if "iou" in e else e["transient"]["iou"]  # noqa: E731
     md.append("| default | " + " | ".join(f"{iou(e['with_motion']):.3f}" for _, e in cols) + " |")

@@ -18,7 +18,8 @@ import torch
 
 from nerf2gs_plugin.cameras import Cameras
 
-RENDER_ONLY = frozenset({"eval_chunk", "render_min_weight", "eval_appearance", "encoding_backend", "expect_masks"})
+RENDER_ONLY = frozenset({"eval_chunk", "render_min_weight", "eval_appearance", "encoding_backend", "expect_masks",
+                         "render_nerf_samples"})
 """Model settings that change no trained parameter (rendering, kernels, warnings): free to differ."""
 
 

@@ -208,19 +208,30 @@ def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[
 def auto_masks(view: Path, reference: Path, splits: list[str], opts: AutoOptions,
                log: Callable[[str], None] = print, progress: bool = True, motion=None, render_downscale: int = 1,
                stats: Optional[dict] = None) -> dict[str, list[FrameMasks]]:
-    """:func:`render_views` then :func:`~nerf2gs_plugin.masks.auto.masks_from_renders`, plus what
-    moves against the static scene's flow (``motion``: :class:`~nerf2gs_plugin.masks.motion.MotionOptions`);
-    ``stats`` receives ``render_seconds`` and ``render_cpu_seconds`` (and the second pass's seconds)."""
+    """:func:`render_views` then :func:`masks_for_renders`; ``stats`` receives ``render_seconds`` and
+    ``render_cpu_seconds`` (and the second pass's seconds)."""
     renders = render_views(view, reference, splits, log, progress, render_downscale)
     if stats is not None:
         stats["render_seconds"], stats["render_cpu_seconds"] = round(renders.seconds, 1), round(renders.cpu_seconds, 1)
+    return masks_for_renders(view, reference, renders, opts, log, progress, motion, stats)
+
+
+def masks_for_renders(view: Path, reference: Path, renders: Renders, opts: AutoOptions, log: Callable[[str], None] = print,
+                      progress: bool = True, motion=None, stats: Optional[dict] = None,
+                      first_pass: Optional[Callable[[dict[str, list[FrameMasks]]], None]] = None) -> dict[str, list[FrameMasks]]:
+    """:func:`~nerf2gs_plugin.masks.auto.masks_from_renders` on ``reference``'s renders of ``view``, plus
+    what moves against the static scene's flow (``motion``: :class:`~nerf2gs_plugin.masks.motion.MotionOptions`)
+    and its second pass; ``first_pass`` (benchmarks) sees the masks before the second pass."""
     result = masks_from_renders(renders, opts, log)
     if motion is not None:
         from nerf2gs_plugin.masks.motion import add_motion, is_sequence
 
         meta = json.loads((Path(view) / "transforms.json").read_text())
         full = at_full_size(renders, result)
-        if add_motion(full, result, motion, log, progress, sequence=is_sequence(meta)) and motion.second_pass_steps > 0:
+        moved = add_motion(full, result, motion, log, progress, sequence=is_sequence(meta))
+        if first_pass is not None:
+            first_pass(result)
+        if moved and motion.second_pass_steps > 0:
             from nerf2gs_plugin.masking.second_pass import second_pass
 
             took = second_pass(view, reference, full, result, motion.second_pass_steps, motion.second_pass_margin, log, progress,

@@ -89,3 +89,5 @@ def test_config_difference_ignores_loss_weights_and_render_settings():
     assert config_difference(a, {**a, "proposal": {"levels": (5, 5)}}) is None
     assert "proposal.levels" in config_difference(a, {**a, "proposal": {"levels": [5, 6]}})
     assert "num_levels" in config_difference(a, {k: v for k, v in a.items() if k != "num_levels"})
+    # a run saved before the render-time sample count existed continues under today's config
+    assert config_difference(a, {**a, "render_nerf_samples": None}) is None
