@@ -208,7 +208,7 @@ def run_product() -> dict:
         out[str(d)] = {label: {kind: score(res[label], kind) for kind in ("sky", "ground", "transient")}
                        for label in ("without_motion", "first_pass", "second_pass")}
         out[str(d)].update(timings=res["timings"], reference=key, train_views=len(res["names"]))
-        print("product", d, {k: v["transient"] for k, v in out[str(d)].items() if "transient" in v}, flush=True)
+        print("product", d, {k: v["transient"] for k, v in out[str(d)].items() if isinstance(v, dict) and "transient" in v}, flush=True)
     return out
 
 
