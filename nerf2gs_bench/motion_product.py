@@ -74,7 +74,7 @@ def product_masks(capture: Path, reference: Path, render_downscale: int, log: Ca
     without = masks_from_renders(renders, AutoOptions(), log=lambda s: None)
     at_full_size(renders, without)  # the masks upsampled in place, as they would be written
     first: dict = {}
-    result = masks_for_renders(view, reference, renders, AutoOptions(), log, False, MotionOptions(), timings,
+    result = masks_for_renders(view, reference, renders, AutoOptions(), log, False, MotionOptions(), timings, render_downscale,
                                first_pass=lambda res: first.update(copy.deepcopy(res)))
     timings.update(seconds=round(time.perf_counter() - t0, 1), cpu_seconds=round(cpu_seconds() - c0, 1))
     return {"names": [v["name"] for v in renders.views["train"]], "without_motion": without["train"],

@@ -213,15 +213,16 @@ def auto_masks(view: Path, reference: Path, splits: list[str], opts: AutoOptions
     renders = render_views(view, reference, splits, log, progress, render_downscale)
     if stats is not None:
         stats["render_seconds"], stats["render_cpu_seconds"] = round(renders.seconds, 1), round(renders.cpu_seconds, 1)
-    return masks_for_renders(view, reference, renders, opts, log, progress, motion, stats)
+    return masks_for_renders(view, reference, renders, opts, log, progress, motion, stats, render_downscale)
 
 
 def masks_for_renders(view: Path, reference: Path, renders: Renders, opts: AutoOptions, log: Callable[[str], None] = print,
-                      progress: bool = True, motion=None, stats: Optional[dict] = None,
+                      progress: bool = True, motion=None, stats: Optional[dict] = None, render_downscale: int = 1,
                       first_pass: Optional[Callable[[dict[str, list[FrameMasks]]], None]] = None) -> dict[str, list[FrameMasks]]:
     """:func:`~nerf2gs_plugin.masks.auto.masks_from_renders` on ``reference``'s renders of ``view``, plus
     what moves against the static scene's flow (``motion``: :class:`~nerf2gs_plugin.masks.motion.MotionOptions`)
-    and its second pass; ``first_pass`` (benchmarks) sees the masks before the second pass."""
+    and its second pass (``render_downscale``: that of ``renders``); ``first_pass`` (benchmarks) sees the
+    masks before the second pass."""
     result = masks_from_renders(renders, opts, log)
     if motion is not None:
         from nerf2gs_plugin.masks.motion import add_motion, is_sequence
