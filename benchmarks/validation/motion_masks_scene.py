@@ -46,10 +46,11 @@ Second pass and render size. Through the masks stage's code with its default sec
 IoU rises on all four captures at both render sizes (table "Through the masks stage's code"): with
 full-size renders 0.32 / 0.38 / 0.32 / 0.41 -> 0.38 / 0.42 / 0.40 / 0.47; with the renders at 1/2
 (`ns2gs-data masks`' default `--render-downscale 2`, what the product writes) 0.32 / 0.37 / 0.31 / 0.43 ->
-0.38 / 0.41 / 0.44 / 0.50, mostly by precision (nuScenes at full size gives up 0.06 of recall). The half-size renders leave the first
+0.38 / 0.41 / 0.43 / 0.50 (KITTI 0.499), mostly by precision (nuScenes at full size gives up 0.06 of recall;
+the second pass renders its regions at every 2nd pixel too: at every pixel they gave 0.381 / 0.412 / 0.436 / 0.501). The half-size renders leave the first
 pass about where it was on the synthetic streets and nuScenes (-0.01) and raise KITTI (+0.03: its residual
-route alone 0.16 -> 0.22); the sky and ground IoU fall by 0.01. KITTI at 1/2 is the only capture at a
-target (0.5 on real frames); the synthetic streets stay far from 0.7. The first pass through the stage
+route alone 0.16 -> 0.22); the sky and ground IoU fall by 0.01. KITTI at 1/2 comes closest to a
+target (0.499 against 0.5 on real frames); the synthetic streets stay far from 0.7. The first pass through the stage
 matches the route called directly (0.319 / 0.377 / 0.321 / 0.409 against 0.318 / 0.377 / 0.321 / 0.409); the second pass
 differs from the end-to-end run in docs/masks-motion.md ("A second pass") on the same references by -0.001 / -0.008 / -0.001 / 0.000
 (its 300 steps are trained again each run).
