@@ -117,6 +117,22 @@ def stats(c: np.ndarray) -> dict:
     return {"iou": round(i / max(u, 1), 4), "precision": round(i / max(p, 1), 4), "recall": round(i / max(t, 1), 4)}
 
 
+def score_masks(names: list, masks: list, kind: str, em: dict) -> dict:
+    """Pooled counts of ``masks`` (one per training view ``names``, at the estimated cameras ``em``) against
+    the street's exact ``kind`` masks, resampled to the true cameras."""
+    from nerf2gs_bench import real as br
+    from nerf2gs_plugin.masks.evaluate import resample_mask
+
+    c = np.zeros(4, dtype=np.int64)
+    for name, m in zip(names, masks):
+        f, tf = em[name], meta["frames"][br.frame_index(Path(name))]
+        gt = load_mask(street / tf[f"{kind}_mask_path"])
+        pred = resample_mask(getattr(m, kind), (f["fl_x"], f["fl_y"], f["cx"], f["cy"]),
+                             (meta["fl_x"], meta["fl_y"], meta["cx"], meta["cy"]), tuple(gt.shape))
+        c += counts(pred, gt)
+    return stats(c)
+
+
 def run_gt() -> dict:
     """The flow logic on the true poses and the static scene's true depth."""
     intr = (meta["fl_x"], meta["fl_y"], meta["cx"], meta["cy"])
@@ -144,7 +160,6 @@ def run_est() -> dict:
     from nerf2gs_plugin.masks.auto import AutoOptions, masks_from_renders
     from nerf2gs_plugin.masks.maskless import maskless_view
     from nerf2gs_bench import real as br
-    from nerf2gs_plugin.masks.evaluate import resample_mask
 
     capture = work / "estimated"
     if not (capture / "transforms.json").is_file():
@@ -174,14 +189,7 @@ def run_est() -> dict:
     add_motion(r, with_motion, MotionOptions(), log=print, progress=False)
     times["motion_s"] = round(time.perf_counter() - t0, 1)
     def score(res: dict, kind: str) -> dict:
-        c = np.zeros(4, dtype=np.int64)
-        for name, m in zip(names, res["train"]):
-            f, tf = em[name], meta["frames"][br.frame_index(Path(name))]
-            gt = load_mask(street / tf[f"{kind}_mask_path"])
-            pred = resample_mask(getattr(m, kind), (f["fl_x"], f["fl_y"], f["cx"], f["cy"]),
-                                 (meta["fl_x"], meta["fl_y"], meta["cx"], meta["cy"]), tuple(gt.shape))
-            c += counts(pred, gt)
-        return stats(c)
+        return score_masks(names, res["train"], kind, em)
 
     rows = {label: {kind: score(res, kind) for kind in ("sky", "ground", "transient")}
             for label, res in (("without_motion", base), ("with_motion", with_motion))}
@@ -197,7 +205,6 @@ def run_product() -> dict:
     """The masks stage's code on the capture and reference of ``est``, at each ``--render-downscale``."""
     from nerf2gs_bench import real as br
     from nerf2gs_bench.motion_product import ensure_keyed_reference, product_masks
-    from nerf2gs_plugin.masks.evaluate import resample_mask
 
     capture = work / "estimated"
     if not (capture / "transforms.json").is_file():
@@ -208,18 +215,7 @@ def run_product() -> dict:
     out = {}
     for d in args.render_downscale:
         res = product_masks(capture, work / "reference", d)
-
-        def score(masks: list, kind: str) -> dict:
-            c = np.zeros(4, dtype=np.int64)
-            for name, m in zip(res["names"], masks):
-                f, tf = em[name], meta["frames"][br.frame_index(Path(name))]
-                gt = load_mask(street / tf[f"{kind}_mask_path"])
-                pred = resample_mask(getattr(m, kind), (f["fl_x"], f["fl_y"], f["cx"], f["cy"]),
-                                     (meta["fl_x"], meta["fl_y"], meta["cx"], meta["cy"]), tuple(gt.shape))
-                c += counts(pred, gt)
-            return stats(c)
-
-        out[str(d)] = {label: {kind: score(res[label], kind) for kind in ("sky", "ground", "transient")}
+        out[str(d)] = {label: {kind: score_masks(res["names"], res[label], kind, em) for kind in ("sky", "ground", "transient")}
                        for label in ("without_motion", "first_pass", "second_pass")}
         out[str(d)].update(timings=res["timings"], reference=key, train_views=len(res["names"]))
         print("product", d, {k: v["transient"] for k, v in out[str(d)].items() if isinstance(v, dict) and "transient" in v}, flush=True)

@@ -36,11 +36,16 @@ def _renders(image: torch.Tensor, truth: dict, patch: torch.Tensor) -> tuple[tor
     return first.clamp(0, 1), static.clamp(0, 1)
 
 
-def test_the_second_pass_keeps_the_rider_and_drops_the_spill_and_what_both_references_render_badly():
+def _frame():
+    """A frame of the sequence with its truth, first pass, badly rendered patch and both references' renders."""
     frames, truths = _sequence()
     image, truth = frames[2].image, truths[2]
     first, patch = _first_pass(truth)
-    render1, render2 = _renders(image, truth, patch)
+    return (image, truth, first, patch, *_renders(image, truth, patch))
+
+
+def test_the_second_pass_keeps_the_rider_and_drops_the_spill_and_what_both_references_render_badly():
+    image, truth, first, patch, render1, render2 = _frame()
     pixels, sample = render_pixels(first)
     assert bool((first <= pixels).all()) and 0.05 < float(sample.float().mean()) < 0.07  # every 4th pixel per side
     sky = torch.zeros_like(first)
@@ -57,10 +62,7 @@ def test_the_second_pass_keeps_the_rider_and_drops_the_spill_and_what_both_refer
 
 
 def test_rendering_every_second_pixel_of_the_regions_keeps_the_rider():
-    frames, truths = _sequence()
-    image, truth = frames[2].image, truths[2]
-    first, patch = _first_pass(truth)
-    render1, render2 = _renders(image, truth, patch)
+    image, truth, first, patch, render1, render2 = _frame()
     full, sample = render_pixels(first)
     half, sample2 = render_pixels(first, 2)
     assert torch.equal(sample, sample2) and bool((half <= full).all())
