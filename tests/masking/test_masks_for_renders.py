@@ -2,6 +2,7 @@
 second pass told the render size."""
 
 import json
+from pathlib import Path
 
 import torch
 
@@ -36,3 +37,41 @@ def test_first_pass_seen_before_the_second_and_render_step_passed(tmp_path, monk
                                first_pass=lambda res: seen.append(int(res["train"][0].transient.sum())))
     assert seen == [4] and int(out["train"][0].transient.sum()) == 0
     assert calls["render_step"] == 2 and stats == {"second_pass_seconds": 1.0}
+
+
+def test_auto_masks_runs_the_second_pass_end_to_end_on_half_size_renders(tmp_path, monkeypatch):
+    """auto_masks on the tiny scene with a 5-step reference, renders at every 2nd pixel and the real second
+    pass (3 steps); only the flow is stood in for: it marks each car and a patch of ground. The second
+    pass may only drop first-pass pixels, the masks keep the images' size, the stats carry its cost and
+    nothing is left beside the reference."""
+    import shutil
+
+    from masks.test_masks import _tiny
+    from nerf2gs_plugin.data.images import load_mask
+    from nerf2gs_plugin.masking.mask_reference import ensure_reference
+    from nerf2gs_plugin.masks.auto import AutoOptions
+    from nerf2gs_plugin.masks.maskless import SECOND_PASS_DIRNAME, maskless_view
+
+    data = _tiny(tmp_path, "scene")
+    cars = {p.stem: load_mask(p) for p in sorted((data / "masks" / "transient").glob("train_*.png"))}
+    shutil.rmtree(data / "masks")
+    ref = ensure_reference(data, tmp_path / "refs" / "ref", steps=5, progress=False, log=lambda s: None)
+    first: list[torch.Tensor] = []
+
+    def flow_stand_in(full, result, opts, log, progress, sequence):
+        for view, m in zip(full.views["train"], result["train"]):
+            assert tuple(m.transient.shape) == tuple(view["image"].shape[:2])  # the flow sees full-size frames
+            m.transient = cars[Path(view["name"]).stem].clone() if Path(view["name"]).stem in cars else torch.zeros_like(m.transient)
+            m.transient[18:22, 20:30] = True
+            first.append(m.transient.clone())
+        return True
+
+    monkeypatch.setattr(mo, "add_motion", flow_stand_in)
+    stats: dict = {}
+    out = am.auto_masks(maskless_view(data), ref, ["train"], AutoOptions(), log=lambda s: None, progress=False,
+                        motion=mo.MotionOptions(second_pass_steps=3), render_downscale=2, stats=stats)
+    assert len(out["train"]) == len(first) == 8 and sum(int(m.sum()) for m in first) > 8 * 40  # the cars are in
+    for m, before in zip(out["train"], first):
+        assert m.transient.shape == (24, 32) and not bool((m.transient & ~before).any())
+    assert stats["second_pass_seconds"] >= stats["second_pass_train_seconds"] > 0 and stats["render_cpu_seconds"] > 0
+    assert [p.name for p in ref.parent.iterdir()] == ["ref"] and not (data / SECOND_PASS_DIRNAME).exists()
