@@ -75,6 +75,10 @@ class Model(nn.Module, metaclass=ABCMeta):
     @abstractmethod
     def get_outputs(self, inputs: Union[RayBundle, Cameras]) -> dict[str, Tensor]: ...
 
+    def get_train_outputs(self, inputs: Union[RayBundle, Cameras], batch: dict[str, Any]) -> dict[str, Tensor]:
+        """:meth:`get_outputs` of a training batch: a model may leave out what no loss of ``batch`` reads."""
+        return self.get_outputs(inputs)
+
     @abstractmethod
     def get_loss_dict(self, outputs: dict[str, Tensor], batch: dict[str, Any], metrics_dict: dict[str, Tensor]) -> dict[str, Tensor]:
         """Scalar losses; the trainer minimises their sum."""

@@ -48,7 +48,7 @@ class Pipeline(nn.Module):
 
     def get_train_loss_dict(self, step: int) -> tuple[dict[str, Tensor], dict[str, Tensor], dict[str, Tensor]]:
         inputs, batch = self.datamanager.next_train(step)
-        outputs = self.model.get_outputs(inputs)
+        outputs = self.model.get_train_outputs(inputs, batch)
         metrics = self.model.get_metrics_dict(outputs, batch)
         losses = self.model.get_loss_dict(outputs, batch, metrics)
         return outputs, losses, metrics

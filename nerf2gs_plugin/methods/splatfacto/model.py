@@ -210,9 +210,15 @@ class SplatfactoModel(Model):
         z = pr.t_star * (pr.rays.directions * forward[pr.camera_indices]).sum(-1)
         return [(pr.coords[sel, 1], pr.coords[sel, 0], z[sel]) for sel in (pr.camera_indices == i for i in range(len(data.cameras)))]
 
+    def _depth_targets_of(self, image_idx: int) -> Optional[tuple[Tensor, Tensor, Tensor]]:
+        """The view's sparse-point depth targets, or None for a view without any (an augmented view from above)."""
+        if self._depth_targets is None or image_idx >= len(self._depth_targets) or len(self._depth_targets[image_idx][2]) == 0:
+            return None
+        return self._depth_targets[image_idx]
+
     def _depth_loss(self, outputs: dict[str, Tensor], image_idx: int) -> Optional[Tensor]:
         """See ``depth_loss_weight``; None for a view without targets (an augmented view from above)."""
-        if self._depth_targets is None or image_idx >= len(self._depth_targets) or len(self._depth_targets[image_idx][2]) == 0:
+        if self._depth_targets_of(image_idx) is None:
             return None
         dev = outputs["depth"].device
         if self._depth_targets[image_idx][2].device != dev:  # built on the CPU at setup: moved once, not every step
@@ -262,7 +268,8 @@ class SplatfactoModel(Model):
     def current_sh_degree(self) -> int:
         return min(int(self.step) // max(self.config.sh_degree_interval, 1), self.config.sh_degree)
 
-    def _render(self, camera: Cameras, training: bool) -> dict[str, Tensor]:
+    def _render(self, camera: Cameras, training: bool, depth: bool = True) -> dict[str, Tensor]:
+        """``depth`` False: no depth channel (and no ``depth`` output); colour and accumulation are the same."""
         from nerf2gs_plugin.rendering import rasterize_gaussians
 
         g = self.gauss
@@ -273,11 +280,12 @@ class SplatfactoModel(Model):
         if g["means"].shape[0] == 0:
             zeros = torch.zeros(h, w, 1, device=dev)
             return {"rgb": (zeros + bg).expand(h, w, 3), "depth": zeros, "accumulation": zeros}
+        mode = "RGB+ED" if depth else "RGB"
         colors = torch.cat([g["features_dc"][:, None, :], g["features_rest"]], dim=1)
         render, alpha, meta = rasterize_gaussians(
             g["means"], normalize_quats(g["quats"]), torch.exp(g["scales"]), torch.sigmoid(g["opacities"]), colors,
             camera.viewmats(), camera.Ks(), w, h, near_plane=self.config.near_plane, far_plane=self.config.far_plane,
-            sh_degree=self.current_sh_degree, render_mode="RGB+ED", rasterize_mode=self.config.rasterize_mode,
+            sh_degree=self.current_sh_degree, render_mode=mode, rasterize_mode=self.config.rasterize_mode,
             backend=self.config.backend,
         )
         if training:
@@ -285,7 +293,9 @@ class SplatfactoModel(Model):
         self._meta = meta if training else None
         alpha = alpha[0]
         rgb = composite(render[0, ..., :3], alpha, bg).clamp(0.0, 1.0)
-        out = {"rgb": rgb, "depth": render[0, ..., 3:4], "accumulation": alpha, "background": bg}
+        out = {"rgb": rgb, "accumulation": alpha, "background": bg}
+        if depth:
+            out["depth"] = render[0, ..., 3:4]
         if training and not self.config.background_from_extra_views:
             out["foreground"] = render[0, ..., :3]  # to composite again on a detached background (an extra view)
         return out
@@ -359,6 +369,13 @@ class SplatfactoModel(Model):
 
     def get_outputs(self, inputs: Cameras) -> dict[str, Tensor]:
         return self._render(inputs, training=self.training)
+
+    def get_train_outputs(self, inputs: Cameras, batch: dict[str, Any]) -> dict[str, Tensor]:
+        """Without the depth channel where no loss reads it (a view without sparse-point depth targets, e.g. a
+        bird's-eye view): the compositing kernel then carries 3 channels instead of 4, forward and backward."""
+        idx = batch.get("image_idx")
+        needs_depth = idx is None or self._depth_targets_of(int(idx)) is not None
+        return self._render(inputs, training=self.training, depth=needs_depth)
 
     @torch.no_grad()
     def render_camera(self, camera: Cameras) -> dict[str, Tensor]:

@@ -86,6 +86,9 @@ class TwoDGSModel(SplatfactoModel):
         # surfels: two tangent scales (the 3DGS init repeats one kNN scale on every axis)
         self.gauss["scales"] = nn.Parameter(self.gauss["scales"].detach()[:, :2].contiguous())
 
+    def get_train_outputs(self, inputs: Cameras, batch: dict[str, Any]) -> dict[str, Tensor]:
+        return self.get_outputs(inputs)  # the normal consistency reads every view's depth
+
     def _render(self, camera: Cameras, training: bool) -> dict[str, Tensor]:
         from nerf2gs_plugin.rendering import rasterize_surfels
 
