@@ -65,7 +65,49 @@ def ssim_map(pred: Tensor, gt: Tensor, window_size: int = 11, sigma: float = 1.5
 
 
 def ssim(pred: Tensor, gt: Tensor, window_size: int = 11, sigma: float = 1.5, data_range: float = 1.0) -> Tensor:
-    """Mean SSIM (scalar tensor, differentiable) of ``[H,W,3]`` images (or ``[B,3,H,W]`` batches)."""
+    """Mean SSIM (scalar tensor, differentiable) of ``[H,W,3]`` images (or ``[B,3,H,W]`` batches).
+    float32 ``[H,W,C]`` images on the CPU go through the fused C++ kernel (the splatting losses' largest
+    cost after the rasterizer otherwise); the same values and gradient to float rounding."""
+    if _fused_applies(pred, gt, window_size):
+        y = gt.to(device=pred.device, dtype=torch.float32).contiguous()
+        c1, c2 = (0.01 * data_range) ** 2, (0.03 * data_range) ** 2
+        return _FusedSSIM.apply(pred.contiguous(), y, gaussian_window(window_size, sigma), c1, c2)
     return ssim_map(pred, gt, window_size, sigma, data_range).mean()
+
+
+SSIM_EXT = "nerf2gs_ssim"
+
+
+def _ssim_kernel():
+    from pathlib import Path
+
+    from nerf2gs_plugin.utils.extensions import load_extension
+
+    return load_extension(SSIM_EXT, [Path(__file__).with_name("csrc") / "ssim.cpp"], (),
+                          ("-O3", "-fopenmp", "-march=native", "-fno-math-errno"))
+
+
+def _fused_applies(pred: Tensor, gt: Tensor, window_size: int) -> bool:
+    """One float32 ``[H,W,C]`` CPU image at least a window large, no gradient into ``gt``, the kernel built."""
+    return (pred.ndim == 3 and pred.shape == gt.shape and pred.device.type == "cpu" and gt.device.type == "cpu"
+            and pred.dtype == torch.float32 and not gt.requires_grad and window_size % 2 == 1
+            and min(pred.shape[0], pred.shape[1]) >= window_size and _ssim_kernel() is not None)
+
+
+class _FusedSSIM(torch.autograd.Function):
+    """Mean SSIM by ``csrc/ssim.cpp``: the gradient reaches ``x`` only."""
+
+    @staticmethod
+    def forward(ctx, x, y, window, c1, c2):  # type: ignore[override]
+        mean, moments = _ssim_kernel().forward(x, y, window, c1, c2)
+        ctx.save_for_backward(x, y, window, moments)
+        ctx.constants = (c1, c2)
+        return mean
+
+    @staticmethod
+    def backward(ctx, grad):  # type: ignore[override]
+        x, y, window, moments = ctx.saved_tensors
+        dx = _ssim_kernel().backward(x, y, window, moments, *ctx.constants, float(grad))
+        return dx, None, None, None, None
 
 
