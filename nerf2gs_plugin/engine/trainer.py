@@ -41,6 +41,10 @@ AUGMENTATION = "nerf2gs_plugin.augment.reference:augmented_datamanager"
 methods): the augmentation sits above the engine, since it loads its reference run through it."""
 
 
+FINITE_CHECK_SIDE = 128
+"""Before a save the first training view is rendered at most this many pixels on its longer side (must be finite)."""
+
+
 def pick_device(name: str = "auto") -> torch.device:
     """CUDA when present, else CPU; never hard-coded."""
     if name == "auto":
@@ -207,11 +211,14 @@ class Trainer:
         bad = nonfinite_counts({"model": self.pipeline.model.state_dict(), "optimizers": self.optimizers.state_dict()})
         if bad:
             raise TrainingDiverged(f"training diverged by step {step}: non-finite values in {describe(bad)}{where}")
-        imgs = self.pipeline.datamanager.train_images
+        camera = self.pipeline.datamanager.train_images.cameras[0]
+        side = max(int(camera.width[0]), int(camera.height[0]))
+        if side > FINITE_CHECK_SIDE:  # the check, not a picture: a NeRF's whole view costs seconds
+            camera = camera.scaled(FINITE_CHECK_SIDE / side)
         with torch.no_grad():
             self.pipeline.model.eval()
             try:
-                out = self.pipeline.model.render_camera(imgs.cameras[0])
+                out = self.pipeline.model.render_camera(camera)
             finally:
                 self.pipeline.model.train()
         bad_out = nonfinite_outputs(out)
