@@ -62,13 +62,25 @@ inline Tile tile_of(int64_t t, const Dims& d) {
   return {static_cast<int>(t / per_cam), (local % d.tiles_x()) * d.ts, (local / d.tiles_x()) * d.ts};
 }
 
-// Rows [r0, r1) of the tile that a Gaussian's alpha >= 1/255 ellipse can reach (1 px margin).
+// Vertical half-extent (1 px margin) of a Gaussian's alpha >= 1/255 ellipse: once per pair, not per tile.
 template <typename T>
-inline void row_range(T my, T ca, T cb, T cc, T op, int y0, int ts, int& r0, int& r1) {
+inline T row_reach(T ca, T cb, T cc, T op) {
   const T det = ca * cc - cb * cb;
   const T s = std::log(std::max(op * T(255), T(1)));
   const T cov_yy = det > 0 ? ca / det : T(0);
-  const T ey = std::sqrt(std::max(T(2) * s * cov_yy, T(0))) + T(1);
+  return std::sqrt(std::max(T(2) * s * cov_yy, T(0))) + T(1);
+}
+
+// row_reach of every pair, filled by the threads of the enclosing parallel region (ends on a barrier).
+template <typename T>
+inline void row_reaches(const T* cn, const T* opa, int64_t CN, T* ey) {
+#pragma omp for schedule(static)
+  for (int64_t i = 0; i < CN; ++i) ey[i] = row_reach<T>(cn[3 * i], cn[3 * i + 1], cn[3 * i + 2], opa[i]);
+}
+
+// Rows [r0, r1) of the tile that a Gaussian's alpha >= 1/255 ellipse can reach (ey: its row_reach).
+template <typename T>
+inline void row_range(T my, T ey, int y0, int ts, int& r0, int& r1) {
   r0 = static_cast<int>(std::max(T(0), std::floor(my - ey - T(0.5) - y0)));
   r1 = static_cast<int>(std::min(T(ts), std::floor(my + ey - T(0.5) - y0) + T(1)));
 }
@@ -79,12 +91,14 @@ inline void row_range(T my, T ca, T cb, T cc, T op, int y0, int ts, int& r0, int
 // LAST / MED: whether the last-composited index (backward) and median ids are wanted.
 template <typename T, int TS, bool LAST, bool MED>
 void forward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
-                        const Dims d, int n_threads, T* out, T* out_a, int64_t* out_last, int64_t* out_med) {
+                        const Dims d, int64_t CN, int n_threads, T* out, T* out_a, int64_t* out_last, int64_t* out_med) {
   const int ts = TS > 0 ? TS : d.ts, P = ts * ts;
   constexpr int L = TS > 0 ? TS : kMaxTile;
   const int64_t D = d.D;
+  std::vector<T> reach(CN);
 #pragma omp parallel num_threads(n_threads)
   {
+    row_reaches<T>(cn, opa, CN, reach.data());
     std::vector<T> px(P), py(P), Tr(P), act(P), acc(P * D), w(P);
     std::vector<int32_t> lst(P), med(P), rowlive(ts);
 #pragma omp for schedule(dynamic, 1)
@@ -127,7 +141,7 @@ void forward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, co
         const T ca = cn[3 * id], cb = cn[3 * id + 1], cc = cn[3 * id + 2];
         const T op = opa[id];
         int r0, r1;
-        row_range<T>(my, ca, cb, cc, op, g.y0, ts, r0, r1);
+        row_range<T>(my, reach[id], g.y0, ts, r0, r1);
         if (r0 >= r1) continue;
         const int p0 = r0 * ts, p1 = r1 * ts;
         const int32_t id32 = static_cast<int32_t>(id);
@@ -184,27 +198,27 @@ void forward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, co
 
 template <typename T, int TS>
 void forward_tiles_ts(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
-                      const Dims d, int n_threads, T* out, T* out_a, int64_t* out_last, int64_t* out_med, bool last,
+                      const Dims d, int64_t CN, int n_threads, T* out, T* out_a, int64_t* out_last, int64_t* out_med, bool last,
                       bool med) {
   if (last && med)
-    forward_tiles_impl<T, TS, true, true>(m2, cn, col, opa, off, ids, d, n_threads, out, out_a, out_last, out_med);
+    forward_tiles_impl<T, TS, true, true>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med);
   else if (last)
-    forward_tiles_impl<T, TS, true, false>(m2, cn, col, opa, off, ids, d, n_threads, out, out_a, out_last, out_med);
+    forward_tiles_impl<T, TS, true, false>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med);
   else if (med)
-    forward_tiles_impl<T, TS, false, true>(m2, cn, col, opa, off, ids, d, n_threads, out, out_a, out_last, out_med);
+    forward_tiles_impl<T, TS, false, true>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med);
   else
-    forward_tiles_impl<T, TS, false, false>(m2, cn, col, opa, off, ids, d, n_threads, out, out_a, out_last, out_med);
+    forward_tiles_impl<T, TS, false, false>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med);
 }
 
 // out_last / out_med stay -1 where not asked for (need_last is only required for backward).
 template <typename T>
 void forward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
-                   const Dims d, int n_threads, T* out, T* out_a, int64_t* out_last, int64_t* out_med,
+                   const Dims d, int64_t CN, int n_threads, T* out, T* out_a, int64_t* out_last, int64_t* out_med,
                    bool need_last = true, bool need_med = true) {
   if (d.ts == 16)
-    forward_tiles_ts<T, 16>(m2, cn, col, opa, off, ids, d, n_threads, out, out_a, out_last, out_med, need_last, need_med);
+    forward_tiles_ts<T, 16>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med, need_last, need_med);
   else
-    forward_tiles_ts<T, 0>(m2, cn, col, opa, off, ids, d, n_threads, out, out_a, out_last, out_med, need_last, need_med);
+    forward_tiles_ts<T, 0>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med, need_last, need_med);
 }
 
 // grads: [n_threads][CN][6 + D] zero-initialised; per pair (means2d x, y, conic a, b, c, opacity,
@@ -216,8 +230,10 @@ void backward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, c
   const int ts = TS > 0 ? TS : d.ts, P = ts * ts;
   constexpr int L = TS > 0 ? TS : kMaxTile;
   const int64_t D = d.D, G = 6 + D;
+  std::vector<T> reach(CN);
 #pragma omp parallel num_threads(n_threads)
   {
+    row_reaches<T>(cn, opa, CN, reach.data());
     T* my_gr = grads + static_cast<int64_t>(omp_get_thread_num()) * CN * G;
     std::vector<T> px(P), py(P), Tr(P), Tfin(P), vout(P * D), buf(P * D), vap(P), fac(P), rap(P), Tb(P), vacc(P), visp(P);
     std::vector<int32_t> lst(P), rowmax(ts);
@@ -256,7 +272,7 @@ void backward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, c
         const T ca = cn[3 * id], cb = cn[3 * id + 1], cc = cn[3 * id + 2];
         const T op = opa[id];
         int r0, r1;
-        row_range<T>(my, ca, cb, cc, op, g.y0, ts, r0, r1);
+        row_range<T>(my, reach[id], g.y0, ts, r0, r1);
         if (r0 >= r1) continue;
         const int p0 = r0 * ts, p1 = r1 * ts;
         int32_t any = 0;

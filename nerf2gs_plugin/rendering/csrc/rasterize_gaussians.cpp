@@ -35,7 +35,7 @@ std::vector<torch::Tensor> forward_t(const torch::Tensor& means2d, const torch::
   auto last = torch::full({d.n_cams, d.height, d.width}, -1, opts.dtype(torch::kInt64));
   auto median = torch::full({d.n_cams, d.height, d.width}, -1, opts.dtype(torch::kInt64));
   gs3d::forward_tiles<T>(means2d.data_ptr<T>(), conics.data_ptr<T>(), colors.data_ptr<T>(), opacities.data_ptr<T>(),
-                         offsets.data_ptr<int64_t>(), ids.data_ptr<int64_t>(), d, std::max(1, at::get_num_threads()),
+                         offsets.data_ptr<int64_t>(), ids.data_ptr<int64_t>(), d, means2d.size(0), std::max(1, at::get_num_threads()),
                          render.data_ptr<T>(), alpha.data_ptr<T>(), last.data_ptr<int64_t>(), median.data_ptr<int64_t>(),
                          need_last, need_median);
   return {render, alpha, last, median};
