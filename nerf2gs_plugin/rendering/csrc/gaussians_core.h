@@ -223,13 +223,86 @@ void forward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const i
 
 // grads: [n_threads][CN][6 + D] zero-initialised; per pair (means2d x, y, conic a, b, c, opacity,
 // features...). The caller sums over threads.
-template <typename T, int TS>
+// One Gaussian of a tile's backward in one pass over its rows (see backward_tiles_impl): the same arithmetic,
+// per pixel and per lane in the same order as the three-pass form. Adds its gradients to o; false when no pixel
+// composited it.
+template <typename T, int L, int DC>
+inline bool fused_pair(T mx, T my, T ca, T cb, T cc, T op, const T* c, int32_t kk, int p0, int p1, int ts, int P,
+                       const int32_t* rowmax, const int32_t* lst, const T* px, const T* py, T* Tr, const T* Tfin,
+                       const T* vap, const T* vout, T* buf, T* o) {
+  T cl[DC];
+  for (int ch = 0; ch < DC; ++ch) cl[ch] = c[ch];
+  T lane_c[DC][L] = {};
+  T l_mx[L] = {}, l_my[L] = {}, l_a[L] = {}, l_b[L] = {}, l_c[L] = {}, l_o[L] = {};
+  int32_t any = 0;
+  for (int row = p0; row < p1; row += ts) {
+    if (kk > rowmax[row / ts]) continue;
+#pragma omp simd reduction(| : any)
+    for (int q = 0; q < ts; ++q) {
+      const int p = row + q;
+      const T dx = mx - px[p], dy = my - py[p];
+      const T sigma = T(0.5) * (ca * dx * dx + cc * dy * dy) + cb * dx * dy;
+      const T vis = exp_neg<T>(-sigma);
+      T a = op * vis;
+      a = a > T(kAlphaMax) ? T(kAlphaMax) : a;
+      const bool valid = kk <= lst[p] && sigma >= 0 && a >= T(kAlphaMin);
+      const T ra = T(1) / (T(1) - a);
+      const T tb = Tr[p] * ra;
+      const T rap = valid ? ra : T(0);
+      const T Tb = valid ? tb : T(0);
+      const T fac = valid ? a * tb : T(0);
+      T vacc = valid ? Tfin[p] * ra * vap[p] : T(0);
+      Tr[p] = valid ? tb : Tr[p];
+      any |= valid ? 1 : 0;
+      for (int ch = 0; ch < DC; ++ch) {
+        const T vo = vout[ch * P + p], bf = buf[ch * P + p];
+        lane_c[ch][q] += fac * vo;
+        vacc += (cl[ch] * Tb - bf * rap) * vo;
+        buf[ch * P + p] = bf + cl[ch] * fac;
+      }
+      const T v_al = op * vis < T(kAlphaMax) ? vacc : T(0);  // 0 where not composited
+      const T v_sig = -op * vis * v_al;
+      l_o[q] += vis * v_al;
+      l_a[q] += T(0.5) * v_sig * dx * dx;
+      l_b[q] += v_sig * dx * dy;
+      l_c[q] += T(0.5) * v_sig * dy * dy;
+      l_mx[q] += v_sig * (ca * dx + cb * dy);
+      l_my[q] += v_sig * (cb * dx + cc * dy);
+    }
+  }
+  if (!any) return false;
+  T g_mx = 0, g_my = 0, g_a = 0, g_b = 0, g_c = 0, g_o = 0;
+  for (int q = 0; q < ts; ++q) {
+    g_mx += l_mx[q];
+    g_my += l_my[q];
+    g_a += l_a[q];
+    g_b += l_b[q];
+    g_c += l_c[q];
+    g_o += l_o[q];
+  }
+  o[0] += g_mx;
+  o[1] += g_my;
+  o[2] += g_a;
+  o[3] += g_b;
+  o[4] += g_c;
+  o[5] += g_o;
+  for (int ch = 0; ch < DC; ++ch) {
+    T vc = 0;
+    for (int q = 0; q < ts; ++q) vc += lane_c[ch][q];
+    o[6 + ch] += vc;
+  }
+  return true;
+}
+
+// DC: the channel count at compile time (3 or 4: one pass over a Gaussian's rows, its per-pixel values kept in
+// registers across the channels), or 0 for d.D at run time (three passes: alpha, channels, geometry).
+template <typename T, int TS, int DC>
 void backward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
                          const T* al, const int64_t* lastp, const T* vr, const T* va, const Dims d, int64_t CN,
                          int n_threads, T* grads) {
   const int ts = TS > 0 ? TS : d.ts, P = ts * ts;
   constexpr int L = TS > 0 ? TS : kMaxTile;
-  const int64_t D = d.D, G = 6 + D;
+  const int64_t D = DC > 0 ? DC : d.D, G = 6 + D;
   std::vector<T> reach(CN);
 #pragma omp parallel num_threads(n_threads)
   {
@@ -275,6 +348,11 @@ void backward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, c
         row_range<T>(my, reach[id], g.y0, ts, r0, r1);
         if (r0 >= r1) continue;
         const int p0 = r0 * ts, p1 = r1 * ts;
+        if constexpr (DC > 0) {
+          fused_pair<T, L, DC>(mx, my, ca, cb, cc, op, col + id * DC, kk, p0, p1, ts, P, rowmax.data(), lst.data(), px.data(),
+                               py.data(), Tr.data(), Tfin.data(), vap.data(), vout.data(), buf.data(), my_gr + id * G);
+          continue;
+        }
         int32_t any = 0;
         for (int row = p0; row < p1; row += ts) {
         if (kk > rowmax[row / ts]) {
@@ -364,10 +442,14 @@ template <typename T>
 void backward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
                     const T* al, const int64_t* lastp, const T* vr, const T* va, const Dims d, int64_t CN,
                     int n_threads, T* grads) {
-  if (d.ts == 16)
-    backward_tiles_impl<T, 16>(m2, cn, col, opa, off, ids, al, lastp, vr, va, d, CN, n_threads, grads);
+  if (d.ts == 16 && d.D == 3)
+    backward_tiles_impl<T, 16, 3>(m2, cn, col, opa, off, ids, al, lastp, vr, va, d, CN, n_threads, grads);
+  else if (d.ts == 16 && d.D == 4)
+    backward_tiles_impl<T, 16, 4>(m2, cn, col, opa, off, ids, al, lastp, vr, va, d, CN, n_threads, grads);
+  else if (d.ts == 16)
+    backward_tiles_impl<T, 16, 0>(m2, cn, col, opa, off, ids, al, lastp, vr, va, d, CN, n_threads, grads);
   else
-    backward_tiles_impl<T, 0>(m2, cn, col, opa, off, ids, al, lastp, vr, va, d, CN, n_threads, grads);
+    backward_tiles_impl<T, 0, 0>(m2, cn, col, opa, off, ids, al, lastp, vr, va, d, CN, n_threads, grads);
 }
 
 }  // namespace gs3d
