@@ -89,17 +89,20 @@ inline void row_range(T my, T ey, int y0, int ts, int& r0, int& r1) {
 // pair / pair id of the median Gaussian, -1 for none).
 // TS: the tile edge at compile time (one SIMD row of 16 floats), or 0 for d.ts at run time.
 // LAST / MED: whether the last-composited index (backward) and median ids are wanted.
-template <typename T, int TS, bool LAST, bool MED>
+// DC: the channel count at compile time (3 or 4: the channels composited in the pass that makes the weights),
+// or 0 for d.D at run time (a second pass per channel).
+template <typename T, int TS, bool LAST, bool MED, int DC>
 void forward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
                         const Dims d, int64_t CN, int n_threads, T* out, T* out_a, int64_t* out_last, int64_t* out_med) {
   const int ts = TS > 0 ? TS : d.ts, P = ts * ts;
   constexpr int L = TS > 0 ? TS : kMaxTile;
-  const int64_t D = d.D;
+  const int64_t D = DC > 0 ? DC : d.D;
   std::vector<T> reach(CN);
 #pragma omp parallel num_threads(n_threads)
   {
     row_reaches<T>(cn, opa, CN, reach.data());
     std::vector<T> px(P), py(P), Tr(P), act(P), acc(P * D), w(P);
+    T* const accp = acc.data();
     std::vector<int32_t> lst(P), med(P), rowlive(ts);
 #pragma omp for schedule(dynamic, 1)
     for (int64_t t = 0; t < d.n_tiles(); ++t) {
@@ -146,9 +149,13 @@ void forward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, co
         const int p0 = r0 * ts, p1 = r1 * ts;
         const int32_t id32 = static_cast<int32_t>(id);
         int32_t lane_any[L] = {};
+        T cl[DC > 0 ? DC : 1];
+        if constexpr (DC > 0)
+          for (int ch = 0; ch < DC; ++ch) cl[ch] = col[id * DC + ch];
         for (int row = p0; row < p1; row += ts) {
         if (rowlive[row / ts] == 0) {
-          for (int p = row; p < row + ts; ++p) w[p] = T(0);
+          if constexpr (DC == 0)
+            for (int p = row; p < row + ts; ++p) w[p] = T(0);
           continue;
         }
 #pragma omp simd
@@ -163,7 +170,12 @@ void forward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, co
           const T nt = tr * (T(1) - a);
           const bool term = valid && nt <= T(kTMin);
           const bool contrib = valid && !term;
-          w[p] = contrib ? a * tr : T(0);
+          const T wp = contrib ? a * tr : T(0);
+          if constexpr (DC > 0) {
+            for (int ch = 0; ch < DC; ++ch) accp[ch * P + p] += wp * cl[ch];
+          } else {
+            w[p] = wp;
+          }
           lane_any[q] |= contrib ? 1 : 0;
           if constexpr (MED) med[p] = (contrib && tr > T(0.5)) ? id32 : med[p];
           Tr[p] = contrib ? nt : tr;
@@ -171,6 +183,7 @@ void forward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, co
           if constexpr (LAST) lst[p] = contrib ? kk : lst[p];
         }
         }
+        if constexpr (DC > 0) continue;
         int32_t any_w = 0;
         for (int q = 0; q < ts; ++q) any_w |= lane_any[q];
         if (!any_w) continue;
@@ -196,18 +209,18 @@ void forward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, co
   }
 }
 
-template <typename T, int TS>
+template <typename T, int TS, int DC>
 void forward_tiles_ts(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
                       const Dims d, int64_t CN, int n_threads, T* out, T* out_a, int64_t* out_last, int64_t* out_med, bool last,
                       bool med) {
   if (last && med)
-    forward_tiles_impl<T, TS, true, true>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med);
+    forward_tiles_impl<T, TS, true, true, DC>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med);
   else if (last)
-    forward_tiles_impl<T, TS, true, false>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med);
+    forward_tiles_impl<T, TS, true, false, DC>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med);
   else if (med)
-    forward_tiles_impl<T, TS, false, true>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med);
+    forward_tiles_impl<T, TS, false, true, DC>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med);
   else
-    forward_tiles_impl<T, TS, false, false>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med);
+    forward_tiles_impl<T, TS, false, false, DC>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med);
 }
 
 // out_last / out_med stay -1 where not asked for (need_last is only required for backward).
@@ -215,10 +228,14 @@ template <typename T>
 void forward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const int64_t* off, const int64_t* ids,
                    const Dims d, int64_t CN, int n_threads, T* out, T* out_a, int64_t* out_last, int64_t* out_med,
                    bool need_last = true, bool need_med = true) {
-  if (d.ts == 16)
-    forward_tiles_ts<T, 16>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med, need_last, need_med);
+  if (d.ts == 16 && d.D == 3)
+    forward_tiles_ts<T, 16, 3>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med, need_last, need_med);
+  else if (d.ts == 16 && d.D == 4)
+    forward_tiles_ts<T, 16, 4>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med, need_last, need_med);
+  else if (d.ts == 16)
+    forward_tiles_ts<T, 16, 0>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med, need_last, need_med);
   else
-    forward_tiles_ts<T, 0>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med, need_last, need_med);
+    forward_tiles_ts<T, 0, 0>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med, need_last, need_med);
 }
 
 // grads: [n_threads][CN][6 + D] zero-initialised; per pair (means2d x, y, conic a, b, c, opacity,
