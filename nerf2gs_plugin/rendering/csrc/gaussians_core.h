@@ -238,8 +238,6 @@ void forward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const i
     forward_tiles_ts<T, 0, 0>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med, need_last, need_med);
 }
 
-// grads: [n_threads][CN][6 + D] zero-initialised; per pair (means2d x, y, conic a, b, c, opacity,
-// features...). The caller sums over threads.
 // One Gaussian of a tile's backward in one pass over its rows (see backward_tiles_impl): the same arithmetic,
 // per pixel and per lane in the same order as the three-pass form. Adds its gradients to o; false when no pixel
 // composited it.
@@ -311,6 +309,8 @@ inline bool fused_pair(T mx, T my, T ca, T cb, T cc, T op, const T* c, int32_t k
   return true;
 }
 
+// grads: [n_threads][CN][6 + D] zero-initialised; per pair (means2d x, y, conic a, b, c, opacity,
+// features...). The caller sums over threads.
 // DC: the channel count at compile time (3 or 4: one pass over a Gaussian's rows, its per-pixel values kept in
 // registers across the channels), or 0 for d.D at run time (three passes: alpha, channels, geometry).
 template <typename T, int TS, int DC>
