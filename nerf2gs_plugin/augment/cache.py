@@ -152,6 +152,8 @@ def cache_key(ref_key: str, dataset: str, config: dict[str, Any], bev: Optional[
         relevant["views"] = views
     if relevant.get("confidence", "none") == "none":  # no confidence maps: the entries of runs before the option
         relevant = {k: v for k, v in relevant.items() if not k.startswith("confidence")}
+    if relevant.get("confidence") != "footprint":  # its ratio: the entries of the other confidences before it
+        relevant.pop("confidence_footprint_ratio", None)
     for off in ("delta_h_spread", "theta_pitch_spread", "drop_outside_box"):  # off: the entries of runs before the option
         if not relevant.get(off):
             relevant.pop(off, None)

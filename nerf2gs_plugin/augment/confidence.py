@@ -22,13 +22,19 @@ weighs little, and the target keeps its own street-view evidence there.
 input views do not show (rooftops, the road away from the path), since where the photos see a surface
 they teach it themselves and the reference's softer colour there only competes with them. A pixel's
 weight falls from 1 (no input view observed its point) to ``seen_weight`` at ``full_views`` observations.
+``footprint`` asks how finely, not how often: the street cameras see the road, but at a grazing angle, where
+one of their pixels covers a long strip that a view from above resolves. A pixel's footprint on the surface
+it shows is ``distance / (focal * |cos(angle between the ray and the surface normal)|)`` (the normal from
+the reference's depth); the weight is a smooth ramp of ``best input footprint / the view's own footprint``
+over the input views that observe the point: 0 up to ratio 1 (a photo sees it at least as finely), 1 from
+``footprint_ratio`` on and where no input view observed it.
 The cost is one projection of every rendered pixel into every training camera (``P x N`` work, a
 Python loop over the N cameras only), plus one reference render per training view for its depth.
 """
 
 from __future__ import annotations
 
-from typing import Literal, Optional, Sequence
+from typing import Iterator, Literal, Optional, Sequence
 
 import torch
 import torch.nn.functional as F
@@ -80,6 +86,25 @@ def _inverse_depth_at(depth_z: Tensor, uv: Tensor, w: int, h: int) -> Tensor:
     return 1.0 / _sample(inv[..., None], uv, w, h)[:, 0].clamp_min(1e-12)
 
 
+def _observations(points: Tensor, cameras: Cameras, depths_z: Sequence[Tensor],
+                  blind: Optional[Sequence[Optional[Tensor]]], rel_tol: float) -> Iterator[tuple[int, Tensor, Tensor]]:
+    """Per camera ``i``: ``(i, seen [P] bool, uv [P, 2])``: which ``points`` it observed (see
+    :func:`observation_counts`) and where they project."""
+    finite = torch.isfinite(points).all(-1)
+    pts = torch.where(finite[:, None], points, torch.zeros_like(points))
+    for i in range(len(cameras)):
+        uv, z = cameras.project(pts, i)
+        h, w = depths_z[i].shape
+        u, v = uv[:, 0].floor().long(), uv[:, 1].floor().long()
+        inside = finite & (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+        uc, vc = u.clamp(0, w - 1), v.clamp(0, h - 1)
+        d = _inverse_depth_at(depths_z[i].to(points), uv, w, h)
+        seen = inside & ((z - d).abs() <= rel_tol * d.abs())
+        if blind is not None and blind[i] is not None:
+            seen &= ~blind[i].to(points.device)[vc, uc]
+        yield i, seen, uv
+
+
 def observation_counts(points: Tensor, cameras: Cameras, depths_z: Sequence[Tensor],
                        blind: Optional[Sequence[Optional[Tensor]]] = None, rel_tol: float = 0.05,
                        colors: Optional[Tensor] = None, images: Optional[Sequence[Tensor]] = None,
@@ -100,19 +125,9 @@ def observation_counts(points: Tensor, cameras: Cameras, depths_z: Sequence[Tens
         ``[P]`` float counts.
     """
     counts = torch.zeros(points.shape[0], device=points.device)
-    finite = torch.isfinite(points).all(-1)
-    pts = torch.where(finite[:, None], points, torch.zeros_like(points))
-    for i in range(len(cameras)):
-        uv, z = cameras.project(pts, i)
-        h, w = depths_z[i].shape
-        u, v = uv[:, 0].floor().long(), uv[:, 1].floor().long()
-        inside = finite & (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
-        uc, vc = u.clamp(0, w - 1), v.clamp(0, h - 1)
-        d = _inverse_depth_at(depths_z[i].to(points), uv, w, h)
-        seen = inside & ((z - d).abs() <= rel_tol * d.abs())
-        if blind is not None and blind[i] is not None:
-            seen &= ~blind[i].to(points.device)[vc, uc]
+    for i, seen, uv in _observations(points, cameras, depths_z, blind, rel_tol):
         if colors is not None and images is not None:
+            h, w = depths_z[i].shape
             diff = (colors.to(points) - _sample(images[i].to(points), uv, w, h)).abs().mean(-1)
             counts += seen.float() * torch.exp(-((diff / color_tol) ** 2))
         else:
@@ -150,6 +165,54 @@ def unseen_weight(depth: Tensor, camera: Cameras, along: DepthAlong, train_camer
     seen = visibility_confidence(depth, camera, along, train_cameras, train_depths_z, train_blind,
                                  full_views=full_views, rel_tol=rel_tol)
     return 1.0 - (1.0 - float(seen_weight)) * seen
+
+
+MIN_COS = 0.02
+"""A ray more grazing than this (about 89 deg from the normal) counts at this angle: the footprint stays finite."""
+
+
+def surface_normals(points: Tensor) -> Tensor:
+    """Unit normals ``[H, W, 3]`` of the surface that a view's lifted points ``[H, W, 3]`` show. Along each
+    image axis the smaller of the forward and backward differences is taken, so a pixel next to a depth
+    edge takes its tangent from its own side; non-finite where a point or both neighbours are."""
+    def tangent(dim: int) -> Tensor:
+        diff = points.diff(dim=dim)
+        first, last = diff.narrow(dim, 0, 1), diff.narrow(dim, diff.shape[dim] - 1, 1)
+        fwd, bwd = torch.cat([diff, last], dim), torch.cat([first, diff], dim)
+        nf, nb = fwd.norm(dim=-1, keepdim=True), bwd.norm(dim=-1, keepdim=True)
+        return torch.where((nf <= nb) | ~torch.isfinite(nb), fwd, bwd)
+
+    n = torch.cross(tangent(1), tangent(0), dim=-1)
+    return n / n.norm(dim=-1, keepdim=True)
+
+
+def footprint(points: Tensor, normals: Tensor, center: Tensor, focal: Tensor | float) -> Tensor:
+    """``[P]``: how long a strip of the surface at ``points`` ``[P, 3]`` (unit ``normals`` ``[P, 3]``) one
+    pixel of a camera at ``center`` ``[3]`` with ``focal`` (pixels) covers: ``distance / (focal * |cos|)``."""
+    ray = points - center.to(points)
+    dist = ray.norm(dim=-1).clamp_min(1e-9)
+    cos = ((ray / dist[:, None]) * normals).sum(-1).abs().nan_to_num(1.0).clamp_min(MIN_COS)
+    return dist / (focal * cos)
+
+
+def footprint_weight(depth: Tensor, camera: Cameras, along: DepthAlong, train_cameras: Cameras,
+                     train_depths_z: Sequence[Tensor], train_blind: Optional[Sequence[Optional[Tensor]]] = None,
+                     rel_tol: float = 0.05, footprint_ratio: float = 2.0) -> Tensor:
+    """Per-pixel loss weight ``[H, W, 1]`` of one rendered view (``footprint``, see the module docstring):
+    a smoothstep of ``(ratio - 1) / (footprint_ratio - 1)``, ``ratio`` the finest observing input view's
+    footprint over this view's; 1 where no input view observed the point."""
+    if footprint_ratio <= 1.0:
+        raise ValueError(f"footprint_ratio must be > 1 (got {footprint_ratio})")
+    h, w = depth.shape[:2]
+    pts = lift(depth, camera, along)
+    normals = surface_normals(pts.reshape(h, w, 3)).reshape(-1, 3)
+    focal = lambda cams, i: torch.sqrt(cams.fx[i] * cams.fy[i]).to(pts)  # noqa: E731
+    own = footprint(pts, normals, camera.centers[0], focal(camera, 0))
+    best = torch.full_like(own, float("inf"))
+    for i, seen, _ in _observations(pts, train_cameras, train_depths_z, train_blind, rel_tol):
+        best = torch.where(seen, torch.minimum(best, footprint(pts, normals, train_cameras.centers[i], focal(train_cameras, i))), best)
+    t = ((best / own - 1.0) / (float(footprint_ratio) - 1.0)).nan_to_num(1.0).clamp(0.0, 1.0)
+    return (t * t * (3.0 - 2.0 * t)).reshape(h, w, 1)
 
 
 def inside_box(points: Tensor, box: Optional[Tensor]) -> Tensor:

@@ -152,8 +152,11 @@ class _Visibility:
 
     def confidence(self, out: dict[str, Tensor], camera: Cameras) -> Tensor:
         """``[H, W, 1]`` confidence of one render ``out`` of the reference at ``camera``."""
-        from nerf2gs_plugin.augment.confidence import unseen_weight, visibility_confidence
+        from nerf2gs_plugin.augment.confidence import footprint_weight, unseen_weight, visibility_confidence
 
+        if self.config.confidence == "footprint":
+            return footprint_weight(out["depth"].cpu(), camera.to("cpu"), self.depth_along, self.cameras, self.depths_z,
+                                    self.blind, self.config.confidence_depth_tol, self.config.confidence_footprint_ratio)
         if self.config.confidence == "unseen":
             return unseen_weight(out["depth"].cpu(), camera.to("cpu"), self.depth_along, self.cameras, self.depths_z,
                                  self.blind, self.config.confidence_full_views, self.config.confidence_depth_tol,
@@ -250,7 +253,7 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
             mask = train.mask("transient", i).cpu()
             comp = composite(train.image(i).cpu(), renders[i]["rgb"], mask, config.dilate_px, config.feather_px)
             save_png(work / "composites" / f"{i:05d}.png", comp)
-            if config.confidence == "unseen":  # a painted pixel is what its own photo could not show: kept whole
+            if config.confidence in ("unseen", "footprint"):  # a painted pixel is what its own photo could not show: kept whole
                 _save_confidence(confidence_path(work / "composites" / f"{i:05d}.png"), torch.ones_like(comp[..., :1]))
             elif vis is not None:  # real pixels weigh 1, painted ones as much as the reference knows them
                 painted = composite(torch.zeros_like(comp), torch.ones_like(comp), mask, config.dilate_px, config.feather_px)[..., :1]

@@ -113,13 +113,16 @@ class AugmentConfig:
     """none | builtin | builtin:PATH | onnx:PATH: image enhancement of the additional views."""
     use_cache: bool = True
     """Reuse the reference's cached renders when their manifest matches (False: render again)."""
-    confidence: Literal["none", "visibility", "consistency", "unseen"] = "none"
+    confidence: Literal["none", "visibility", "consistency", "unseen", "footprint"] = "none"
     """Per-pixel loss weight of the reference's pixels. none: all 1; visibility: how many training views
     observed the surface the pixel shows (depth-consistent, not sky/transient there), reaching 1 at
     confidence-full-views, times the render's accumulation; consistency: each of those observations
     weighted by how well the reference's colour agrees with that real image; unseen: the opposite, for the
     additional views only: 1 where no training view observed the surface, falling to
-    confidence-seen-weight at confidence-full-views observations (composites keep weight 1) (augment/confidence.py)."""
+    confidence-seen-weight at confidence-full-views observations (composites keep weight 1); footprint: for the
+    additional views only, how much finer the view resolves the surface than the finest input view that observed
+    it: 0 where an input view sees it at least as finely, 1 from confidence-footprint-ratio times finer and where
+    none observed it (composites keep weight 1) (augment/confidence.py)."""
     confidence_full_views: int = 3
     """visibility: observations at which a pixel's confidence reaches 1."""
     confidence_depth_tol: float = 0.05
@@ -128,6 +131,9 @@ class AugmentConfig:
     """consistency: mean absolute RGB difference at which an observation counts exp(-1)."""
     confidence_seen_weight: float = 0.0
     """unseen: the loss weight of an additional view's pixel that confidence-full-views training views observed."""
+    confidence_footprint_ratio: float = 2.0
+    """footprint: how many times finer than the finest observing input view an additional view must resolve a
+    surface for its pixel to weigh 1 (a smooth ramp from 0 at 1x; must be > 1)."""
     appearance: Literal["mean", "nearest"] = "mean"
     """How a reference with an appearance model (StreetNeRF's per-photo colour transforms) colours what
     it renders: mean: every view in the mean of the photos' transforms; nearest: each view in the
