@@ -419,6 +419,8 @@ class AugmentedDataManager(DataManager):
             raise ConfigError(f"must be in (0, 1], got {augment.real_only_from}", "--augment.real-only-from")
         if not 0.0 <= augment.extra_decay_floor <= 1.0:
             raise ConfigError(f"must be in [0, 1], got {augment.extra_decay_floor}", "--augment.extra-decay-floor")
+        if augment.confidence == "footprint" and not augment.confidence_footprint_ratio > 1.0:
+            raise ConfigError(f"must be > 1, got {augment.confidence_footprint_ratio}", "--augment.confidence-footprint-ratio")
         self.real_only_step: Optional[int] = (
             int(round(augment.real_only_from * total_steps)) if total_steps is not None and augment.real_only_from < 1.0 else None)
         # --augment.extra-decay: the share falls to 0 at this step (None: it stays)

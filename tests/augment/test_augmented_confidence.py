@@ -89,6 +89,23 @@ def test_unseen_weighs_the_extra_views_as_visibility_turned_around_and_keeps_com
     assert float(vis.extra_images.confidence.max()) > float(vis.extra_images.confidence.min())  # not a constant map
 
 
+def test_footprint_weighs_the_extra_views_keeps_composites_whole_and_refuses_a_ratio_of_one(tiny_scene, tmp_path):
+    cfg = dataclasses.replace(CFG, confidence="footprint")
+    fp = _augmented(tiny_scene, tmp_path / "f", cfg)
+    conf = fp.extra_images.confidence
+    assert bool(((conf >= 0) & (conf <= 1)).all()) and float(conf.max()) > float(conf.min())
+    assert torch.equal(fp.train_images.confidence, torch.ones_like(fp.train_images.confidence))
+    with pytest.raises(ConfigError, match="confidence-footprint-ratio"):
+        _augmented(tiny_scene, tmp_path / "g", dataclasses.replace(cfg, confidence_footprint_ratio=1.0))
+    # the ratio keys only footprint's entries: the other confidences keep their cached renders
+    cams = fp.train_images.cameras
+    other = dataclasses.replace(CFG, confidence="unseen")
+    assert cache_key("r", "d", asdict(other), None, cams, "none") == cache_key(
+        "r", "d", asdict(dataclasses.replace(other, confidence_footprint_ratio=3.0)), None, cams, "none")
+    assert cache_key("r", "d", asdict(cfg), None, cams, "none") != cache_key(
+        "r", "d", asdict(dataclasses.replace(cfg, confidence_footprint_ratio=3.0)), None, cams, "none")
+
+
 def test_a_reference_without_depth_is_refused(tiny_scene, tmp_path):
     with pytest.raises(ConfigError, match="renders depth"):
         _augmented(tiny_scene, tmp_path, render=FlatRenderer(depth=False))
