@@ -39,6 +39,7 @@ VARIANTS: dict[str, dict] = {
     "confidence unseen": {"augment": {"confidence": "unseen"}},
     "confidence unseen 0.3": {"augment": {"confidence": "unseen", "confidence_seen_weight": 0.3}},
     "confidence unseen 0.5": {"augment": {"confidence": "unseen", "confidence_seen_weight": 0.5}},
+    "confidence footprint 1.25": {"augment": {"confidence": "footprint", "confidence_footprint_ratio": 1.25}},
     "confidence footprint 2": {"augment": {"confidence": "footprint", "confidence_footprint_ratio": 2.0}},
     "confidence footprint 4": {"augment": {"confidence": "footprint", "confidence_footprint_ratio": 4.0}},
     "sky_alpha 0.5": {"augment": {}, "model": {"sky_alpha_weight": 0.5}},
