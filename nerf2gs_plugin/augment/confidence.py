@@ -195,14 +195,11 @@ def footprint(points: Tensor, normals: Tensor, center: Tensor, focal: Tensor | f
     return dist / (focal * cos)
 
 
-def footprint_weight(depth: Tensor, camera: Cameras, along: DepthAlong, train_cameras: Cameras,
-                     train_depths_z: Sequence[Tensor], train_blind: Optional[Sequence[Optional[Tensor]]] = None,
-                     rel_tol: float = 0.05, footprint_ratio: float = 2.0) -> Tensor:
-    """Per-pixel loss weight ``[H, W, 1]`` of one rendered view (``footprint``, see the module docstring):
-    a smoothstep of ``(ratio - 1) / (footprint_ratio - 1)``, ``ratio`` the finest observing input view's
-    footprint over this view's; 1 where no input view observed the point."""
-    if footprint_ratio <= 1.0:
-        raise ValueError(f"footprint_ratio must be > 1 (got {footprint_ratio})")
+def relative_footprint(depth: Tensor, camera: Cameras, along: DepthAlong, train_cameras: Cameras,
+                    train_depths_z: Sequence[Tensor], train_blind: Optional[Sequence[Optional[Tensor]]] = None,
+                    rel_tol: float = 0.05) -> Tensor:
+    """``[H, W]``: per pixel of one rendered view, the finest footprint among the input views that observe its
+    point over the view's own (below 1: a photo sees it more finely); inf where no input view observed it."""
     h, w = depth.shape[:2]
     pts = lift(depth, camera, along)
     normals = surface_normals(pts.reshape(h, w, 3)).reshape(-1, 3)
@@ -211,8 +208,19 @@ def footprint_weight(depth: Tensor, camera: Cameras, along: DepthAlong, train_ca
     best = torch.full_like(own, float("inf"))
     for i, seen, _ in _observations(pts, train_cameras, train_depths_z, train_blind, rel_tol):
         best = torch.where(seen, torch.minimum(best, footprint(pts, normals, train_cameras.centers[i], focal(train_cameras, i))), best)
-    t = ((best / own - 1.0) / (float(footprint_ratio) - 1.0)).nan_to_num(1.0).clamp(0.0, 1.0)
-    return (t * t * (3.0 - 2.0 * t)).reshape(h, w, 1)
+    return (best / own).reshape(h, w)
+
+
+def footprint_weight(depth: Tensor, camera: Cameras, along: DepthAlong, train_cameras: Cameras,
+                     train_depths_z: Sequence[Tensor], train_blind: Optional[Sequence[Optional[Tensor]]] = None,
+                     rel_tol: float = 0.05, footprint_ratio: float = 2.0) -> Tensor:
+    """Per-pixel loss weight ``[H, W, 1]`` of one rendered view (``footprint``, see the module docstring):
+    a smoothstep of ``(ratio - 1) / (footprint_ratio - 1)``, ``ratio`` as :func:`relative_footprint` gives it."""
+    if footprint_ratio <= 1.0:
+        raise ValueError(f"footprint_ratio must be > 1 (got {footprint_ratio})")
+    ratio = relative_footprint(depth, camera, along, train_cameras, train_depths_z, train_blind, rel_tol)
+    t = ((ratio - 1.0) / (float(footprint_ratio) - 1.0)).nan_to_num(1.0).clamp(0.0, 1.0)
+    return (t * t * (3.0 - 2.0 * t))[..., None]
 
 
 def inside_box(points: Tensor, box: Optional[Tensor]) -> Tensor:
