@@ -2,12 +2,12 @@
 depth (no NeRF in it): per split, over the ground pixels, the finest observing training view's footprint over
 the view's own (``augment/confidence.py:relative_footprint``; below 1: a street view sees it more finely).
 
-Usage: python benchmarks/footprint_truth.py STREET_DATA   (an ``ns2gs-data synth-street`` folder)
+Usage: python benchmarks/validation/footprint_truth.py STREET_DATA   (an ``ns2gs-data synth-street`` folder)
 """
 from __future__ import annotations
 
+import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -55,4 +55,6 @@ def main(root: Path) -> None:
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]))
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("data", type=Path, help="an ns2gs-data synth-street folder")
+    main(parser.parse_args().data)
