@@ -59,7 +59,7 @@ def ensure_keyed_reference(capture: Path, reference: Path, reuse_stale: bool = F
 
 def product_masks(capture: Path, reference: Path, render_downscale: int, log: Callable[[str], None] = print) -> dict:
     """The training frames' masks of the masks stage on ``capture`` with ``reference``:
-    ``{"names", "without_motion", "first_pass", "second_pass", "timings"}`` (the masks as
+    ``{"names", "without_motion", "first_pass", "second_pass", "settled", "timings"}`` (the masks as
     :class:`~nerf2gs_plugin.masks.auto.FrameMasks` lists at the frames' full size)."""
     from nerf2gs_plugin.masking.auto_masks import at_full_size, masks_for_renders, render_views
     from nerf2gs_plugin.masks.auto import AutoOptions, masks_from_renders
@@ -74,8 +74,11 @@ def product_masks(capture: Path, reference: Path, render_downscale: int, log: Ca
     without = masks_from_renders(renders, AutoOptions(), log=lambda s: None)
     at_full_size(renders, without)  # the masks upsampled in place, as they would be written
     first: dict = {}
+    second: dict = {}
     result = masks_for_renders(view, reference, renders, AutoOptions(), log, False, MotionOptions(), timings, render_downscale,
-                               first_pass=lambda res: first.update(copy.deepcopy(res)))
+                               first_pass=lambda res: first.update(copy.deepcopy(res)),
+                               before_settle=lambda res: second.update(copy.deepcopy(res)))
     timings.update(seconds=round(time.perf_counter() - t0, 1), cpu_seconds=round(cpu_seconds() - c0, 1))
     return {"names": [v["name"] for v in renders.views["train"]], "without_motion": without["train"],
-            "first_pass": first.get("train", result["train"]), "second_pass": result["train"], "timings": timings}
+            "first_pass": first.get("train", result["train"]), "second_pass": second.get("train", result["train"]),
+            "settled": result["train"], "timings": timings}

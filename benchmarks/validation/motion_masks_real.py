@@ -108,7 +108,7 @@ if args.product:
     prod = {}
     for d in args.product:
         res = product_masks(capture, work / "reference", d)
-        prod[str(d)] = {label: score(res["names"], res[label])[0] for label in ("without_motion", "first_pass", "second_pass")}
+        prod[str(d)] = {label: score(res["names"], res[label])[0] for label in ("without_motion", "first_pass", "second_pass", "settled")}
         prod[str(d)].update(timings=res["timings"], reference=ref_key, train_views=len(res["names"]))
         print("product", d, prod[str(d)], flush=True)
     prev = json.loads(out.with_suffix(".json").read_text()).get(KEY, {}) if out.with_suffix(".json").is_file() else {}

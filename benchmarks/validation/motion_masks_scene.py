@@ -216,7 +216,7 @@ def run_product() -> dict:
     for d in args.render_downscale:
         res = product_masks(capture, work / "reference", d)
         out[str(d)] = {label: {kind: score_masks(res["names"], res[label], kind, em) for kind in ("sky", "ground", "transient")}
-                       for label in ("without_motion", "first_pass", "second_pass")}
+                       for label in ("without_motion", "first_pass", "second_pass", "settled")}
         out[str(d)].update(timings=res["timings"], reference=key, train_views=len(res["names"]))
         print("product", d, {k: v["transient"] for k, v in out[str(d)].items() if isinstance(v, dict) and "transient" in v}, flush=True)
     return out
@@ -279,7 +279,8 @@ for key, name in REAL:
             e = rl[label]
             md.append(f"| real | {sz} | {name}, {len(rl['labelled_frames'])} hand-labelled frames, {label.replace('_', ' ')} | | | "
                       f"{e['iou']:.3f} | {e['precision']:.3f} | {e['recall']:.3f} |")
-PRODUCT = (("without_motion", "without motion"), ("first_pass", "motion, before the second pass"), ("second_pass", "motion + second pass"))
+PRODUCT = (("without_motion", "without motion"), ("first_pass", "motion, before the second pass"), ("second_pass", "motion + second pass"),
+           ("settled", "+ neighbours agree (`persist`)"))
 prod_cols = [(f"seed {s}", rw.get("product", {})) for s, rw in sorted(doc["seeds"].items())]
 prod_cols += [(name, doc.get(key, {}).get("product", {})) for key, name in REAL]
 downscales = sorted({d for _, pr in prod_cols for d in pr}, key=int)
@@ -295,7 +296,8 @@ if downscales:
         return f"{t['iou']:.3f} ({t['precision']:.2f} / {t['recall']:.2f})"
     for d in downscales:
         for label, text in PRODUCT:
-            md.append(f"| 1/{d} | {text} | " + " | ".join(cell(pr[d][label]) if d in pr else "" for _, pr in prod_cols) + " |")
+            if any(label in pr.get(d, {}) for _, pr in prod_cols):
+                md.append(f"| 1/{d} | {text} | " + " | ".join(cell(pr[d][label]) if label in pr.get(d, {}) else "" for _, pr in prod_cols) + " |")
     md += ["", "Sky / ground IoU through the masks stage (the motion route and the second pass change only the transient masks):", "",
            "| renders | " + " | ".join(c for c, _ in prod_cols[:2]) + " |", "|---|" + "---|" * len(prod_cols[:2])]
     for d in downscales:

@@ -218,18 +218,21 @@ def auto_masks(view: Path, reference: Path, splits: list[str], opts: AutoOptions
 
 def masks_for_renders(view: Path, reference: Path, renders: Renders, opts: AutoOptions, log: Callable[[str], None] = print,
                       progress: bool = True, motion=None, stats: Optional[dict] = None, render_downscale: int = 1,
-                      first_pass: Optional[Callable[[dict[str, list[FrameMasks]]], None]] = None) -> dict[str, list[FrameMasks]]:
+                      first_pass: Optional[Callable[[dict[str, list[FrameMasks]]], None]] = None,
+                      before_settle: Optional[Callable[[dict[str, list[FrameMasks]]], None]] = None) -> dict[str, list[FrameMasks]]:
     """:func:`~nerf2gs_plugin.masks.auto.masks_from_renders` on ``reference``'s renders of ``view``, plus
     what moves against the static scene's flow (``motion``: :class:`~nerf2gs_plugin.masks.motion.MotionOptions`)
-    and its second pass (``render_downscale``: that of ``renders``); ``first_pass`` (benchmarks) sees the
-    masks before the second pass."""
+    and its second pass (``render_downscale``: that of ``renders``), then the neighbours' check
+    (``masks/motion.settle_transients``); ``first_pass`` and ``before_settle`` (benchmarks) see the masks
+    before the second pass and before that check."""
     result = masks_from_renders(renders, opts, log)
     if motion is not None:
-        from nerf2gs_plugin.masks.motion import add_motion, is_sequence
+        from nerf2gs_plugin.masks.motion import add_motion, is_sequence, settle_transients
 
         meta = json.loads((Path(view) / "transforms.json").read_text())
         full = at_full_size(renders, result)
-        moved = add_motion(full, result, motion, log, progress, sequence=is_sequence(meta))
+        kept: dict = {}
+        moved = add_motion(full, result, motion, log, progress, sequence=is_sequence(meta), kept=kept)
         if first_pass is not None:
             first_pass(result)
         if moved and motion.second_pass_steps > 0:
@@ -239,4 +242,8 @@ def masks_for_renders(view: Path, reference: Path, renders: Renders, opts: AutoO
                                render_step=max(1, int(render_downscale)))
             if stats is not None:
                 stats.update(took)
+        if moved:
+            if before_settle is not None:
+                before_settle(result)
+            settle_transients(full, result, kept, motion, log, progress)
     return result

@@ -40,6 +40,7 @@ import torch
 from torch import Tensor
 
 from nerf2gs_plugin.masks import from_renders as fr
+from nerf2gs_plugin.masks.temporal import keep_flow, persistent
 
 Intrinsics = tuple[float, float, float, float]  # fx, fy, cx, cy (pixel centres at +0.5)
 
@@ -114,6 +115,14 @@ class MotionOptions:
     render differs from the image more than the first reference's does (0: off)."""
     second_pass_margin: float = 0.2
     """... by more than this, each residual divided by its frame's median."""
+    persist: float = 0.1
+    """Last (``masks/temporal.py``): the final regions, outlined once more, are dropped where no frame
+    just before or after confirms them: carried there by the observed flow, less than this share of a
+    region lands within ``persist_ring`` of that frame's regions, in each of them that sees half of it
+    (0: off; the outline again stays with ``outline``). A blip (one pair's flow spill, a facade a short
+    reference renders badly) has no counterpart; a mover has."""
+    persist_ring: float = 0.035
+    """... the ring, as a fraction of the image's shorter side (the flow's error at a mover's edge)."""
 
 
 @dataclass
@@ -387,12 +396,14 @@ def grow_regions(seeds: Tensor, image: Tensor, opts: MotionOptions) -> Tensor:
     return fr.clean_regions(m, max(4, int(opts.min_region_frac * h * w)), close_px=max(1, round(0.01 * min(h, w))))
 
 
-def motion_masks(frames: Sequence[MotionFrame], opts: MotionOptions, progress: Optional[Callable[[], None]] = None) -> list[Tensor]:
+def motion_masks(frames: Sequence[MotionFrame], opts: MotionOptions, progress: Optional[Callable[[], None]] = None,
+                 flows_out: Optional[list] = None) -> list[Tensor]:
     """Bool ``[H, W]`` moving-object masks of a sequence (frames in capture order): per frame the
     pixels that move in ``vote`` of the pairs (:func:`frame_votes`) and differ from the reference
     (:func:`residual_gate`), kept where the frames just before and after move there too
     (:func:`carried_share`), grown to regions (:func:`grow_regions`) and outlines (:func:`outline`).
-    One frame ahead is kept in memory (its seeds and flows), not the sequence."""
+    One frame ahead is kept in memory (its seeds and flows), not the sequence; ``flows_out`` receives
+    each frame's observed flows into the frames just before and after (``masks/temporal.keep_flow``)."""
     greys = [grey(f.image) for f in frames]
     seeds: dict[int, Tensor] = {}
     flows: dict[int, dict[int, Tensor]] = {}
@@ -415,6 +426,8 @@ def motion_masks(frames: Sequence[MotionFrame], opts: MotionOptions, progress: O
 
     for i in range(len(frames)):
         frac, flows[i] = frame_votes(frames, i, opts, greys)
+        if flows_out is not None:
+            flows_out.append({j: keep_flow(f) for j, f in flows[i].items()})
         s = fr.opening(frac >= opts.vote, 1) if opts.vote > 0 else frac > 0
         seeds[i] = s & residual_gate(frames[i], opts.residual_rel)
         if i >= 1:
@@ -447,12 +460,13 @@ def is_sequence(meta: dict) -> bool:
 
 
 def add_motion(renders, result: dict, opts: MotionOptions, log: Callable[[str], None] = print, progress: bool = True,
-               sequence: bool = True) -> bool:
+               sequence: bool = True, kept: Optional[dict] = None) -> bool:
     """Add the moving objects to ``result``'s transient masks (``masks_from_renders``' masks, in
     place): every split's frames in one sequence sorted by file name (a video's order); ``sequence``:
     whether the capture is one (:func:`is_sequence`; see ``sequences_only``). The ground
     and sky masks stay as the residual route made them: with a short reference's depth the motion
     route also marks static road (docs/masks-motion.md), and the ground mask should not pay for it.
+    ``kept`` receives what :func:`settle_transients` needs (the frames' order and observed flows).
     Returns whether the route ran."""
     from nerf2gs_plugin.progress import make_progress
 
@@ -466,10 +480,40 @@ def add_motion(renders, result: dict, opts: MotionOptions, log: Callable[[str], 
                                  renders.up, renders.height, opts.ground_clamp)
     with make_progress(progress) as prog:
         task = prog.add_task("masks: motion", total=len(frames), stats="")
-        moving = motion_masks(frames, opts, lambda: prog.advance(task))
+        flows: Optional[list] = [] if kept is not None else None
+        moving = motion_masks(frames, opts, lambda: prog.advance(task), flows)
+    if kept is not None:
+        kept.update(order=order, flows=flows)
     share = 0.0
     for (_, s, i), m in zip(order, moving):
         result[s][i].transient = result[s][i].transient | m
         share += float(m.float().mean()) / max(len(order), 1)
     log(f"masks: motion marked {100 * share:.2f}% of the pixels as moving")
     return True
+
+
+def settle_transients(renders, result: dict, kept: dict, opts: MotionOptions, log: Callable[[str], None] = print,
+                      progress: bool = True) -> None:
+    """The motion route's last step on ``result``'s final transient masks (in place; ``kept``: from
+    :func:`add_motion`): each frame's regions outlined once more (``outline``), then those that no frame
+    just before or after confirms dropped (``persist``, ``masks/temporal.py``)."""
+    from nerf2gs_plugin.progress import make_progress
+
+    order = kept["order"]
+    masks = [result[s][i].transient for _, s, i in order]
+    if opts.outline:
+        for k, (_, s, i) in enumerate(order):
+            m = masks[k]
+            if bool(m.any()):
+                h, w = m.shape
+                masks[k] = fr.clean_regions(outline(m, renders.views[s][i]["image"], opts.outline_ring),
+                                            max(4, int(opts.min_region_frac * h * w)), close_px=max(1, round(0.01 * min(h, w))))
+    if opts.persist > 0:
+        before = sum(int(m.sum()) for m in masks)
+        with make_progress(progress) as prog:
+            task = prog.add_task("masks: motion, neighbours agree", total=len(masks), stats="")
+            masks = persistent(masks, kept["flows"], opts.persist, opts.persist_ring, lambda: prog.advance(task))
+        after = sum(int(m.sum()) for m in masks)
+        log(f"masks: regions no neighbouring frame confirms dropped: {100 * (before - after) / max(before, 1):.1f}% of the moving pixels")
+    for m, (_, s, i) in zip(masks, order):
+        result[s][i].transient = m

@@ -1,5 +1,5 @@
-"""masks_for_renders (the masks stage after the renders): the bench's view of the first pass, and the
-second pass told the render size."""
+"""masks_for_renders (the masks stage after the renders): the bench's view of the first pass, the
+second pass told the render size, and the neighbours' check after it."""
 
 import json
 from pathlib import Path
@@ -19,8 +19,9 @@ def test_first_pass_seen_before_the_second_and_render_step_passed(tmp_path, monk
     def first(renders, opts, log):
         return {"train": [FrameMasks(*(torch.zeros(2, 2, dtype=torch.bool),) * 3)]}
 
-    def motion(full, result, opts, log, progress, sequence):
+    def motion(full, result, opts, log, progress, sequence, kept=None):
         result["train"][0].transient = torch.ones(2, 2, dtype=torch.bool)
+        kept.update(flows="kept")
         return True
 
     def second(view, reference, full, result, steps, margin, log, progress, render_step=1):
@@ -28,15 +29,19 @@ def test_first_pass_seen_before_the_second_and_render_step_passed(tmp_path, monk
         result["train"][0].transient = torch.zeros(2, 2, dtype=torch.bool)
         return {"second_pass_seconds": 1.0}
 
+    def settle(full, result, kept, opts, log, progress):
+        calls["settled"] = (kept["flows"], int(result["train"][0].transient.sum()))
     monkeypatch.setattr(am, "masks_from_renders", first)
     monkeypatch.setattr(am, "at_full_size", lambda renders, result: renders)
     monkeypatch.setattr(mo, "add_motion", motion)
     monkeypatch.setattr(sp, "second_pass", second)
+    monkeypatch.setattr(mo, "settle_transients", settle)
     seen, stats = [], {}
     out = am.masks_for_renders(tmp_path, tmp_path / "ref", None, None, motion=mo.MotionOptions(), stats=stats, render_downscale=2,
                                first_pass=lambda res: seen.append(int(res["train"][0].transient.sum())))
     assert seen == [4] and int(out["train"][0].transient.sum()) == 0
     assert calls["render_step"] == 2 and stats == {"second_pass_seconds": 1.0}
+    assert calls["settled"] == ("kept", 0)  # the route's flows, on the second pass's masks
 
 
 def test_auto_masks_runs_the_second_pass_end_to_end_on_half_size_renders(tmp_path, monkeypatch):
@@ -58,7 +63,8 @@ def test_auto_masks_runs_the_second_pass_end_to_end_on_half_size_renders(tmp_pat
     ref = ensure_reference(data, tmp_path / "refs" / "ref", steps=5, progress=False, log=lambda s: None)
     first: list[torch.Tensor] = []
 
-    def flow_stand_in(full, result, opts, log, progress, sequence):
+    def flow_stand_in(full, result, opts, log, progress, sequence, kept=None):
+        kept.update(order=sorted((v["name"], "train", i) for i, v in enumerate(full.views["train"])), flows=[{}] * len(full.views["train"]))
         for view, m in zip(full.views["train"], result["train"]):
             assert tuple(m.transient.shape) == tuple(view["image"].shape[:2])  # the flow sees full-size frames
             m.transient = cars[Path(view["name"]).stem].clone() if Path(view["name"]).stem in cars else torch.zeros_like(m.transient)
