@@ -59,3 +59,24 @@ def test_off_or_without_neighbours_nothing_changes():
     masks, flows = _drive()
     out = persistent(masks, [{} for _ in masks], 0.1, 0.035)
     assert all(torch.equal(a, b) for a, b in zip(out, masks))
+
+
+def test_on_the_routes_own_flows_the_rider_stays_and_a_planted_blip_goes():
+    from masks.test_motion import _sequence
+    from nerf2gs_plugin.masks.motion import MotionOptions, motion_masks
+
+    frames, truth = _sequence()
+    flows: list = []
+    masks = motion_masks(frames, MotionOptions(), flows_out=flows)
+    assert [sorted(f) for f in flows] == [[1], [0, 2], [1, 3], [2, 4], [3]]
+    h, w = frames[0].dist.shape
+    assert flows[1][2].dtype == torch.float16 and tuple(flows[1][2].shape) == ((h + 1) // 2, (w + 1) // 2, 2)
+    blip = torch.zeros(h, w, dtype=torch.bool)
+    blip[-14:-4, -24:-8] = True  # static background, nothing there in the other frames
+    assert not (masks[2] & blip).any()
+    masks[2] = masks[2] | blip
+    out = persistent(masks, flows, 0.1, 0.035)
+    assert not (out[2] & blip).any()
+    for k in range(1, len(frames) - 1):
+        rider = truth[k]["rider"]
+        assert float((out[k] & rider).sum()) == float((masks[k] & rider).sum()) > 0.8 * float(rider.sum())
