@@ -4,9 +4,10 @@ against their neighbours in time.
 A region that no neighbour confirms is a blip: the spill of one pair's flow, a facade that one frame's
 reference renders badly. Carried by the observed flow into the frame just before and the frame just
 after, a mover's region lands on (or near) that frame's region of the same mover; a blip lands on
-nothing. A region is dropped where, in every neighbour that sees at least half of it, less than
-``persist`` of it lands within ``persist_ring`` of that neighbour's regions; a region that no neighbour
-sees (it leaves the frame, the sequence's ends) stays. (``masks/motion.settle_transients`` first grows /
+nothing. A region is dropped where some neighbour sees at least half of it and in none that sees a
+quarter of it (:data:`CONFIRM_SEEN`) ``persist`` of what it sees lands within ``persist_ring`` of that
+neighbour's regions; a region that no neighbour sees half of (it leaves the frame, the sequence's ends)
+stays. (``masks/motion.settle_transients`` first grows /
 trims each frame's regions to the image's outlines once more, then calls :func:`persistent`.)
 
 The flows are kept at every 2nd pixel per side (:func:`keep_flow`): the test tolerates a ring of several
@@ -21,6 +22,9 @@ import numpy as np
 import torch
 from torch import Tensor
 
+CONFIRM_SEEN = 0.25
+"""A neighbour that sees this share of a region may confirm it (a mover leaving the frame: the frame after
+sees only part of it), though only those that see half of it can drop it."""
 FLOW_STEP = 2
 """The kept flows' pixel step per side."""
 
@@ -46,8 +50,8 @@ def carried(mask: Tensor, flow: Tensor, shape: tuple[int, int]) -> tuple[np.ndar
 
 def confirmed_regions(mask: Tensor, neighbours: Sequence[tuple[Tensor, Tensor]], persist: float, ring_px: int) -> Tensor:
     """``mask``'s regions that some neighbour confirms: ``neighbours`` are ``(its mask, the observed flow
-    into it)``; a neighbour that sees at least half of a region confirms it where ``persist`` of what it
-    sees lands within ``ring_px`` of the neighbour's mask. Regions no neighbour sees stay."""
+    into it)``; a neighbour that sees :data:`CONFIRM_SEEN` of a region confirms it where ``persist`` of
+    what it sees lands within ``ring_px`` of the neighbour's mask. Regions no neighbour sees half of stay."""
     import cv2
 
     m = mask.numpy().astype(np.uint8)
@@ -64,7 +68,7 @@ def confirmed_regions(mask: Tensor, neighbours: Sequence[tuple[Tensor, Tensor]],
         seen[k] = np.bincount(labels[inside], minlength=n)
         hit[k] = np.bincount(labels[on], minlength=n)
     sees = seen >= 0.5 * area
-    ok = (sees & (hit >= persist * np.maximum(seen, 1))).any(0) | ~sees.any(0)
+    ok = ((seen >= CONFIRM_SEEN * area) & (hit >= persist * np.maximum(seen, 1))).any(0) | ~sees.any(0)
     ok[0] = False
     return torch.from_numpy(ok[labels])
 

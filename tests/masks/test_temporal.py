@@ -80,3 +80,15 @@ def test_on_the_routes_own_flows_the_rider_stays_and_a_planted_blip_goes():
     for k in range(1, len(frames) - 1):
         rider = truth[k]["rider"]
         assert float((out[k] & rider).sum()) == float((masks[k] & rider).sum()) > 0.8 * float(rider.sum())
+
+
+def test_a_mover_leaving_the_frame_is_confirmed_by_the_part_the_next_frame_still_sees(monkeypatch):
+    import nerf2gs_plugin.masks.temporal as tm
+
+    leaving = _box(45, 14, 15)  # the right edge: 10 px further on, two thirds of it are out of frame
+    masks = [torch.zeros(H, W, dtype=torch.bool), leaving, _box(55, 14, 5)]
+    flows = [{1: _shift(0.0)}, {0: _shift(0.0), 2: _shift(10.0)}, {1: _shift(-10.0)}]
+    # the frame before sees all of it and has nothing there; the frame after sees a third and has it
+    assert persistent(masks, flows, 0.1, 0.035)[1].equal(leaving)
+    monkeypatch.setattr(tm, "CONFIRM_SEEN", 0.5)
+    assert not persistent(masks, flows, 0.1, 0.035)[1].any()
