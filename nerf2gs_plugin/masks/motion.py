@@ -118,9 +118,9 @@ class MotionOptions:
     persist: float = 0.1
     """Last (``masks/temporal.py``): the final regions, outlined once more, are dropped where no frame
     just before or after confirms them: carried there by the observed flow, less than this share of a
-    region lands within ``persist_ring`` of that frame's regions, in each of them that sees half of it
-    (0: off; the outline again stays with ``outline``). A blip (one pair's flow spill, a facade a short
-    reference renders badly) has no counterpart; a mover has."""
+    region lands within ``persist_ring`` of that frame's regions, in each of them that sees a quarter of
+    it, and one of them sees half of it (0: off; the outline again stays with ``outline``). A blip (one
+    pair's flow spill, a facade a short reference renders badly) has no counterpart; a mover has."""
     persist_ring: float = 0.035
     """... the ring, as a fraction of the image's shorter side (the flow's error at a mover's edge)."""
 

@@ -7,8 +7,8 @@ after, a mover's region lands on (or near) that frame's region of the same mover
 nothing. A region is dropped where some neighbour sees at least half of it and in none that sees a
 quarter of it (:data:`CONFIRM_SEEN`) ``persist`` of what it sees lands within ``persist_ring`` of that
 neighbour's regions; a region that no neighbour sees half of (it leaves the frame, the sequence's ends)
-stays. (``masks/motion.settle_transients`` first grows /
-trims each frame's regions to the image's outlines once more, then calls :func:`persistent`.)
+stays. (``masks/motion.settle_transients`` first grows / trims each frame's regions to the image's
+outlines once more, then calls :func:`persistent`.)
 
 The flows are kept at every 2nd pixel per side (:func:`keep_flow`): the test tolerates a ring of several
 pixels anyway, and a sequence's flows at full size would hold hundreds of MB.
