@@ -296,7 +296,9 @@ class StreetNeRFModel(Model):
         b = 10.0
         return (b * x) / ((b - 1.0) * x + 1.0)
 
-    def _render_rays(self, rays: RayBundle, image_idx: Optional[Tensor], novel: str = "mean") -> dict[str, Tensor]:
+    def _render_rays(self, rays: RayBundle, image_idx: Optional[Tensor], novel: str = "mean", colour: bool = True) -> dict[str, Tensor]:
+        """``colour`` False: the weights, accumulation and distances only (no colour network, sky or
+        appearance), for a loss that reads no colour; the same sampling and weights as with colour."""
         c = self.config
         R = len(rays)
         dev = rays.origins.device
@@ -325,6 +327,11 @@ class StreetNeRFModel(Model):
             s_edges = pdf_edges(s_edges, w.detach() ** anneal, n_next, jitter)
         t_edges, x, r = positions(s_edges)
         n = s_edges.shape[1] - 1
+        t_mid = (t_edges[:, 1:] + t_edges[:, :-1]) / 2
+        if not colour:
+            w = render_weights(self.field.density(x, r)[0].reshape(R, n), t_edges)
+            return {"accumulation": w.sum(-1, keepdim=True), "weights": w, "s_edges": s_edges, "t_mid": t_mid,
+                    "proposals": proposals}  # type: ignore[dict-item]
         dirs = d[:, None, :].expand(R, n, 3).reshape(-1, 3)
         if torch.is_grad_enabled() or c.render_min_weight <= 0:
             sigma, rgb = self.field(x, dirs, r)
@@ -343,7 +350,6 @@ class StreetNeRFModel(Model):
             color = color + (1.0 - acc) * torch.sigmoid(self.bg_logit)
         if self.appearance is not None:
             color = self.appearance(color, image_idx, novel)
-        t_mid = (t_edges[:, 1:] + t_edges[:, :-1]) / 2
         depth = (w * t_mid).sum(-1, keepdim=True) / acc.clamp_min(1e-6)
         return {"rgb": color, "accumulation": acc, "depth": depth, "weights": w, "s_edges": s_edges, "t_mid": t_mid,
                 "proposals": proposals}  # type: ignore[dict-item]
@@ -414,7 +420,7 @@ class StreetNeRFModel(Model):
         rays = RayBundle(self.pt_origins[idx], self.pt_directions[idx], self.pt_radius[idx], cams)
         if self.camera_optimizer is not None:  # the ray of a pixel of that image: it moves with the image
             rays = self.camera_optimizer.apply_to_rays(rays)
-        out = self._render_rays(rays, cams)
+        out = self._render_rays(rays, cams, colour=False)
         return line_of_sight_loss(out["weights"], out["t_mid"], out["accumulation"], self.pt_t_star[idx, None]).mean()
 
     def _ground_loss(self, outputs: dict[str, Any], ground: Tensor) -> Optional[Tensor]:

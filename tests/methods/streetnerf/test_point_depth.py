@@ -84,3 +84,34 @@ def test_point_depth_off_without_points(tiny_scene, tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # switched off on purpose: no warning
         assert not small_model_config(point_depth=False).setup(train_data=data).use_point_depth
+
+
+def test_point_depth_loss_skips_the_colour_without_changing_loss_or_gradients(tiny_scene, tmp_path):
+    """The point rays render no colour (no loss reads it): the loss and every gradient are bit-for-bit those of
+    a render with colour, and no colour-only parameter gets a gradient either way."""
+    torch.manual_seed(0)
+    tr = make_trainer(tiny_scene, tmp_path / "out")
+    model = tr.pipeline.model
+    for step in range(5):  # past the first steps' zero-ish fields
+        tr.train_step(step)
+    render = model._render_rays
+    colour_calls = []
+
+    def run(with_colour: bool) -> tuple[torch.Tensor, dict]:
+        model._render_rays = lambda r, idx, *a, colour=True: colour_calls.append(colour) or render(r, idx, *a, colour=colour or with_colour)
+        model.zero_grad(set_to_none=True)
+        torch.manual_seed(3)
+        loss = model._point_depth_loss()
+        loss.backward()
+        return loss.detach(), {k: p.grad.clone() for k, p in model.named_parameters() if p.grad is not None}
+
+    try:
+        loss_c, grads_c = run(True)
+        loss_n, grads_n = run(False)
+    finally:
+        model._render_rays = render
+    assert colour_calls == [False, False]  # the loss asks for no colour
+    assert torch.equal(loss_c, loss_n) and grads_c.keys() == grads_n.keys()
+    assert all(torch.equal(grads_c[k], grads_n[k]) for k in grads_c)
+    assert any(k.startswith("field.encoding") for k in grads_n) and any(k.startswith("field.density_mlp") for k in grads_n)
+    assert not any(k.startswith(("field.color_mlp", "sky_model", "appearance")) for k in grads_n)
