@@ -58,7 +58,9 @@ class Optimizers:
             if not params:
                 continue
             cfg = configs[name]
-            self.optimizers[name] = torch.optim.Adam(params, lr=cfg.lr, eps=cfg.eps, weight_decay=cfg.weight_decay)
+            # foreach: the same update as the per-tensor loop (bit-for-bit), with one Python call per operation
+            # for the whole group instead of one per tensor (a field's dozens of small tensors)
+            self.optimizers[name] = torch.optim.Adam(params, lr=cfg.lr, eps=cfg.eps, weight_decay=cfg.weight_decay, foreach=True)
 
     def zero_grad(self) -> None:
         for opt in self.optimizers.values():
