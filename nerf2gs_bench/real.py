@@ -278,16 +278,17 @@ def attach_eval(data: Path, true_groups: dict[str, list], true_train: np.ndarray
     return local
 
 
-def process_capture(video: Path, out: Path, n: int, fov_deg: float, camera_height: float):
-    """``ns2gs-data process video`` with every frame kept (so frame names index the drive)."""
+def process_capture(video: Path, out: Path, n: int, fov_deg: float, camera_height: float, num_threads: int = 1):
+    """``ns2gs-data process video`` with every frame kept (so frame names index the drive). ``num_threads``: COLMAP's
+    (1, for the accuracy benches: repeatable mapping; a timing of the product passes its default, all cores)."""
     from nerf2gs_plugin.data.process.frames import extract_video_frames
     from nerf2gs_plugin.data.process.pipeline import ProcessOptions, run_process
     from nerf2gs_plugin.data.process.sfm import SfmOptions
 
-    # the dashcam's FOV is known: keep it (no focal refinement), and one thread so the mapping is
-    # repeatable (COLMAP's multi-threaded mapper gave a wrong geometry on one of two runs of 30 frames)
+    # the dashcam's FOV is known: keep it (no focal refinement); one thread makes the mapping repeatable
+    # (COLMAP's multi-threaded mapper gave a wrong geometry on one of two runs of 30 frames)
     opts = ProcessOptions(out=Path(out), camera_height=camera_height, fov_deg=fov_deg, progress=False,
-                          sfm=SfmOptions(refine_intrinsics=False, num_threads=1))
+                          sfm=SfmOptions(refine_intrinsics=False, num_threads=num_threads))
     return run_process(lambda d, progress: extract_video_frames(video, d, None, n, 0.0, opts.max_size, progress=progress),
                        opts, is_video=True)
 

@@ -161,6 +161,7 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
 
     from nerf2gs_bench.machine import machine_info
     from nerf2gs_bench.real import process_capture
+    from nerf2gs_plugin.data.process.sfm import SfmOptions
     from nerf2gs_plugin.masking.make_masks import MasksConfig, make_masks
     from nerf2gs_plugin.masking.mask_reference import ensure_reference
 
@@ -169,7 +170,8 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
     for stale in ("capture", "masks-reference", "streetnerf", "splatfacto-nerf-views"):
         shutil.rmtree(root / stale, ignore_errors=True)
     data, ref = root / "capture", root / "masks-reference"
-    doc: dict = {"options": dict(dataclasses.asdict(opts)), "machine": machine_info(), "complete": False,
+    sfm_threads = SfmOptions().num_threads  # what a user's SfM runs on (the accuracy benches take one thread: repeatable)
+    doc: dict = {"options": dict(dataclasses.asdict(opts)), "machine": machine_info(), "complete": False, "sfm_threads": sfm_threads,
                  "streetnerf_render_nerf_samples": _render_nerf_samples(), "video_size": _video_size(video)}
 
     def record(final: bool = False) -> None:
@@ -178,7 +180,7 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
         write_results(out_dir, doc)
 
     stages = Stages(on_stage=record)
-    report = stages.run("process (frames, SfM)", lambda: process_capture(video, data, opts.frames, fov, cam_height))
+    report = stages.run("process (frames, SfM)", lambda: process_capture(video, data, opts.frames, fov, cam_height, sfm_threads))
     log(f"[bench] process: {report.registered}/{report.frames} registered")
     doc["registered"] = report.registered
     stages.run("masks: first reference", lambda: ensure_reference(data, ref, opts.reference_steps, progress=False, log=log))
@@ -229,6 +231,7 @@ def results_md(doc: dict) -> str:
     o = doc["options"]
     lines = [f"# The real path, stage by stage ({o['frames']} frames, {o['width']}x{o['height']})", "",
              f"Machine: {machine_line(doc['machine'])}; torch threads {doc['machine'].get('torch_threads')}; "
+             f"SfM threads {_sfm_threads(doc)}; "
              f"load average at the end {doc.get('load_average')}.",
              f"{_source(doc)}; masks' reference {o['reference_steps']} steps, StreetNeRF "
              f"{o['streetnerf_steps'] or 'default'} steps ({'warm-started from the masks reference' if o['warm_start'] else 'from scratch'}), "
@@ -246,6 +249,12 @@ def results_md(doc: dict) -> str:
         lines += ["", "**Incomplete: the bench stopped (or is still running) after the stages above.**"]
     lines += ["", f"Target: <= {doc['target_minutes']:g} min for the whole path on 2 cores."]
     return "\n".join(lines) + "\n"
+
+
+def _sfm_threads(doc: dict) -> str:
+    """COLMAP's threads in the process stage (results written before it was recorded ran on one)."""
+    n = doc.get("sfm_threads", 1)
+    return "all cores (the product's default)" if n < 1 else str(n)
 
 
 def _source(doc: dict) -> str:

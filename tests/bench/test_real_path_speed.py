@@ -75,3 +75,33 @@ def test_a_real_capture_becomes_a_video_of_its_first_frames_at_the_stand_ins_pix
     assert bright == sorted(bright) and bright[0] < bright[-1]
     with pytest.raises(ConfigError, match="unknown capture"):
         make_capture(tmp_path / "work", RealPathOptions(capture="nowhere", data_root=tmp_path / "data"))
+
+
+def test_the_process_stage_runs_sfm_on_the_products_default_threads(tmp_path, monkeypatch):
+    """The bench times what a user runs: COLMAP on all cores (SfmOptions' default), said in the results."""
+    import pytest
+
+    import nerf2gs_bench.real as br
+    import nerf2gs_bench.real_path_speed as rps
+    from nerf2gs_plugin.data.process.sfm import SfmOptions
+
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def fake_process(video, out, n, fov, height, num_threads=1):
+        seen["threads"] = num_threads
+        raise Stop
+
+    monkeypatch.setattr(br, "process_capture", fake_process)
+    monkeypatch.setattr(rps, "make_capture", lambda root, opts: (tmp_path / "drive.avi", 60.0, 1.6))
+    monkeypatch.setattr(rps, "_video_size", lambda video: "480x360")
+    with pytest.raises(Stop):
+        rps.run(tmp_path / "root", tmp_path / "out", RealPathOptions())
+    assert seen["threads"] == SfmOptions().num_threads == -1
+    doc = {"options": {"frames": 100, "width": 480, "height": 360, "reference_steps": 1000, "streetnerf_steps": None,
+                       "warm_start": True, "splatfacto_steps": None, "street_seed": 0, "movers": True},
+           "machine": {}, "stage_seconds": {}, "total_cpu_s": 0.0, "total_wall_s": 0.0, "target_minutes": 12.0}
+    assert "SfM threads 1;" in rps.results_md(doc)  # results of before the field: one thread
+    assert "SfM threads all cores (the product's default);" in rps.results_md({**doc, "sfm_threads": -1})
