@@ -104,6 +104,23 @@ class _HashGridCPU(torch.autograd.Function):
         return grad_x, grad_table, None
 
 
+class _HashGridWeightedCPU(torch.autograd.Function):
+    """The encoding times per-point, per-level weights ``w [N, L]`` (no gradient to them or to the positions) in the
+    kernel's pass: the same products, and the same table gradient, as the separate multiply and its backward."""
+
+    @staticmethod
+    def forward(ctx, x: Tensor, table: Tensor, res: Tensor, w: Tensor) -> Tensor:  # type: ignore[override]
+        x, w = x.detach().contiguous().float(), w.detach().contiguous()
+        ctx.save_for_backward(x, res, w)
+        ctx.table_size = table.shape[1]
+        return load_kernel().forward_w(x, table.detach().contiguous(), res, w)
+
+    @staticmethod
+    def backward(ctx, grad_out: Tensor):  # type: ignore[override]
+        x, res, w = ctx.saved_tensors
+        return None, load_kernel().backward_w(x, grad_out.contiguous(), res, w, ctx.table_size), None, None
+
+
 def hash_encode(x: Tensor, table: Tensor, resolutions: list[int], backend: str = "auto", res_tensor: Optional[Tensor] = None) -> Tensor:
     """Encode ``x [N,3]`` (in [0,1]) with ``table [L,T,F]`` -> ``[N, L, F]`` using ``backend``."""
     use_cpu = backend == "cpu" or (backend == "auto" and x.device.type == "cpu" and table.dtype == torch.float32)
@@ -153,6 +170,10 @@ class HashEncoding(nn.Module):
             # a render: the level weights in the kernel's one pass (the same float operations)
             out = load_kernel().forward_aa(x.contiguous().float(), self.table.contiguous(), self._res, radius.reshape(-1).contiguous().float())
             return out.reshape(x.shape[0], -1)
+        if radius is not None and not (x.requires_grad or radius.requires_grad) and _fused_available(x, self.table, self.backend):
+            # training without position gradients: the level weights multiplied in the kernel's pass (same bits)
+            w = level_weights(radius, self._res.to(x.dtype))
+            return _HashGridWeightedCPU.apply(x, self.table, self._res, w).reshape(x.shape[0], -1)
         feats = hash_encode(x, self.table, self.resolutions, self.backend, res_cpu)  # [N,L,F]
         if radius is not None:
             feats = feats * level_weights(radius, self._res.to(x.dtype))[..., None]

@@ -119,14 +119,39 @@ void forward_aa_impl(const float* x, const float* table, const int32_t* res, con
     }
 }
 
+// Forward times given per-point, per-level weights w [N, L] (training's anti-aliasing weights, computed by
+// torch): the product the separate multiply would make, in the pass that interpolates.
 template <int F>
-void backward_impl(const float* x, const float* grad_out, const int32_t* res, float* grad_table, int64_t N, int L, uint32_t T) {
+void forward_w_impl(const float* x, const float* table, const int32_t* res, const float* w, float* out, int64_t N, int L, uint32_t T) {
+#pragma omp parallel for schedule(static)
+    for (int64_t n = 0; n < N; ++n) {
+        const float* p = x + 3 * n;
+        float* o = out + n * (int64_t)L * F;
+        Corners c;
+        for (int l = 0; l < L; ++l) {
+            level_corners(p, res[l], T, c);
+            const float* tl = table + (int64_t)l * T * F;
+            float acc[F];
+            interpolate<F>(tl, c, acc);
+            const float a = w[n * L + l];
+            for (int f = 0; f < F; ++f) o[l * F + f] = acc[f] * a;
+        }
+    }
+}
+
+// lw: null, or per-point, per-level weights [N, L] the output was multiplied by (forward_w): the gradient
+// reaching the table is grad_out times them, as the separate multiply's backward makes it.
+template <int F>
+void backward_impl(const float* x, const float* grad_out, const int32_t* res, float* grad_table, int64_t N, int L, uint32_t T,
+                   const float* lw = nullptr) {
 #pragma omp parallel for schedule(dynamic, 1)
     for (int l = 0; l < L; ++l) {
         float* gl = grad_table + (int64_t)l * T * F;
         Corners c;
         for (int64_t n = 0; n < N; ++n) {
-            const float* g = grad_out + (n * L + l) * F;
+            float g[F];
+            const float* go = grad_out + (n * L + l) * F;
+            for (int f = 0; f < F; ++f) g[f] = lw ? go[f] * lw[n * L + l] : go[f];
             bool any = false;
             for (int f = 0; f < F; ++f) any |= (g[f] != 0.f);
             if (!any) continue;
@@ -245,6 +270,42 @@ torch::Tensor hashgrid_forward_aa(torch::Tensor x, torch::Tensor table, torch::T
     return out;
 }
 
+torch::Tensor hashgrid_forward_w(torch::Tensor x, torch::Tensor table, torch::Tensor res, torch::Tensor w) {
+    const Grid g(x, table, res);
+    TORCH_CHECK(w.device().is_cpu() && w.dtype() == torch::kFloat32 && w.dim() == 2 && w.size(0) == g.N && w.size(1) == g.L,
+                "hashgrid: w must be float32 [N, L] on the CPU");
+    w = w.contiguous();
+    auto out = torch::empty({g.N, g.L, g.F}, g.x.options());
+    const float* wp = w.data_ptr<float>();
+    float* op = out.data_ptr<float>();
+    dispatch_features(g.F, [&](auto f) {
+        forward_w_impl<decltype(f)::value>(g.x.data_ptr<float>(), g.table.data_ptr<float>(), g.res.data_ptr<int32_t>(), wp, op, g.N, g.L,
+                                           g.T);
+    });
+    return out;
+}
+
+torch::Tensor hashgrid_backward_w(torch::Tensor x, torch::Tensor grad_out, torch::Tensor res, torch::Tensor w, int64_t T) {
+    TORCH_CHECK(grad_out.dim() == 3 && grad_out.size(0) == x.size(0), "hashgrid: grad_out must be [N, L, F]");
+    TORCH_CHECK(w.device().is_cpu() && w.dtype() == torch::kFloat32 && w.dim() == 2 && w.size(0) == x.size(0) &&
+                w.size(1) == grad_out.size(1), "hashgrid: w must be float32 [N, L] on the CPU");
+    x = x.contiguous();
+    grad_out = grad_out.contiguous().to(torch::kFloat32);
+    res = res.contiguous();
+    w = w.contiguous();
+    const int64_t N = x.size(0);
+    const int L = (int)grad_out.size(1);
+    const int F = (int)grad_out.size(2);
+    auto grad_table = torch::zeros({L, T, F}, x.options());
+    const float* xp = x.data_ptr<float>();
+    const float* gp = grad_out.data_ptr<float>();
+    const int32_t* rp = res.data_ptr<int32_t>();
+    const float* wp = w.data_ptr<float>();
+    float* op = grad_table.data_ptr<float>();
+    dispatch_features(F, [&](auto f) { backward_impl<decltype(f)::value>(xp, gp, rp, op, N, L, (uint32_t)T, wp); });
+    return grad_table;
+}
+
 torch::Tensor hashgrid_backward(torch::Tensor x, torch::Tensor grad_out, torch::Tensor res, int64_t T) {
     TORCH_CHECK(grad_out.dim() == 3 && grad_out.size(0) == x.size(0), "hashgrid: grad_out must be [N, L, F]");
     x = x.contiguous();
@@ -280,6 +341,8 @@ torch::Tensor hashgrid_backward_x(torch::Tensor x, torch::Tensor table, torch::T
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
     m.def("forward", &hashgrid_forward, "hash-grid encoding forward (CPU)");
     m.def("forward_aa", &hashgrid_forward_aa, "hash-grid encoding forward times the anti-aliasing level weights (CPU, no gradient)");
+    m.def("forward_w", &hashgrid_forward_w, "hash-grid encoding forward times per-point, per-level weights (CPU)");
     m.def("backward", &hashgrid_backward, "hash-grid encoding backward w.r.t. the table (CPU)");
+    m.def("backward_w", &hashgrid_backward_w, "hash-grid encoding backward w.r.t. the table of forward_w (CPU)");
     m.def("backward_x", &hashgrid_backward_x, "hash-grid encoding backward w.r.t. the positions (CPU)");
 }

@@ -96,3 +96,26 @@ def test_render_pass_matches_the_encoding_times_level_weights():
     with torch.no_grad():
         fused = enc(x, r)
     torch.testing.assert_close(fused, with_grad.detach(), atol=1e-6, rtol=1e-5)
+
+
+@pytest.mark.parametrize("levels,log2_table", [(5, 11), (12, 14)])
+def test_training_pass_with_level_weights_is_the_separate_multiply_bit_for_bit(levels, log2_table):
+    """With a gradient to the table only, the kernel multiplies the level weights in its pass: the output and the
+    table's gradient are bit-for-bit those of the encoding times the weights (zero gradients skipped alike)."""
+    torch.manual_seed(0)
+    enc = HashEncoding(HashGridSpec(levels, 2, log2_table, 16, 512), backend="cpu")
+    with torch.no_grad():
+        enc.table.normal_()
+    x = torch.rand(4000, 3) * 1.2 - 0.1
+    r = torch.rand(4000) * 0.02
+    r[:5] = 0.0
+    g = torch.randn(4000, levels * 2)
+    g[::7] = 0.0  # rows without gradient, as where no loss reaches
+    fused = enc(x, r)
+    (fused * g).sum().backward()
+    grad_fused, enc.table.grad = enc.table.grad.clone(), None
+    feats = hash_encode(x, enc.table, enc.resolutions, "cpu")
+    separate = (feats * level_weights(r, enc._res.float())[..., None]).reshape(4000, -1)
+    (separate * g).sum().backward()
+    assert "Weighted" in type(fused.grad_fn.next_functions[0][0]).__name__  # the fused pass ran (under the reshape)
+    assert torch.equal(fused, separate) and torch.equal(grad_fused, enc.table.grad)
