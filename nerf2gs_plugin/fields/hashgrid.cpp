@@ -77,8 +77,11 @@ static inline void interpolate(const float* tl, const Corners& c, float* acc) {
     }
 }
 
+// lw: null, or per-point, per-level weights [N, L] (training's anti-aliasing weights, computed by torch) the
+// features are multiplied by: the product a separate multiply would make, in the pass that interpolates.
 template <int F>
-void forward_impl(const float* x, const float* table, const int32_t* res, float* out, int64_t N, int L, uint32_t T) {
+void forward_impl(const float* x, const float* table, const int32_t* res, float* out, int64_t N, int L, uint32_t T,
+                  const float* lw = nullptr) {
 #pragma omp parallel for schedule(static)
     for (int64_t n = 0; n < N; ++n) {
         const float* p = x + 3 * n;
@@ -89,7 +92,12 @@ void forward_impl(const float* x, const float* table, const int32_t* res, float*
             const float* tl = table + (int64_t)l * T * F;
             float acc[F];
             interpolate<F>(tl, c, acc);
-            for (int f = 0; f < F; ++f) o[l * F + f] = acc[f];
+            if (lw) {
+                const float a = lw[n * L + l];
+                for (int f = 0; f < F; ++f) o[l * F + f] = acc[f] * a;
+            } else {
+                for (int f = 0; f < F; ++f) o[l * F + f] = acc[f];
+            }
         }
     }
 }
@@ -119,27 +127,7 @@ void forward_aa_impl(const float* x, const float* table, const int32_t* res, con
     }
 }
 
-// Forward times given per-point, per-level weights w [N, L] (training's anti-aliasing weights, computed by
-// torch): the product the separate multiply would make, in the pass that interpolates.
-template <int F>
-void forward_w_impl(const float* x, const float* table, const int32_t* res, const float* w, float* out, int64_t N, int L, uint32_t T) {
-#pragma omp parallel for schedule(static)
-    for (int64_t n = 0; n < N; ++n) {
-        const float* p = x + 3 * n;
-        float* o = out + n * (int64_t)L * F;
-        Corners c;
-        for (int l = 0; l < L; ++l) {
-            level_corners(p, res[l], T, c);
-            const float* tl = table + (int64_t)l * T * F;
-            float acc[F];
-            interpolate<F>(tl, c, acc);
-            const float a = w[n * L + l];
-            for (int f = 0; f < F; ++f) o[l * F + f] = acc[f] * a;
-        }
-    }
-}
-
-// lw: null, or per-point, per-level weights [N, L] the output was multiplied by (forward_w): the gradient
+// lw: null, or per-point, per-level weights [N, L] the output was multiplied by (forward_impl's): the gradient
 // reaching the table is grad_out times them, as the separate multiply's backward makes it.
 template <int F>
 void backward_impl(const float* x, const float* grad_out, const int32_t* res, float* grad_table, int64_t N, int L, uint32_t T,
@@ -244,15 +232,32 @@ struct Grid {
 
 }  // namespace
 
-torch::Tensor hashgrid_forward(torch::Tensor x, torch::Tensor table, torch::Tensor res) {
+// lw: an undefined tensor, or the per-point, per-level weights [N, L] to multiply the features by.
+static torch::Tensor forward_weighted(torch::Tensor x, torch::Tensor table, torch::Tensor res, torch::Tensor lw) {
     const Grid g(x, table, res);
+    const float* wp = nullptr;
+    if (lw.defined()) {
+        TORCH_CHECK(lw.device().is_cpu() && lw.dtype() == torch::kFloat32 && lw.dim() == 2 && lw.size(0) == g.N && lw.size(1) == g.L,
+                    "hashgrid: w must be float32 [N, L] on the CPU");
+        lw = lw.contiguous();
+        wp = lw.data_ptr<float>();
+    }
     auto out = torch::empty({g.N, g.L, g.F}, g.x.options());
     const float* xp = g.x.data_ptr<float>();
     const float* tp = g.table.data_ptr<float>();
     const int32_t* rp = g.res.data_ptr<int32_t>();
     float* op = out.data_ptr<float>();
-    dispatch_features(g.F, [&](auto f) { forward_impl<decltype(f)::value>(xp, tp, rp, op, g.N, g.L, g.T); });
+    dispatch_features(g.F, [&](auto f) { forward_impl<decltype(f)::value>(xp, tp, rp, op, g.N, g.L, g.T, wp); });
     return out;
+}
+
+torch::Tensor hashgrid_forward(torch::Tensor x, torch::Tensor table, torch::Tensor res) {
+    return forward_weighted(x, table, res, torch::Tensor());
+}
+
+torch::Tensor hashgrid_forward_w(torch::Tensor x, torch::Tensor table, torch::Tensor res, torch::Tensor w) {
+    TORCH_CHECK(w.defined(), "hashgrid: w must be float32 [N, L] on the CPU");
+    return forward_weighted(x, table, res, w);
 }
 
 torch::Tensor hashgrid_forward_aa(torch::Tensor x, torch::Tensor table, torch::Tensor res, torch::Tensor radius) {
@@ -270,29 +275,19 @@ torch::Tensor hashgrid_forward_aa(torch::Tensor x, torch::Tensor table, torch::T
     return out;
 }
 
-torch::Tensor hashgrid_forward_w(torch::Tensor x, torch::Tensor table, torch::Tensor res, torch::Tensor w) {
-    const Grid g(x, table, res);
-    TORCH_CHECK(w.device().is_cpu() && w.dtype() == torch::kFloat32 && w.dim() == 2 && w.size(0) == g.N && w.size(1) == g.L,
-                "hashgrid: w must be float32 [N, L] on the CPU");
-    w = w.contiguous();
-    auto out = torch::empty({g.N, g.L, g.F}, g.x.options());
-    const float* wp = w.data_ptr<float>();
-    float* op = out.data_ptr<float>();
-    dispatch_features(g.F, [&](auto f) {
-        forward_w_impl<decltype(f)::value>(g.x.data_ptr<float>(), g.table.data_ptr<float>(), g.res.data_ptr<int32_t>(), wp, op, g.N, g.L,
-                                           g.T);
-    });
-    return out;
-}
-
-torch::Tensor hashgrid_backward_w(torch::Tensor x, torch::Tensor grad_out, torch::Tensor res, torch::Tensor w, int64_t T) {
+// lw: an undefined tensor, or the weights [N, L] the forward multiplied the features by.
+static torch::Tensor backward_table(torch::Tensor x, torch::Tensor grad_out, torch::Tensor res, int64_t T, torch::Tensor lw) {
     TORCH_CHECK(grad_out.dim() == 3 && grad_out.size(0) == x.size(0), "hashgrid: grad_out must be [N, L, F]");
-    TORCH_CHECK(w.device().is_cpu() && w.dtype() == torch::kFloat32 && w.dim() == 2 && w.size(0) == x.size(0) &&
-                w.size(1) == grad_out.size(1), "hashgrid: w must be float32 [N, L] on the CPU");
+    const float* wp = nullptr;
+    if (lw.defined()) {
+        TORCH_CHECK(lw.device().is_cpu() && lw.dtype() == torch::kFloat32 && lw.dim() == 2 && lw.size(0) == x.size(0) &&
+                    lw.size(1) == grad_out.size(1), "hashgrid: w must be float32 [N, L] on the CPU");
+        lw = lw.contiguous();
+        wp = lw.data_ptr<float>();
+    }
     x = x.contiguous();
     grad_out = grad_out.contiguous().to(torch::kFloat32);
     res = res.contiguous();
-    w = w.contiguous();
     const int64_t N = x.size(0);
     const int L = (int)grad_out.size(1);
     const int F = (int)grad_out.size(2);
@@ -300,27 +295,18 @@ torch::Tensor hashgrid_backward_w(torch::Tensor x, torch::Tensor grad_out, torch
     const float* xp = x.data_ptr<float>();
     const float* gp = grad_out.data_ptr<float>();
     const int32_t* rp = res.data_ptr<int32_t>();
-    const float* wp = w.data_ptr<float>();
     float* op = grad_table.data_ptr<float>();
     dispatch_features(F, [&](auto f) { backward_impl<decltype(f)::value>(xp, gp, rp, op, N, L, (uint32_t)T, wp); });
     return grad_table;
 }
 
 torch::Tensor hashgrid_backward(torch::Tensor x, torch::Tensor grad_out, torch::Tensor res, int64_t T) {
-    TORCH_CHECK(grad_out.dim() == 3 && grad_out.size(0) == x.size(0), "hashgrid: grad_out must be [N, L, F]");
-    x = x.contiguous();
-    grad_out = grad_out.contiguous().to(torch::kFloat32);
-    res = res.contiguous();
-    const int64_t N = x.size(0);
-    const int L = (int)grad_out.size(1);
-    const int F = (int)grad_out.size(2);
-    auto grad_table = torch::zeros({L, T, F}, x.options());
-    const float* xp = x.data_ptr<float>();
-    const float* gp = grad_out.data_ptr<float>();
-    const int32_t* rp = res.data_ptr<int32_t>();
-    float* op = grad_table.data_ptr<float>();
-    dispatch_features(F, [&](auto f) { backward_impl<decltype(f)::value>(xp, gp, rp, op, N, L, (uint32_t)T); });
-    return grad_table;
+    return backward_table(x, grad_out, res, T, torch::Tensor());
+}
+
+torch::Tensor hashgrid_backward_w(torch::Tensor x, torch::Tensor grad_out, torch::Tensor res, torch::Tensor w, int64_t T) {
+    TORCH_CHECK(w.defined(), "hashgrid: w must be float32 [N, L] on the CPU");
+    return backward_table(x, grad_out, res, T, w);
 }
 
 torch::Tensor hashgrid_backward_x(torch::Tensor x, torch::Tensor table, torch::Tensor grad_out, torch::Tensor res) {
