@@ -380,3 +380,30 @@ def test_render_camera_pixels_renders_only_those(trained):
         assert not part[k][~pixels].any()
     with pytest.raises(ValueError, match="pixels"):
         model.render_camera(cam, pixels=pixels[1:])
+
+
+def test_training_steps_are_bit_for_bit_those_of_the_plain_ops(tiny_scene, tmp_path, monkeypatch):
+    """The step's savings (point rays without colour, grouped Adam, level weights in the hash-grid kernel) train
+    the very same parameters as the plain ops: colour for every ray, Adam per tensor, a separate multiply."""
+    from nerf2gs_plugin.fields import hash_encoding
+
+    def train(plain: bool) -> dict:
+        torch.manual_seed(0)
+        tr = make_trainer(tiny_scene, tmp_path / ("plain" if plain else "lean"))
+        model = tr.pipeline.model
+        if plain:
+            render = model._render_rays
+            model._render_rays = lambda r, idx, *a, colour=True: render(r, idx, *a, colour=True)
+            for opt in tr.optimizers.optimizers.values():
+                for group in opt.param_groups:
+                    group["foreach"] = False
+            monkeypatch.setattr(hash_encoding, "_fused_available", lambda *a: False)
+        for step in range(4):
+            tr.train_step(step)
+        monkeypatch.undo()
+        return {k: v.detach().clone() for k, v in model.state_dict().items()}
+
+    lean, plain = train(False), train(True)
+    assert lean.keys() == plain.keys()
+    assert all(torch.equal(lean[k], plain[k]) for k in lean)
+    assert not torch.equal(lean["field.encoding.table"], make_trainer(tiny_scene, tmp_path / "fresh").pipeline.model.field.encoding.table)
