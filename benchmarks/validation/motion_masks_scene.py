@@ -298,7 +298,7 @@ downscales = sorted({d for _, pr in prod_cols for d in pr}, key=int)
 if downscales:
     md += ["", "Through the masks stage's code (`nerf2gs_bench/motion_product.py`: the renders and `masks_for_renders`, as "
            "`ns2gs-data masks --segmenter auto` runs them, default `MotionOptions` with its 300-step second pass; the same "
-           "captures and first references as the rows above). `renders 1/2`: the masks' renders at every 2nd pixel "
+           "captures as the rows above, first references as the note below says). `renders 1/2`: the masks' renders at every 2nd pixel "
            "per side, upsampled (`--render-downscale 2`, the default of `ns2gs-data masks`); `1/1`: every pixel, as the "
            "rows above. Transient IoU (precision / recall):", "",
            "| renders | route | " + " | ".join(c for c, _ in prod_cols) + " |", "|---|---|" + "---|" * len(prod_cols)]
@@ -314,13 +314,19 @@ if downscales:
     for d in downscales:
         md.append(f"| 1/{d} | " + " | ".join(f"{pr[d]['second_pass']['sky']['iou']:.3f} / {pr[d]['second_pass']['ground']['iou']:.3f}"
                                            if d in pr else "" for _, pr in prod_cols[:2]) + " |")
-    if any(v["reference"]["stale"] for _, pr in prod_cols for v in pr.values()):
-        md += ["", "The first references were trained by earlier model code (the motion bench's cached runs, made before "
-               "`render_nerf_samples` existed; their model config is today's but for that render-time key), reused "
-               "with `--reuse-reference` (the JSON's `reference.stale`); the renders, the masks and the second pass "
-               "ran on today's code."]
+    stale = [d for d in downscales if any(pr[d]["reference"]["stale"] for _, pr in prod_cols if d in pr)]
+    fresh = [d for d in downscales if d not in stale]
+    if stale:
+        md += ["", f"The first references of the {' and '.join(f'1/{d}' for d in stale)} rows were trained by earlier model "
+               "code (the motion bench's cached runs, made before `render_nerf_samples` existed; their model config is "
+               "today's but for that render-time key), reused with `--reuse-reference` (the JSON's `reference.stale`); the "
+               "renders, the masks and the second pass ran on today's code."]
+    if fresh:
+        codes = sorted({pr[d]["reference"]["code"] for d in fresh for _, pr in prod_cols if d in pr})
+        md += ["", f"The first references of the {' and '.join(f'1/{d}' for d in fresh)} rows were trained afresh (1000 "
+               f"steps, without `--reuse-reference`) by today's model code ({', '.join(codes)}, the JSON's `reference.code`)."]
     md += ["", "CPU seconds of the masks stage after the reference (renders, motion route, second pass; getrusage with the "
-           "render workers'), wall seconds of the second pass in brackets (2 shared cores, four runs at once): " + "; ".join(
+           "render workers'), wall seconds of the second pass in brackets (2 cores shared with other jobs, two to four runs at once): " + "; ".join(
                f"{c} 1/{d}: {pr[d]['timings']['cpu_seconds']:.0f} ({pr[d]['timings'].get('second_pass_seconds', 0):.0f} s)"
                for d in downscales for c, pr in prod_cols if d in pr) + "."]
 cols = [(f"seed {s}", rw["est"]) for s, rw in sorted(doc["seeds"].items()) if "levers" in rw.get("est", {})]
