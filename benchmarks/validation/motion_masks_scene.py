@@ -19,7 +19,8 @@ Usage: python benchmarks/validation/motion_masks_scene.py SEED WORK OUT_STEM [gt
 (WORK keeps the street, the capture, the reference and its renders between runs). OUT_STEM.json gets
 this seed's rows (merged with what the file already has); OUT_STEM.md is written from the JSON.
 Produced benchmarks/results/motion_masks.{json,md} with seeds 0 and 3 (``both``, then ``product
---render-downscale 1`` and ``2`` on the same WORK folders, ``--reuse-reference``) and motion_masks_real.py.
+--render-downscale 2``, then ``1``, on the same WORK folders: the first trains the reference afresh, the
+second keeps it as its key matches) and motion_masks_real.py (``--product 2``, then ``--product 1``).
 """
 import argparse
 import json
