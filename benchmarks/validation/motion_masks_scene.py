@@ -58,9 +58,10 @@ differs from the end-to-end run in docs/masks-motion.md ("A second pass") on the
 
 Fresh references. The product rows were first made on the motion bench's cached references (earlier
 model code, `--reuse-reference`), then rerun without it, so the 1000-step references were trained again
-by today's code: on all four captures the new references' weights equal the cached ones bit for bit
-(largest difference 0; the model code changed only at render time), and every product row, at both
-render sizes, came out the same to 4 decimals (IoU, precision, recall; sky and ground).
+by today's code, twice (model code 532fca94808a, then 9680e598da9b after StreetNeRF's step savings): on
+all four captures the new references' weights equal the cached ones bit for bit both times (largest
+difference 0), and every product row, at both render sizes, came out the same to 4 decimals (IoU,
+precision, recall; sky and ground). The rows shown are the second rerun's.
 
 Neighbours agree (`persist`, the route's last step, `masks/temporal.py`): the final regions outlined once
 more, then those that no frame just before or after confirms (carried there by the observed flow) dropped.
