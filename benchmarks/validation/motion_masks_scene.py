@@ -54,7 +54,7 @@ route alone 0.16 -> 0.22); the sky and ground IoU fall by 0.01. KITTI at 1/2 com
 target (0.499 against 0.5 on real frames); the synthetic streets stay far from 0.7. The first pass through the stage
 matches the route called directly (0.319 / 0.377 / 0.321 / 0.409 against 0.318 / 0.377 / 0.321 / 0.409); the second pass
 differs from the end-to-end run in docs/masks-motion.md ("A second pass") on the same references by -0.001 / -0.008 / -0.001 / 0.000
-(that run was made by earlier code: rerun on the same reference, the second pass repeats to 4 decimals).
+(not noise of its 300 steps: rerun on the same reference, the second pass repeats to 4 decimals).
 
 Fresh references. The product rows were first made on the motion bench's cached references (earlier
 model code, `--reuse-reference`), then rerun without it, so the 1000-step references were trained again
