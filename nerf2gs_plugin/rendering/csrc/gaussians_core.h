@@ -238,6 +238,27 @@ void forward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const i
     forward_tiles_ts<T, 0, 0>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med, need_last, need_med);
 }
 
+// a pair's six 2D gradients (mean x, y; conic a, b, c; opacity): its row's lanes summed into o[0..5]
+template <typename T>
+inline void add_lane_sums(T* o, const T* l_mx, const T* l_my, const T* l_a, const T* l_b, const T* l_c, const T* l_o,
+                          int ts) {
+  T g_mx = 0, g_my = 0, g_a = 0, g_b = 0, g_c = 0, g_o = 0;
+  for (int q = 0; q < ts; ++q) {
+    g_mx += l_mx[q];
+    g_my += l_my[q];
+    g_a += l_a[q];
+    g_b += l_b[q];
+    g_c += l_c[q];
+    g_o += l_o[q];
+  }
+  o[0] += g_mx;
+  o[1] += g_my;
+  o[2] += g_a;
+  o[3] += g_b;
+  o[4] += g_c;
+  o[5] += g_o;
+}
+
 // One Gaussian of a tile's backward in one pass over its rows (see backward_tiles_impl): the same arithmetic,
 // per pixel and per lane in the same order as the three-pass form. Adds its gradients to o; false when no pixel
 // composited it.
@@ -286,21 +307,7 @@ inline bool fused_pair(T mx, T my, T ca, T cb, T cc, T op, const T* c, int32_t k
     }
   }
   if (!any) return false;
-  T g_mx = 0, g_my = 0, g_a = 0, g_b = 0, g_c = 0, g_o = 0;
-  for (int q = 0; q < ts; ++q) {
-    g_mx += l_mx[q];
-    g_my += l_my[q];
-    g_a += l_a[q];
-    g_b += l_b[q];
-    g_c += l_c[q];
-    g_o += l_o[q];
-  }
-  o[0] += g_mx;
-  o[1] += g_my;
-  o[2] += g_a;
-  o[3] += g_b;
-  o[4] += g_c;
-  o[5] += g_o;
+  add_lane_sums(o, l_mx, l_my, l_a, l_b, l_c, l_o, ts);
   for (int ch = 0; ch < DC; ++ch) {
     T vc = 0;
     for (int q = 0; q < ts; ++q) vc += lane_c[ch][q];
@@ -433,22 +440,8 @@ void backward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, c
             l_my[q] += v_sig * (cb * dx + cc * dy);
           }
         }
-        T g_mx = 0, g_my = 0, g_a = 0, g_b = 0, g_c = 0, g_o = 0;
-        for (int q = 0; q < ts; ++q) {
-          g_mx += l_mx[q];
-          g_my += l_my[q];
-          g_a += l_a[q];
-          g_b += l_b[q];
-          g_c += l_c[q];
-          g_o += l_o[q];
-        }
         T* o = my_gr + id * G;
-        o[0] += g_mx;
-        o[1] += g_my;
-        o[2] += g_a;
-        o[3] += g_b;
-        o[4] += g_c;
-        o[5] += g_o;
+        add_lane_sums(o, l_mx, l_my, l_a, l_b, l_c, l_o, ts);
         for (int64_t ch = 0; ch < D; ++ch) o[6 + ch] += vcol[ch];
       }
     }
