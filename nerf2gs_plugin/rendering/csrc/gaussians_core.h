@@ -238,26 +238,42 @@ void forward_tiles(const T* m2, const T* cn, const T* col, const T* opa, const i
     forward_tiles_ts<T, 0, 0>(m2, cn, col, opa, off, ids, d, CN, n_threads, out, out_a, out_last, out_med, need_last, need_med);
 }
 
-// a pair's six 2D gradients (mean x, y; conic a, b, c; opacity): its row's lanes summed into o[0..5]
-template <typename T>
-inline void add_lane_sums(T* o, const T* l_mx, const T* l_my, const T* l_a, const T* l_b, const T* l_c, const T* l_o,
-                          int ts) {
-  T g_mx = 0, g_my = 0, g_a = 0, g_b = 0, g_c = 0, g_o = 0;
-  for (int q = 0; q < ts; ++q) {
-    g_mx += l_mx[q];
-    g_my += l_my[q];
-    g_a += l_a[q];
-    g_b += l_b[q];
-    g_c += l_c[q];
-    g_o += l_o[q];
+// a pair's six 2D gradients (mean x, y; conic a, b, c; opacity), per lane of a tile row: each pixel adds its
+// share in its lane, and the lanes are summed once per pair (not once per row)
+template <typename T, int L>
+struct PairLanes {
+  T mx[L] = {}, my[L] = {}, a[L] = {}, b[L] = {}, c[L] = {}, o[L] = {};
+
+  // pixel in lane q at (dx, dy) from the mean, its transmittance vis, v_al the loss gradient of its alpha
+  inline void add(int q, T vis, T v_al, T op, T dx, T dy, T ca, T cb, T cc) {
+    const T v_sig = -op * vis * v_al;
+    o[q] += vis * v_al;
+    a[q] += T(0.5) * v_sig * dx * dx;
+    b[q] += v_sig * dx * dy;
+    c[q] += T(0.5) * v_sig * dy * dy;
+    mx[q] += v_sig * (ca * dx + cb * dy);
+    my[q] += v_sig * (cb * dx + cc * dy);
   }
-  o[0] += g_mx;
-  o[1] += g_my;
-  o[2] += g_a;
-  o[3] += g_b;
-  o[4] += g_c;
-  o[5] += g_o;
-}
+
+  // the lanes' sums added to out[0..5]
+  inline void sum_into(T* out, int ts) const {
+    T g_mx = 0, g_my = 0, g_a = 0, g_b = 0, g_c = 0, g_o = 0;
+    for (int q = 0; q < ts; ++q) {
+      g_mx += mx[q];
+      g_my += my[q];
+      g_a += a[q];
+      g_b += b[q];
+      g_c += c[q];
+      g_o += o[q];
+    }
+    out[0] += g_mx;
+    out[1] += g_my;
+    out[2] += g_a;
+    out[3] += g_b;
+    out[4] += g_c;
+    out[5] += g_o;
+  }
+};
 
 // One Gaussian of a tile's backward in one pass over its rows (see backward_tiles_impl): the same arithmetic,
 // per pixel and per lane in the same order as the three-pass form. Adds its gradients to o; false when no pixel
@@ -269,7 +285,7 @@ inline bool fused_pair(T mx, T my, T ca, T cb, T cc, T op, const T* c, int32_t k
   T cl[DC];
   for (int ch = 0; ch < DC; ++ch) cl[ch] = c[ch];
   T lane_c[DC][L] = {};
-  T l_mx[L] = {}, l_my[L] = {}, l_a[L] = {}, l_b[L] = {}, l_c[L] = {}, l_o[L] = {};
+  PairLanes<T, L> lanes;
   int32_t any = 0;
   for (int row = p0; row < p1; row += ts) {
     if (kk > rowmax[row / ts]) continue;
@@ -297,17 +313,11 @@ inline bool fused_pair(T mx, T my, T ca, T cb, T cc, T op, const T* c, int32_t k
         buf[ch * P + p] = bf + cl[ch] * fac;
       }
       const T v_al = op * vis < T(kAlphaMax) ? vacc : T(0);  // 0 where not composited
-      const T v_sig = -op * vis * v_al;
-      l_o[q] += vis * v_al;
-      l_a[q] += T(0.5) * v_sig * dx * dx;
-      l_b[q] += v_sig * dx * dy;
-      l_c[q] += T(0.5) * v_sig * dy * dy;
-      l_mx[q] += v_sig * (ca * dx + cb * dy);
-      l_my[q] += v_sig * (cb * dx + cc * dy);
+      lanes.add(q, vis, v_al, op, dx, dy, ca, cb, cc);
     }
   }
   if (!any) return false;
-  add_lane_sums(o, l_mx, l_my, l_a, l_b, l_c, l_o, ts);
+  lanes.sum_into(o, ts);
   for (int ch = 0; ch < DC; ++ch) {
     T vc = 0;
     for (int q = 0; q < ts; ++q) vc += lane_c[ch][q];
@@ -422,7 +432,7 @@ void backward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, c
           vcol[ch] = vc;
         }
         // per-lane partial sums, reduced once per Gaussian (not once per row)
-        T l_mx[L] = {}, l_my[L] = {}, l_a[L] = {}, l_b[L] = {}, l_c[L] = {}, l_o[L] = {};
+        PairLanes<T, L> lanes;
         for (int row = p0; row < p1; row += ts) {
           if (kk > rowmax[row / ts]) continue;
 #pragma omp simd
@@ -431,17 +441,11 @@ void backward_tiles_impl(const T* m2, const T* cn, const T* col, const T* opa, c
             const T dx = mx - px[p], dy = my - py[p];
             const T vis = visp[p];
             const T v_al = op * vis < T(kAlphaMax) ? vacc[p] : T(0);  // 0 where not composited
-            const T v_sig = -op * vis * v_al;
-            l_o[q] += vis * v_al;
-            l_a[q] += T(0.5) * v_sig * dx * dx;
-            l_b[q] += v_sig * dx * dy;
-            l_c[q] += T(0.5) * v_sig * dy * dy;
-            l_mx[q] += v_sig * (ca * dx + cb * dy);
-            l_my[q] += v_sig * (cb * dx + cc * dy);
+            lanes.add(q, vis, v_al, op, dx, dy, ca, cb, cc);
           }
         }
         T* o = my_gr + id * G;
-        add_lane_sums(o, l_mx, l_my, l_a, l_b, l_c, l_o, ts);
+        lanes.sum_into(o, ts);
         for (int64_t ch = 0; ch < D; ++ch) o[6 + ch] += vcol[ch];
       }
     }
