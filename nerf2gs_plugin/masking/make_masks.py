@@ -172,6 +172,13 @@ def _segment(cfg: MasksConfig, data: Path, frames: list, groups: dict, out: Path
 
         if cfg.render_downscale < 1 or cfg.render_downscale != int(cfg.render_downscale):  # before a reference is trained for nothing
             raise ConfigError(f"--render-downscale must be a whole number >= 1, got {cfg.render_downscale}")
+        m = cfg.motion
+        if not 0 <= m.persist <= 1:
+            raise ConfigError(f"--motion.persist must be a share within [0, 1] (0: off), got {m.persist}")
+        if m.persist > 0 and m.persist_ring <= 0:
+            raise ConfigError(f"--motion.persist-ring must be > 0 (a fraction of the shorter image side), got {m.persist_ring}")
+        if m.second_pass_steps < 0:
+            raise ConfigError(f"--motion.second-pass-steps must be >= 0 (0: off), got {m.second_pass_steps}")
         distorted = [f.image.name for _, f in frames if f.intr.distorted]
         if distorted:
             raise DataError(f"--segmenter auto needs undistorted (pinhole) images; {distorted[0]} has distortion "

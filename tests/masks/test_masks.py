@@ -371,6 +371,12 @@ def test_make_masks_auto_with_a_very_short_reference(tmp_path):
     assert tuple(img.shape[:2]) == (int(outs.cameras.height[0]), int(outs.cameras.width[0]))
     with pytest.raises(ConfigError, match="render-downscale"):
         make_masks(MasksConfig(data=data, reference=ref, overwrite=True, render_downscale=0.5, progress=False), log=logs.append)
+    from nerf2gs_plugin.masks.motion import MotionOptions
+
+    for bad, flag in ((MotionOptions(persist=1.5), "motion.persist"), (MotionOptions(persist_ring=0.0), "motion.persist-ring"),
+                      (MotionOptions(second_pass_steps=-1), "motion.second-pass-steps")):
+        with pytest.raises(ConfigError, match=flag):
+            make_masks(MasksConfig(data=data, reference=ref, overwrite=True, motion=bad, progress=False), log=logs.append)
 
 
 @pytest.mark.parametrize("d", [2, 3])
