@@ -9,12 +9,13 @@ functions of ``from_renders.py``. The ground plane is ``data/ground.py``'s RANSA
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Optional
 
 import torch
 from torch import Tensor
 
 from nerf2gs_plugin.masks import from_renders as fr
+from nerf2gs_plugin.utils.parallel import map_ahead
 
 
 @dataclass
@@ -84,33 +85,41 @@ class Renders:
     cpu_seconds: float = 0.0  # of the renders (this process, every thread, and its render workers)
 
 
-def masks_from_renders(r: Renders, opts: AutoOptions, log: Callable[[str], None] = print) -> dict[str, list[FrameMasks]]:
-    """Sky / ground / transient per frame (reference resolution), keyed by split, in parser order."""
+def masks_from_renders(r: Renders, opts: AutoOptions, log: Callable[[str], None] = print,
+                       workers: Optional[int] = None) -> dict[str, list[FrameMasks]]:
+    """Sky / ground / transient per frame (reference resolution), keyed by split, in parser order; the
+    frames spread over the cores (``utils/parallel.map_ahead``, ``workers``)."""
     up, tol = r.up, r.metres_to_world * opts.ground_tol_m
-    sky_res = {}
-    for s, rs in r.views.items():
-        for i, v in enumerate(rs):
-            sky = fr.sky_from_render(v["acc"], v["dirs"], up, opts.sky_acc, opts.horizon_margin_deg,
-                                     depth=v["depth"], far=opts.sky_far * r.box_extent,
-                                     vote=opts.sky_vote, from_top=opts.sky_from_top, fill_holes=opts.sky_fill_holes)
-            fitted = fr.fit_colour(v["rgb"], v["image"])
-            sky_res[s, i] = (sky, fr.residual_map(v["image"], fitted))
+    frames = [(s, i) for s, rs in r.views.items() for i in range(len(rs))]
+
+    def sky_and_residual(si: tuple[str, int]) -> tuple[Tensor, Tensor]:
+        v = r.views[si[0]][si[1]]
+        sky = fr.sky_from_render(v["acc"], v["dirs"], up, opts.sky_acc, opts.horizon_margin_deg,
+                                 depth=v["depth"], far=opts.sky_far * r.box_extent,
+                                 vote=opts.sky_vote, from_top=opts.sky_from_top, fill_holes=opts.sky_fill_holes)
+        fitted = fr.fit_colour(v["rgb"], v["image"])
+        return sky, fr.residual_map(v["image"], fitted)
+
+    sky_res = dict(zip(frames, map_ahead(sky_and_residual, frames, workers)))
     base = "train" if "train" in r.views else next(iter(r.views))
     pool = torch.cat([sky_res[base, i][1][~sky_res[base, i][0]] for i in range(len(r.views[base]))])
     thr = fr.robust_threshold(pool, opts.transient_k, opts.transient_floor)
     low = fr.robust_threshold(pool, opts.transient_k_low, opts.transient_floor / 2) if 0 < opts.transient_k_low < opts.transient_k else None
     log(f"masks: ground plane at height {r.height:.4f} (world units), tolerance {tol:.4f}; transient residual threshold {thr:.3f}" + (f" (regions grown to {low:.3f})" if low else ""))
-    result: dict[str, list[FrameMasks]] = {}
-    for s, rs in r.views.items():
-        result[s] = []
-        for i, v in enumerate(rs):
-            sky, res = sky_res[s, i]
-            h, w = v["acc"].shape
-            trans = fr.transient_from_residual(res, thr, max(4, int(opts.min_region_frac * h * w)), low=low,
-                                               open_px=int(round(opts.transient_open * min(h, w))))
-            normals = fr.normals_from_points(fr.surface_points(v["origin"], v["dirs"], v["depth"])) if opts.ground_normals else None
-            ground = fr.ground_from_render(v["origin"], v["dirs"], v["depth"], v["acc"], up, r.height, tol, normals=normals,
-                                           smooth_px=int(round(opts.ground_smooth * min(h, w))), empty_is_ground=opts.ground_empty)
-            trans = trans & ~sky  # the sky is where the reference is weakest: a high residual there is no car
-            result[s].append(FrameMasks(sky, ground & ~trans & ~sky, trans))
+
+    def frame_masks(si: tuple[str, int]) -> FrameMasks:
+        v = r.views[si[0]][si[1]]
+        sky, res = sky_res[si]
+        h, w = v["acc"].shape
+        trans = fr.transient_from_residual(res, thr, max(4, int(opts.min_region_frac * h * w)), low=low,
+                                           open_px=int(round(opts.transient_open * min(h, w))))
+        normals = fr.normals_from_points(fr.surface_points(v["origin"], v["dirs"], v["depth"])) if opts.ground_normals else None
+        ground = fr.ground_from_render(v["origin"], v["dirs"], v["depth"], v["acc"], up, r.height, tol, normals=normals,
+                                       smooth_px=int(round(opts.ground_smooth * min(h, w))), empty_is_ground=opts.ground_empty)
+        trans = trans & ~sky  # the sky is where the reference is weakest: a high residual there is no car
+        return FrameMasks(sky, ground & ~trans & ~sky, trans)
+
+    result: dict[str, list[FrameMasks]] = {s: [] for s in r.views}
+    for (s, _), m in zip(frames, map_ahead(frame_masks, frames, workers)):
+        result[s].append(m)
     return result

@@ -396,60 +396,89 @@ def grow_regions(seeds: Tensor, image: Tensor, opts: MotionOptions) -> Tensor:
     return fr.clean_regions(m, max(4, int(opts.min_region_frac * h * w)), close_px=max(1, round(0.01 * min(h, w))))
 
 
+def _regions(m: Tensor, image: Tensor, opts: MotionOptions) -> Tensor:
+    """A frame's moving pixels -> its regions: grown (:func:`grow_regions`), then outlined (:func:`outline`)."""
+    m = grow_regions(m, image, opts)
+    if opts.outline:
+        h, w = m.shape
+        m = fr.clean_regions(outline(m, image, opts.outline_ring), max(4, int(opts.min_region_frac * h * w)),
+                             close_px=max(1, round(0.01 * min(h, w))))
+    return m
+
+
 def motion_masks(frames: Sequence[MotionFrame], opts: MotionOptions, progress: Optional[Callable[[], None]] = None,
-                 flows_out: Optional[list] = None) -> list[Tensor]:
+                 flows_out: Optional[list] = None, workers: Optional[int] = None) -> list[Tensor]:
     """Bool ``[H, W]`` moving-object masks of a sequence (frames in capture order): per frame the
     pixels that move in ``vote`` of the pairs (:func:`frame_votes`) and differ from the reference
     (:func:`residual_gate`), kept where the frames just before and after move there too
     (:func:`carried_share`), grown to regions (:func:`grow_regions`) and outlines (:func:`outline`).
-    One frame ahead is kept in memory (its seeds and flows), not the sequence; ``flows_out`` receives
-    each frame's observed flows into the frames just before and after (``masks/temporal.keep_flow``)."""
+    The frames are spread over the cores (``utils/parallel.map_ahead``, ``workers``; each frame's mask
+    depends on the sequence alone, so the masks are those of one frame after another). One frame
+    ahead is kept in memory (its seeds and flows), not the sequence; ``flows_out`` receives each
+    frame's observed flows into the frames just before and after (``masks/temporal.keep_flow``)."""
+    from nerf2gs_plugin.utils.parallel import map_ahead
+
     greys = [grey(f.image) for f in frames]
     seeds: dict[int, Tensor] = {}
     flows: dict[int, dict[int, Tensor]] = {}
     out = []
 
-    def finish(i: int) -> None:
-        m = seeds[i]
+    def frame(i: int) -> tuple[Tensor, Optional[dict[int, Tensor]], dict[int, Tensor], Optional[Tensor]]:
+        """``(seeds, the observed flows or None, the flows kept, the final mask or None)``: without
+        ``carry`` a frame is finished here, else it waits for its neighbours' seeds."""
+        frac, fl = frame_votes(frames, i, opts, greys)
+        s = fr.opening(frac >= opts.vote, 1) if opts.vote > 0 else frac > 0
+        s = s & residual_gate(frames[i], opts.residual_rel)
+        kept = {j: keep_flow(f) for j, f in fl.items()} if flows_out is not None else {}
         if opts.carry > 0:
-            m = m & (carried_share(m, flows[i], {j: seeds[j] for j in flows[i]}) >= opts.carry)
-        m = grow_regions(m, frames[i].image, opts)
-        if opts.outline:
-            h, w = m.shape
-            m = fr.clean_regions(outline(m, frames[i].image, opts.outline_ring), max(4, int(opts.min_region_frac * h * w)),
-                                 close_px=max(1, round(0.01 * min(h, w))))
-        out.append(m)
+            return s, fl, kept, None
+        return s, None, kept, _regions(s, frames[i].image, opts)
+
+    def finish(i: int) -> None:
+        m = seeds[i] & (carried_share(seeds[i], flows[i], {j: seeds[j] for j in flows[i]}) >= opts.carry)
+        out.append(_regions(m, frames[i].image, opts))
         for k in [k for k in seeds if k < i]:
             seeds.pop(k), flows.pop(k, None)
         if progress is not None:
             progress()
 
-    for i in range(len(frames)):
-        frac, flows[i] = frame_votes(frames, i, opts, greys)
+    for i, (s, fl, kept, done) in enumerate(map_ahead(frame, range(len(frames)), workers)):
         if flows_out is not None:
-            flows_out.append({j: keep_flow(f) for j, f in flows[i].items()})
-        s = fr.opening(frac >= opts.vote, 1) if opts.vote > 0 else frac > 0
-        seeds[i] = s & residual_gate(frames[i], opts.residual_rel)
+            flows_out.append(kept)
+        if done is not None:
+            out.append(done)
+            if progress is not None:
+                progress()
+            continue
+        seeds[i], flows[i] = s, fl  # type: ignore[assignment]
         if i >= 1:
             finish(i - 1)
-    if frames:
+    if frames and opts.carry > 0:
         finish(len(frames) - 1)
     return out
 
 
-def frames_from_renders(views: Sequence[dict], sky: Sequence[Tensor], up: Tensor, height: float, clamp: bool = True) -> list[MotionFrame]:
+def frames_from_renders(views: Sequence[dict], sky: Sequence[Tensor], up: Tensor, height: float, clamp: bool = True,
+                        workers: Optional[int] = None) -> list[MotionFrame]:
     """The reference's renders (``render_views``: image, rgb, depth, c2w, intr) as a motion sequence:
     the rendered depth, the sky at infinity, clamped to the ground plane; the residual of the
-    image against the render, after the residual route's colour fit."""
-    out = []
-    for v, s in zip(views, sky):
-        intr = tuple(float(x) for x in v["intr"])
+    image against the render, after the residual route's colour fit (frames spread over the cores)."""
+    from nerf2gs_plugin.utils.parallel import map_ahead
+
+    def static(k: int) -> tuple[Tensor, Optional[Tensor], Optional[Tensor]]:
+        v, s = views[k], sky[k]
         dist = torch.where(s, torch.full_like(v["depth"], math.inf), v["depth"].float())
-        bound = static_distance(torch.full_like(dist, math.inf), v["c2w"], intr, up, height) if clamp else None
+        bound = static_distance(torch.full_like(dist, math.inf), v["c2w"], _intr(v), up, height) if clamp else None
         dist = torch.minimum(dist, bound) if bound is not None else dist
         residual = fr.residual_map(v["image"], fr.fit_colour(v["rgb"], v["image"])) if "rgb" in v else None
-        out.append(MotionFrame(v["image"], dist, v["c2w"], intr, bound, residual))  # type: ignore[arg-type]
-    return out
+        return dist, bound, residual
+
+    return [MotionFrame(v["image"], dist, v["c2w"], _intr(v), bound, residual)
+            for v, (dist, bound, residual) in zip(views, map_ahead(static, range(len(views)), workers))]
+
+
+def _intr(view: dict) -> Intrinsics:
+    return tuple(float(x) for x in view["intr"])  # type: ignore[return-value]
 
 
 def is_sequence(meta: dict) -> bool:
@@ -498,16 +527,20 @@ def settle_transients(renders, result: dict, kept: dict, opts: MotionOptions, lo
     :func:`add_motion`): each frame's regions outlined once more (``outline``), then those that no frame
     just before or after confirms dropped (``persist``, ``masks/temporal.py``)."""
     from nerf2gs_plugin.progress import make_progress
+    from nerf2gs_plugin.utils.parallel import map_ahead
 
     order = kept["order"]
     masks = [result[s][i].transient for _, s, i in order]
     if opts.outline:
-        for k, (_, s, i) in enumerate(order):
-            m = masks[k]
-            if bool(m.any()):
-                h, w = m.shape
-                masks[k] = fr.clean_regions(outline(m, renders.views[s][i]["image"], opts.outline_ring),
-                                            max(4, int(opts.min_region_frac * h * w)), close_px=max(1, round(0.01 * min(h, w))))
+        def again(k: int) -> Tensor:
+            (_, s, i), m = order[k], masks[k]
+            if not bool(m.any()):
+                return m
+            h, w = m.shape
+            return fr.clean_regions(outline(m, renders.views[s][i]["image"], opts.outline_ring),
+                                    max(4, int(opts.min_region_frac * h * w)), close_px=max(1, round(0.01 * min(h, w))))
+
+        masks = list(map_ahead(again, range(len(masks))))  # one frame per core
     if opts.persist > 0:
         before = sum(int(m.sum()) for m in masks)
         with make_progress(progress) as prog:

@@ -74,15 +74,22 @@ def confirmed_regions(mask: Tensor, neighbours: Sequence[tuple[Tensor, Tensor]],
 
 
 def persistent(masks: Sequence[Tensor], flows: Sequence[dict[int, Tensor]], persist: float, ring_frac: float,
-               progress: Optional[Callable[[], None]] = None) -> list[Tensor]:
+               progress: Optional[Callable[[], None]] = None, workers: Optional[int] = None) -> list[Tensor]:
     """A sequence's masks (frames in capture order; ``flows[i]``: index ``j`` -> the observed flow from
     frame ``i`` into ``j``, kept by :func:`keep_flow`) without the regions that no neighbour in
-    ``flows[i]`` confirms (:func:`confirmed_regions`, its ring ``ring_frac`` of the shorter side)."""
-    kept = []
-    for i, m in enumerate(masks):
+    ``flows[i]`` confirms (:func:`confirmed_regions`, its ring ``ring_frac`` of the shorter side); the
+    frames spread over the cores (``utils/parallel.map_ahead``, ``workers``)."""
+    from nerf2gs_plugin.utils.parallel import map_ahead
+
+    def check(i: int) -> Tensor:
+        m = masks[i]
         ring = max(1, int(round(ring_frac * min(m.shape))))
         near = [(masks[j], f) for j, f in flows[i].items() if 0 <= j < len(masks) and tuple(masks[j].shape) == tuple(m.shape)]
-        kept.append(confirmed_regions(m, near, persist, ring) if bool(m.any()) else m)
+        return confirmed_regions(m, near, persist, ring) if bool(m.any()) else m
+
+    kept = []
+    for m in map_ahead(check, range(len(masks)), workers):
+        kept.append(m)
         if progress is not None:
             progress()
     return kept

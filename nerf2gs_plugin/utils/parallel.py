@@ -11,8 +11,10 @@ differ from a two-thread render in the last float bits only.
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import resource
+import sys
 from typing import Any, Callable, Iterable, Iterator, Optional, TypeVar
 
 import torch
@@ -46,6 +48,23 @@ def _run(item: Any) -> Any:
         return _JOB(item)  # type: ignore[misc]
 
 
+@contextlib.contextmanager
+def _opencv_one_thread() -> Iterator[None]:
+    """OpenCV (where loaded: the mask maths) without worker threads while the workers are forked: a
+    forked child inherits the thread pool's bookkeeping but not its threads, and its first parallel
+    call, or a ``cv2.setNumThreads``, waits for them for ever. With none, the children's OpenCV
+    calls run on their one thread; the parent's threads come back afterwards."""
+    cv2 = sys.modules.get("cv2")
+    threads = cv2.getNumThreads() if cv2 is not None else 0
+    if cv2 is not None:
+        cv2.setNumThreads(1)
+    try:
+        yield
+    finally:
+        if cv2 is not None:
+            cv2.setNumThreads(threads)
+
+
 def render_ahead(render: Callable[[T], R], items: Iterable[T], workers: Optional[int] = None) -> Iterator[R]:
     """``render(item)`` for every item, yielded in order. With more than one worker (see
     :func:`view_workers`) the first item is rendered here (lazy loads: kernels, caches, which the
@@ -67,7 +86,8 @@ def render_ahead(render: Callable[[T], R], items: Iterable[T], workers: Optional
     # a worker that dies (out of memory) breaks the pool with an error instead of a wait for ever
     pool = ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("fork"), initializer=_init_worker)
     try:
-        futures = [pool.submit(_run, item) for item in items[1:]]  # the workers are forked at the first
+        with _opencv_one_thread():
+            futures = [pool.submit(_run, item) for item in items[1:]]  # the workers are forked at the first
         _JOB = None
         for f in futures[:-1]:
             yield f.result()
@@ -77,3 +97,11 @@ def render_ahead(render: Callable[[T], R], items: Iterable[T], workers: Optional
         _JOB = None
         pool.shutdown(wait=True, cancel_futures=True)
     yield last
+
+
+def map_ahead(job: Callable[[T], R], items: Iterable[T], workers: Optional[int] = None) -> Iterator[R]:
+    """``job(item)`` for every item, yielded in order, the items spread over the cores as
+    :func:`render_ahead` spreads views (the per-frame mask maths: one frame per core). ``job`` must
+    depend on its item alone, not on what earlier items changed: the workers see the parent's state
+    as it was at the fork."""
+    return render_ahead(job, items, workers)

@@ -44,3 +44,28 @@ def test_a_workers_error_reaches_the_caller_and_its_cpu_time_is_counted():
     own0 = sum(os.times()[:2])
     list(render_ahead(lambda k: sum(i * i for i in range(300_000)), range(9), 2))
     assert cpu_seconds() - c0 > 1.5 * (sum(os.times()[:2]) - own0)  # most of it ran in the workers
+
+
+def test_opencv_in_the_workers_after_the_parent_used_its_threads():
+    """A forked worker that calls OpenCV after the parent ran it on several threads must not wait for
+    the parent's threads (which the fork did not copy): the workers come back, equal to the parent's
+    results, and the parent keeps its OpenCV thread count."""
+    import cv2
+    import numpy as np
+
+    from nerf2gs_plugin.utils.parallel import map_ahead
+
+    img = np.random.default_rng(0).integers(0, 255, (240, 320), dtype=np.uint8)
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(2)
+    try:
+        cv2.GaussianBlur(img.astype(np.float32), (0, 0), 3.0)  # the parent's pool started
+
+        def job(k: int) -> float:
+            flow = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM).calc(img, np.roll(img, k, 1), None)
+            return float(cv2.GaussianBlur(flow, (0, 0), 2.0).sum())
+
+        assert list(map_ahead(job, range(5), 2)) == [job(k) for k in range(5)]
+        assert cv2.getNumThreads() == 2
+    finally:
+        cv2.setNumThreads(before)
