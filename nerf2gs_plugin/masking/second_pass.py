@@ -105,17 +105,19 @@ def second_pass(view: Path, reference: Path, full: Renders, result: dict[str, li
         todo = [(s, i) for s, views in full.views.items() for i in range(len(views))
                 if bool(result[s][i].transient.any()) and size(s, i) == tuple(result[s][i].transient.shape)]
 
-        def render(si: tuple[str, int]) -> tuple[Tensor, Tensor, Tensor]:
+        def mask(si: tuple[str, int]) -> Tensor:
+            """The frame's second-pass mask: its regions rendered, then the maths, both in one worker."""
             s, i = si
-            pixels, sample = render_pixels(result[s][i].transient, render_step)
-            return pixels, sample, run.model.render_camera(data[s].cameras[i : i + 1], pixels=pixels)["rgb"].cpu()
+            m, v = result[s][i], full.views[s][i]
+            pixels, sample = render_pixels(m.transient, render_step)
+            rgb = run.model.render_camera(data[s].cameras[i : i + 1], pixels=pixels)["rgb"].cpu()
+            return second_pass_mask(m.transient, v["image"], v["rgb"], rgb, pixels, sample, m.sky, margin)
 
         with make_progress(progress) as prog, torch.no_grad():
             task = prog.add_task("masks: second pass", total=len(todo), stats="")
-            # views rendered side by side (utils/parallel.py) while this loop makes each one's mask
-            for (s, i), (pixels, sample, rgb) in zip(todo, render_ahead(render, todo)):
-                m, v = result[s][i], full.views[s][i]
-                m.transient = second_pass_mask(m.transient, v["image"], v["rgb"], rgb, pixels, sample, m.sky, margin)
+            # views side by side (utils/parallel.py), each one's mask made where it was rendered
+            for (s, i), m in zip(todo, render_ahead(mask, todo)):
+                result[s][i].transient = m
                 prog.advance(task)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -65,21 +65,24 @@ def _opencv_one_thread() -> Iterator[None]:
             cv2.setNumThreads(threads)
 
 
-def render_ahead(render: Callable[[T], R], items: Iterable[T], workers: Optional[int] = None) -> Iterator[R]:
+def render_ahead(render: Callable[[T], R], items: Iterable[T], workers: Optional[int] = None,
+                 first_here: bool = True) -> Iterator[R]:
     """``render(item)`` for every item, yielded in order. With more than one worker (see
     :func:`view_workers`) the first item is rendered here (lazy loads: kernels, caches, which the
-    workers then inherit), the rest by ``workers`` forked processes, one torch thread each, without
-    gradients; items and results travel pickled (tensors through shared memory), ``render`` itself
-    is inherited. ``render`` must not rely on state it changes (a model already in eval mode): each
-    worker changes its own copy."""
+    workers then inherit; ``first_here`` False: in the workers too), the rest by ``workers`` forked
+    processes, one torch thread each, without gradients; items and results travel pickled (tensors
+    through shared memory), ``render`` itself is inherited. ``render`` must not rely on state it
+    changes (a model already in eval mode): each worker changes its own copy."""
     global _JOB
     items = list(items)
-    n = min(view_workers(workers), max(len(items) - 1, 1))
+    n = min(view_workers(workers), max(len(items) - (1 if first_here else 0), 1))
     if n < 2:
         for item in items:
             yield render(item)
         return
-    yield render(items[0])
+    if first_here:
+        yield render(items[0])
+        items = items[1:]
     from concurrent.futures import ProcessPoolExecutor
 
     _JOB = render
@@ -87,7 +90,7 @@ def render_ahead(render: Callable[[T], R], items: Iterable[T], workers: Optional
     pool = ProcessPoolExecutor(n, mp_context=multiprocessing.get_context("fork"), initializer=_init_worker)
     try:
         with _opencv_one_thread():
-            futures = [pool.submit(_run, item) for item in items[1:]]  # the workers are forked at the first
+            futures = [pool.submit(_run, item) for item in items]  # the workers are forked at the first
         _JOB = None
         for f in futures[:-1]:
             yield f.result()
@@ -103,5 +106,5 @@ def map_ahead(job: Callable[[T], R], items: Iterable[T], workers: Optional[int] 
     """``job(item)`` for every item, yielded in order, the items spread over the cores as
     :func:`render_ahead` spreads views (the per-frame mask maths: one frame per core). ``job`` must
     depend on its item alone, not on what earlier items changed: the workers see the parent's state
-    as it was at the fork."""
-    return render_ahead(job, items, workers)
+    as it was at the fork. Every item goes to the workers: nothing to load lazily here first."""
+    return render_ahead(job, items, workers, first_here=False)

@@ -69,3 +69,13 @@ def test_opencv_in_the_workers_after_the_parent_used_its_threads():
         assert cv2.getNumThreads() == 2
     finally:
         cv2.setNumThreads(before)
+
+
+def test_map_ahead_sends_every_item_to_the_workers():
+    from nerf2gs_plugin.utils.parallel import map_ahead
+
+    out = list(map_ahead(_render, range(5), 2))
+    assert all(r["pid"] != os.getpid() for r in out)
+    for k, r in enumerate(out):
+        torch.testing.assert_close(r["out"], _render(k)["out"], rtol=1e-5, atol=1e-5)
+    assert [r["pid"] for r in map_ahead(_render, range(5), 1)] == [os.getpid()] * 5
