@@ -154,6 +154,8 @@ def cache_key(ref_key: str, dataset: str, config: dict[str, Any], bev: Optional[
         relevant = {k: v for k, v in relevant.items() if not k.startswith("confidence")}
     if relevant.get("confidence") != "footprint":  # its ratio: the entries of the other confidences before it
         relevant.pop("confidence_footprint_ratio", None)
+    if relevant.get("view_downscale", 1) == 1:  # the input views' size: the entries of runs before the option
+        relevant.pop("view_downscale", None)
     for off in ("delta_h_spread", "theta_pitch_spread", "drop_outside_box"):  # off: the entries of runs before the option
         if not relevant.get(off):
             relevant.pop(off, None)
@@ -246,12 +248,14 @@ class ViewStore:
     def key(self, camera: Cameras) -> str:
         return view_key(self.ref_key, self.appearance, camera)
 
-    def add_entries(self, dataset: str, cameras: Cameras) -> None:
-        """Make the kept views of older entries (same reference, dataset and appearance) findable: their
-        manifests hold each view's pose; its intrinsics are those of ``cameras`` (same dataset), matched by pose."""
+    def add_entries(self, dataset: str, cameras: Cameras, view_downscale: int = 1) -> None:
+        """Make the kept views of older entries (same reference, dataset, appearance and view size) findable:
+        their manifests hold each view's pose; its intrinsics are those of ``cameras`` (same dataset), matched by pose."""
         poses = np.round(cameras.camera_to_worlds.cpu().numpy(), 5)
         for m in cache_manifests(self.dir.parent.parent):
             if m.reference != self.ref_key or m.dataset != dataset or m.config.get("appearance", "mean") != self.appearance:
+                continue
+            if int(m.config.get("view_downscale", 1)) != view_downscale:  # a pose match of another size is another render
                 continue
             for k, pose in enumerate(np.round(m.extra_poses().numpy(), 5)):
                 hit = np.flatnonzero(np.abs(poses - pose).reshape(len(poses), -1).max(-1) < 1e-5)

@@ -195,6 +195,11 @@ def additional_views(train: Cameras, world: WorldFrame, augment: Any) -> Optiona
     if not parts:
         return None
     if len(parts) == 1:  # one family: its cameras as they are
-        return AdditionalViews(parts[0][1].cameras, parts[0][1].sources, [parts[0][0]] * len(parts[0][1].cameras))
-    return AdditionalViews(Cameras.cat([p.cameras for _, p in parts]), [i for _, p in parts for i in p.sources],
-                           [n for n, p in parts for _ in range(len(p.cameras))])
+        made = AdditionalViews(parts[0][1].cameras, parts[0][1].sources, [parts[0][0]] * len(parts[0][1].cameras))
+    else:
+        made = AdditionalViews(Cameras.cat([p.cameras for _, p in parts]), [i for _, p in parts for i in p.sources],
+                               [n for n, p in parts for _ in range(len(p.cameras))])
+    n = int(getattr(augment, "view_downscale", 1))
+    if n > 1:  # smaller renders and cheaper steps; the camera's size keys each render (cache.view_key)
+        made.cameras = made.cameras.scaled(1.0 / n)
+    return made

@@ -1,0 +1,95 @@
+"""--augment.view-downscale: the additional views rendered and trained smaller than the input views."""
+
+import dataclasses
+from dataclasses import asdict
+
+import pytest
+import torch
+
+from nerf2gs_plugin.augment.cache import cache_key
+from nerf2gs_plugin.augment.datamanager import AugmentConfig, AugmentedDataManager, Reference
+from nerf2gs_plugin.datamanagers.full_image import FullImageDataManagerConfig
+from nerf2gs_plugin.errors import ConfigError
+
+
+class SizeRecorder:
+    """A stand-in reference: a grey render at the camera's size, recording each size asked for."""
+
+    def __init__(self):
+        self.sizes = []
+
+    def __call__(self, camera):
+        h, w = int(camera.height[0]), int(camera.width[0])
+        self.sizes.append((h, w))
+        return {"rgb": torch.full((h, w, 3), 0.3), "depth": torch.ones(h, w, 1), "accumulation": torch.ones(h, w, 1)}
+
+
+def _augmented(data, root, cfg, render):
+    dm = FullImageDataManagerConfig().setup(data=data, device="cpu")
+    AugmentedDataManager(dm, Reference(render, "ref:vd", root), cfg)
+    return dm
+
+
+def test_half_size_views_render_and_cache_under_their_own_keys(tiny_scene, tmp_path):
+    cfg = AugmentConfig(delta_h=2.0, min_coverage=0.0, composites=False)
+    full_r, half_r = SizeRecorder(), SizeRecorder()
+    full = _augmented(tiny_scene, tmp_path, cfg, full_r)
+    half = _augmented(tiny_scene, tmp_path, dataclasses.replace(cfg, view_downscale=2), half_r)
+    h, w = full.train_images.hw(0)
+    assert full_r.sizes and set(full_r.sizes) == {(h, w)}
+    # every additional view rendered at half the width and height (none of the full-size store reused)
+    assert len(half_r.sizes) == len(full_r.sizes) and set(half_r.sizes) == {(round(h / 2), round(w / 2))}
+    assert half.extra_images.hw(0) == (round(h / 2), round(w / 2)) and half.train_images.hw(0) == (h, w)
+    cams, big = half.extra_images.cameras, full.extra_images.cameras
+    assert torch.allclose(cams.fx, big.fx / 2) and torch.allclose(cams.cx, big.cx / 2)
+    entries = sorted(p.name for p in (tmp_path / "augment_cache").iterdir() if p.name != "views")
+    assert len(entries) == 2  # one entry per size
+    assert len(list((tmp_path / "augment_cache" / "views").glob("*.json"))) == 2 * len(full_r.sizes)
+    # each size again: nothing rendered, each from its own entry
+    again = SizeRecorder()
+    _augmented(tiny_scene, tmp_path, dataclasses.replace(cfg, view_downscale=2), again)
+    _augmented(tiny_scene, tmp_path, cfg, again)
+    assert again.sizes == []
+
+
+def test_the_input_views_size_keeps_the_entries_written_before_the_option(tiny_scene):
+    dm = FullImageDataManagerConfig().setup(data=tiny_scene, device="cpu")
+    cams = dm.train_images.cameras
+    plain = asdict(AugmentConfig())
+    before = {k: v for k, v in plain.items() if k != "view_downscale"}
+    assert cache_key("r", "d", plain, cams, cams, "none") == cache_key("r", "d", before, cams, cams, "none")
+    assert cache_key("r", "d", {**plain, "view_downscale": 2}, cams, cams, "none") != cache_key("r", "d", plain, cams, cams, "none")
+
+
+def test_a_target_trains_on_views_of_another_size(tiny_scene, tmp_path):
+    from nerf2gs_plugin.engine.trainer import Trainer
+    from nerf2gs_plugin.registry import get_method
+
+    def train(method, out, steps, **kw):
+        cfg = dataclasses.replace(get_method(method).config, data=tiny_scene, output_dir=out, max_num_iterations=steps,
+                                  steps_per_eval_image=0, progress=False, timestamp="run", seed=3, **kw)
+        t = Trainer(cfg)
+        t.setup()
+        return t, t.train()
+
+    _, ref = train("voxel-grid", tmp_path / "ref", 20)
+    trainer, _ = train("splatfacto", tmp_path / "tgt", 12, augment_from=ref,
+                       augment=AugmentConfig(delta_h=2.0, min_coverage=0.0, view_downscale=2, confidence="footprint",
+                                                     real_only_from=1.0))
+    dm = trainer.pipeline.datamanager
+    assert dm.extra_images.hw(0) != dm.train_images.hw(0)
+    # both sizes are drawn (extra views are about half the samples) and the model stayed finite
+    drawn = [dm.next_train(s)[1]["image_idx"] for s in range(12)]
+    n = len(dm.train_images)
+    assert any(int(i) >= n for i in drawn) and any(int(i) < n for i in drawn)
+    assert all(bool(torch.isfinite(p).all()) for p in trainer.pipeline.model.parameters())
+
+
+@pytest.mark.parametrize("bad", [0, -1])
+def test_a_bad_view_downscale_is_refused(bad):
+    from nerf2gs_plugin.engine.validate import check_trainer_config
+    from nerf2gs_plugin.registry import get_method
+
+    cfg = dataclasses.replace(get_method("splatfacto").config, augment=AugmentConfig(view_downscale=bad))
+    with pytest.raises(ConfigError, match="--augment.view-downscale"):
+        check_trainer_config(cfg)
