@@ -3,6 +3,8 @@ up, the metric scale, and the bird's-eye views its augmentation trained on (when
 
 from __future__ import annotations
 
+import dataclasses
+
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Optional
@@ -52,7 +54,8 @@ def trained_birds_eye(config: Any, dataset: Optional[str], train: Cameras, up: T
     aug = getattr(config, "augment", None)
     if config is None or getattr(config, "augment_from", None) is None or aug is None or not aug.extra_views:
         return None, ""
-    made = additional_views(train, _World(up, units_per_metre), aug)
+    # at the capture's size whatever size the run trained them at (--augment.view-downscale): the render's own --downscale sets it
+    made = additional_views(train, _World(up, units_per_metre), dataclasses.replace(aug, view_downscale=1))
     if made is None:
         return None, ""
     try:

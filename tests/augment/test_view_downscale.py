@@ -93,3 +93,15 @@ def test_a_bad_view_downscale_is_refused(bad):
     cfg = dataclasses.replace(get_method("splatfacto").config, augment=AugmentConfig(view_downscale=bad))
     with pytest.raises(ConfigError, match="--augment.view-downscale"):
         check_trainer_config(cfg)
+
+
+def test_the_birds_eye_render_path_keeps_the_captures_size(tiny_scene):
+    from types import SimpleNamespace
+
+    from nerf2gs_plugin.render.scene import trained_birds_eye
+
+    dm = FullImageDataManagerConfig().setup(data=tiny_scene, device="cpu")
+    td, cams = dm.train_data, dm.train_images.cameras
+    config = SimpleNamespace(augment_from=tiny_scene / "no-such-run", augment=AugmentConfig(view_downscale=2))
+    path, _ = trained_birds_eye(config, None, cams, td.up, 1.0 / td.metres_per_unit)
+    assert path is not None and torch.equal(path.width, cams.width) and torch.equal(path.height, cams.height)
