@@ -81,3 +81,19 @@ def test_frames_are_scored_at_the_downscale_the_run_trained_at():
     cfg = apply_plain(get_method("splatfacto").config, ov, where="test")
     assert sl.run_downscale(cfg) == 2.0
     assert sl.run_downscale(get_method("splatfacto").config) == 1.0
+
+
+def test_the_synthetic_street_trains_a_variant_s_steps_factor(monkeypatch, tmp_path):
+    import nerf2gs_bench.paper as paper
+
+    plans = []
+
+    def fake_plan(plan, data, runs_root, log=None, name=""):
+        plans.extend(plan)
+        return {s.label: {"results": {"street": {"psnr": 20.0}}} for s in plan}
+
+    monkeypatch.setattr(paper, "run_plan", fake_plan)
+    sl.synthetic(tmp_path, tmp_path, ["view-downscale 2, input samples matched"], seeds=(42,))
+    steps = {s.label: s.overrides["max_num_iterations"] for s in plans if s.method == "splatfacto"}
+    base = sl.SYNTHETIC_STEPS["splatfacto"]
+    assert steps == {"target, seed 42": base, "view-downscale 2, input samples matched, seed 42": round(base * 1.8)}
