@@ -469,7 +469,7 @@ class AugmentedDataManager(DataManager):
         if self.augment.seed_points <= 0 or self.views.extra is None or self.views.manifest is None:
             return None
         return views_seed_points(self.views.manifest, self.views.extra, self.reference.depth_along, self.inner.train_data,
-                                 self.augment.seed_points, self.augment.seed_points_per_family)
+                                 self.augment.seed_points, self.augment.seed_points_per_family, self.augment.view_downscale)
 
     @property
     def manifest(self) -> CacheManifest:

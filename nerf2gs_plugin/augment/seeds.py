@@ -24,12 +24,14 @@ from nerf2gs_plugin.utils.voxels import unique_cells
 MIN_SEED_BASE = 1000
 """The count of points ``--augment.seed-points`` multiplies when the capture has fewer sparse points."""
 PIXEL_STRIDE = 2
-"""Every this many pixels of a view (in each direction) are lifted: the grid thins them far more anyway."""
+"""Every this many pixels of a view of the input views' size (in each direction) are lifted: the grid thins
+them far more anyway. A view rendered smaller (``--augment.view-downscale``) is lifted more densely, so that
+the grid finds as many points on the same surfaces."""
 
 
 def lifted_points(cameras: Cameras, depths: Sequence[Tensor], images: Sequence[Tensor], depth_along: str,
-                  scene_box: Optional[Tensor] = None) -> tuple[Tensor, Tensor]:
-    """World points ``[P, 3]`` and colours ``[P, 3]`` (0-1) of every ``PIXEL_STRIDE``-th pixel of each view
+                  scene_box: Optional[Tensor] = None, stride: int = PIXEL_STRIDE) -> tuple[Tensor, Tensor]:
+    """World points ``[P, 3]`` and colours ``[P, 3]`` (0-1) of every ``stride``-th pixel of each view
     (``depths`` ``[H, W, 1]``, ``images`` ``[H, W, 3]``), inside ``scene_box`` ``[2, 3]`` (what lies beyond it,
     the far background, is no place for a primitive)."""
     pts, cols = [], []
@@ -37,7 +39,7 @@ def lifted_points(cameras: Cameras, depths: Sequence[Tensor], images: Sequence[T
         d, img = depths[i].float(), images[i].float()
         h, w = d.shape[:2]
         keep = torch.zeros(h, w, dtype=torch.bool)
-        keep[::PIXEL_STRIDE, ::PIXEL_STRIDE] = True
+        keep[::stride, ::stride] = True
         keep &= torch.isfinite(d[..., 0]) & (d[..., 0] > 0)
         p = lift(d, cameras[i].to("cpu"), depth_along).float()[keep.reshape(-1)]
         pts.append(p)
@@ -80,11 +82,12 @@ def seed_points(xyz: Tensor, rgb: Tensor, occupied: Optional[Tensor], max_points
 
 
 def views_seed_points(manifest: Any, extra: Any, depth_along: str, train_data: Any, ratio: float,
-                      per_family: bool = False) -> Optional[tuple[Tensor, Tensor]]:
+                      per_family: bool = False, view_downscale: int = 1) -> Optional[tuple[Tensor, Tensor]]:
     """:func:`seed_points` of a cache entry's additional views (``manifest``: their depths beside the raw
     renders; ``extra``: the ImageSet the target trains on), at most ``ratio`` x the dataset's sparse points
     (at least :data:`MIN_SEED_BASE`); None when the entry has no depths (a reference that renders none).
-    ``per_family``: each family's views in turn on their own grid and budget, clear of the points before."""
+    ``per_family``: each family's views in turn on their own grid and budget, clear of the points before.
+    ``view_downscale``: the views' size is 1/this of the input views' (see :data:`PIXEL_STRIDE`)."""
     depth_files = [manifest.extra_png(j, raw=True).with_name(f"{j:05d}_depth.npy") for j in range(manifest.num_extra)]
     if not depth_files or not all(f.is_file() for f in depth_files):
         return None
@@ -98,7 +101,8 @@ def views_seed_points(manifest: Any, extra: Any, depth_along: str, train_data: A
     for family in dict.fromkeys(families):
         ids = [j for j, f in enumerate(families) if f == family]
         xyz, rgb = lifted_points(cams[torch.tensor(ids)] if len(ids) < len(images) else cams, [depths[j] for j in ids],
-                                 [images[j] for j in ids], depth_along, train_data.scene_box)
+                                 [images[j] for j in ids], depth_along, train_data.scene_box,
+                                 max(1, PIXEL_STRIDE // max(int(view_downscale), 1)))
         pts, cols = seed_points(xyz, rgb, occupied, budget)
         out_xyz.append(pts)
         out_rgb.append(cols)

@@ -52,6 +52,17 @@ def test_half_size_views_render_and_cache_under_their_own_keys(tiny_scene, tmp_p
     assert again.sizes == []
 
 
+def test_half_size_views_seed_about_as_many_points(tiny_scene, tmp_path):
+    counts = {}
+    for n in (1, 2):
+        dm = FullImageDataManagerConfig().setup(data=tiny_scene, device="cpu")
+        aug = AugmentedDataManager(dm, Reference(SizeRecorder(), "ref:vd", tmp_path),
+                                   AugmentConfig(delta_h=2.0, min_coverage=0.0, composites=False, view_downscale=n))
+        counts[n] = len(aug.initial_points()[0])
+    # the smaller views are lifted more densely: the same surfaces, about the same points
+    assert counts[1] > 0 and abs(counts[2] - counts[1]) <= 0.2 * counts[1]
+
+
 def test_the_input_views_size_keeps_the_entries_written_before_the_option(tiny_scene):
     dm = FullImageDataManagerConfig().setup(data=tiny_scene, device="cpu")
     cams = dm.train_images.cameras
