@@ -63,6 +63,24 @@ def test_half_size_views_seed_about_as_many_points(tiny_scene, tmp_path):
     assert counts[1] > 0 and abs(counts[2] - counts[1]) <= 0.2 * counts[1]
 
 
+def test_an_image_conditioned_enhancer_gets_its_reference_at_the_view_s_size(tiny_scene, tmp_path):
+    seen = []
+
+    class ShapeEnhancer:
+        def enhance(self, rgb, reference=None):
+            seen.append((tuple(rgb.shape), tuple(reference.shape)))
+            return rgb
+
+        def cache_key(self):
+            return "shape"
+
+    dm = FullImageDataManagerConfig().setup(data=tiny_scene, device="cpu")
+    AugmentedDataManager(dm, Reference(SizeRecorder(), "ref:vd", tmp_path),
+                         AugmentConfig(delta_h=2.0, min_coverage=0.0, composites=False, view_downscale=2), ShapeEnhancer())
+    h, w = dm.train_images.hw(0)
+    assert seen and all(r == v == (round(h / 2), round(w / 2), 3) for v, r in seen)
+
+
 def test_the_input_views_size_keeps_the_entries_written_before_the_option(tiny_scene):
     dm = FullImageDataManagerConfig().setup(data=tiny_scene, device="cpu")
     cams = dm.train_images.cameras
