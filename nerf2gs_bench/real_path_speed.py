@@ -40,7 +40,9 @@ class RealPathOptions:
     streetnerf_steps: Optional[int] = None
     """None: StreetNeRF's default."""
     splatfacto_steps: Optional[int] = None
-    """None: Splatfacto's default."""
+    """None: Splatfacto's default (its whole schedule rescaled otherwise, as ns2gs-train --steps)."""
+    view_downscale: int = 1
+    """The views from above rendered and trained at 1/N size (--augment.view-downscale)."""
     warm_start: bool = True
     """StreetNeRF continues from the masks' reference (its first steps are the reference's)."""
     render_downscale: Optional[int] = None
@@ -86,7 +88,8 @@ class Stages:
 
 def stem(opts: RealPathOptions) -> str:
     """The results' name: one per capture, the stand-in's the plain one."""
-    return f"{STEM}_{opts.capture}" if opts.capture else STEM
+    name = f"{STEM}_{opts.capture}" if opts.capture else STEM
+    return f"{name}_view_downscale{opts.view_downscale}" if opts.view_downscale > 1 else name
 
 
 def make_capture(root: Path, opts: RealPathOptions) -> tuple[Path, float, float]:
@@ -135,11 +138,13 @@ def real_capture_video(root: Path, opts: RealPathOptions) -> tuple[Path, float, 
     return write_video(Path(root) / f"{cap.name}.avi", frames, transform=shaped), cap.fov_deg, cap.camera_height
 
 
-def _trainer_config(method: str, data: Path, run_dir: Path, steps: Optional[int], **kw):
+def _trainer_config(method: str, data: Path, run_dir: Path, steps: Optional[int], augment_changes: Optional[dict] = None, **kw):
     from nerf2gs_plugin.registry import get_method
 
     spec = get_method(method)
     cfg = spec.with_steps(steps) if steps else spec.config
+    if augment_changes:
+        kw["augment"] = dataclasses.replace(cfg.augment, **augment_changes)
     return dataclasses.replace(cfg, data=data, run_dir=run_dir, steps_per_eval_image=0, progress=False, **kw)
 
 
@@ -194,7 +199,8 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
     sn = _train(stages, "StreetNeRF", _trainer_config("streetnerf", data, root / "streetnerf", opts.streetnerf_steps,
                                                       warm_start=ref if opts.warm_start else None))
     _train(stages, "Splatfacto + NeRF views: training", _trainer_config("splatfacto", data, root / "splatfacto-nerf-views",
-                                                                        opts.splatfacto_steps, augment_from=sn),
+                                                                        opts.splatfacto_steps, augment_from=sn,
+                                                                        augment_changes={"view_downscale": opts.view_downscale}),
            setup_part="Splatfacto + NeRF views: reference renders")
     doc["masks_coverage"] = summary.get("coverage")
     record(final=True)
@@ -235,7 +241,8 @@ def results_md(doc: dict) -> str:
              f"load average at the end {doc.get('load_average')}.",
              f"{_source(doc)}; masks' reference {o['reference_steps']} steps, StreetNeRF "
              f"{o['streetnerf_steps'] or 'default'} steps ({'warm-started from the masks reference' if o['warm_start'] else 'from scratch'}), "
-             f"Splatfacto {o['splatfacto_steps'] or 'default'} steps with NeRF views; masks' renders at 1/{_downscale(doc):g}; "
+             f"Splatfacto {o['splatfacto_steps'] or 'default'} steps with NeRF views"
+             f"{'' if o.get('view_downscale', 1) == 1 else ' (the views from above at 1/%d size)' % o['view_downscale']}; masks' renders at 1/{_downscale(doc):g}; "
              f"StreetNeRF renders with {doc.get('streetnerf_render_nerf_samples') or 'all'} fine samples per ray. "
              f"Registered {doc.get('registered', '?')}/{o['frames']}.", "",
              "CPU seconds are user + system of the bench's process (one thread: the time the stage takes alone on one "

@@ -106,3 +106,22 @@ def test_paper_preset_and_the_old_name_resolve_to_one_config(name, tmp_path):
     assert to_plain(plain) == to_plain(dataclasses.replace(spec.config, data=tmp_path, max_num_iterations=7))
     with pytest.raises(ConfigError, match="unknown preset 'gpu'.*paper"):
         parse_args([name, "--preset", "gpu", *flags])
+
+
+def test_steps_rescales_the_whole_schedule_and_flags_apply_on_top(tmp_path):
+    """``--steps N`` is the method at N steps with its schedule rescaled (as a bench's ``with_steps``);
+    ``--max-num-iterations`` after it still wins, a bad N is refused naming the flag."""
+    from nerf2gs_plugin.cli.train import parse_args
+    from nerf2gs_plugin.utils.config import to_plain
+
+    spec = registry.get_method("splatfacto")
+    cfg, _ = parse_args(["splatfacto", "--steps", "4200", "--data", str(tmp_path)])
+    assert to_plain(cfg) == to_plain(dataclasses.replace(spec.with_steps(4200), data=tmp_path))
+    strategy = cfg.pipeline.model.strategy
+    assert cfg.max_num_iterations == 4200 and strategy.stop_split_at == round(spec.config.pipeline.model.strategy.stop_split_at * 1.4)
+    paper, _ = parse_args(["splatfacto", "--preset", "paper", "--steps=600", "--data", str(tmp_path), "--max-num-iterations", "500"])
+    assert paper.max_num_iterations == 500
+    assert to_plain(paper.pipeline) == to_plain(spec.preset("paper").with_steps(600).pipeline)  # preset first, then rescaled
+    for bad in ("0", "-3", "many"):
+        with pytest.raises(ConfigError, match="--steps.*positive whole number"):
+            parse_args(["splatfacto", "--steps", bad, "--data", str(tmp_path)])

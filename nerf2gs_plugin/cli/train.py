@@ -1,4 +1,4 @@
-"""ns2gs-train <method> [--preset NAME] --data DATA [--augment-from REF [--baseline RUN]] [--pipeline.model.x ...]"""
+"""ns2gs-train <method> [--preset NAME] [--steps N] --data DATA [--augment-from REF [--baseline RUN]] [--pipeline.model.x ...]"""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import tyro
 
 from nerf2gs_plugin.cli.common import exit_on_sigterm, run_cli
 from nerf2gs_plugin.engine.trainer import Trainer, TrainerConfig
-from nerf2gs_plugin.registry import discover_methods, report_failures
+from nerf2gs_plugin.registry import MethodSpecification, discover_methods, report_failures
 
 
 BASELINE_FLAG = "--baseline"
@@ -20,6 +20,10 @@ BASELINE_HELP = ("With --augment-from REF, --baseline RUN names the target train
 
 PRESET_FLAG = "--preset"
 PRESET_HELP = "--preset NAME (before the method's flags take effect): the method at that scale, e.g. paper (for a GPU)."
+
+STEPS_FLAG = "--steps"
+STEPS_HELP = ("--steps N (after --preset, before the method's flags): N training steps with every step-valued schedule "
+              "(densification, SH degree, learning-rate decay) rescaled with them; --max-num-iterations changes the length alone.")
 
 
 def pop_option(argv: list[str], flag: str, what: str) -> tuple[list[str], Optional[str]]:
@@ -48,6 +52,18 @@ def pop_baseline(argv: list[str]) -> tuple[list[str], Optional[Path]]:
     such field): (the rest, RUN or None)."""
     rest, baseline = pop_option(argv, BASELINE_FLAG, "a run folder")
     return rest, None if baseline is None else Path(baseline)
+
+
+def _positive_steps(value: str) -> int:
+    from nerf2gs_plugin.errors import ConfigError
+
+    try:
+        steps = int(value)
+    except ValueError:
+        steps = 0
+    if steps <= 0:
+        raise ConfigError(f"must be a positive whole number of steps, got {value!r}", STEPS_FLAG)
+    return steps
 
 
 def train(config: TrainerConfig, baseline: Optional[Path] = None) -> None:
@@ -99,6 +115,9 @@ def parse_args(args: list[str]) -> tuple[TrainerConfig, Optional[Path]]:
     argv, preset = pop_option(args, PRESET_FLAG, "a preset name (e.g. paper)")
     if preset is not None and argv and argv[0] in specs:  # the method's defaults at that scale; its flags apply on top
         specs[argv[0]] = specs[argv[0]].preset(preset)
+    argv, steps = pop_option(argv, STEPS_FLAG, "a number of steps")
+    if steps is not None and argv and argv[0] in specs:  # the schedule rescaled first, so the method's flags apply on top
+        specs[argv[0]] = MethodSpecification(specs[argv[0]].with_steps(_positive_steps(steps)), specs[argv[0]].description)
     argv, baseline = pop_baseline(argv)
     if baseline is not None and not baseline.exists():
         from nerf2gs_plugin.errors import DataError
@@ -108,7 +127,7 @@ def parse_args(args: list[str]) -> tuple[TrainerConfig, Optional[Path]]:
     descriptions = {name: spec.description for name, spec in specs.items()}
     union = tyro.extras.subcommand_type_from_defaults(defaults=configs, descriptions=descriptions)
     config = tyro.cli(tyro.conf.FlagConversionOff[union], args=argv,
-                      description=f"Train a method (nerf2gs). {PRESET_HELP} {BASELINE_HELP}")
+                      description=f"Train a method (nerf2gs). {PRESET_HELP} {STEPS_HELP} {BASELINE_HELP}")
     return config, baseline
 
 

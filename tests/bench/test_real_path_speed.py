@@ -63,6 +63,7 @@ def test_a_real_capture_becomes_a_video_of_its_first_frames_at_the_stand_ins_pix
     opts = RealPathOptions(capture="kitti", data_root=tmp_path / "data", frames=10, width=48, height=36)
     video, fov, height = make_capture(tmp_path / "work", opts)
     assert (fov, height) == (81.0, 1.65) and stem(opts) == "real_path_speed_kitti" and stem(RealPathOptions()) == "real_path_speed"
+    assert stem(RealPathOptions(capture="kitti", view_downscale=2)) == "real_path_speed_kitti_view_downscale2"
     cap, frames = cv2.VideoCapture(str(video)), []
     while True:
         ok, frame = cap.read()
