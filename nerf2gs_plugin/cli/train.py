@@ -22,8 +22,9 @@ PRESET_FLAG = "--preset"
 PRESET_HELP = "--preset NAME (before the method's flags take effect): the method at that scale, e.g. paper (for a GPU)."
 
 STEPS_FLAG = "--steps"
-STEPS_HELP = ("--steps N (after --preset, before the method's flags): N training steps with every step-valued schedule "
-              "(densification, SH degree, learning-rate decay) rescaled with them; --max-num-iterations changes the length alone.")
+STEPS_HELP = ("--steps N: N training steps with every step-valued schedule (densification, SH degree, learning-rate "
+              "decay) rescaled with them, applied after --preset and before the method's flags wherever it is written; "
+              "--max-num-iterations changes the length alone.")
 
 
 def pop_option(argv: list[str], flag: str, what: str) -> tuple[list[str], Optional[str]]:

@@ -44,6 +44,10 @@ def test_results_state_machine_options_and_total(tmp_path):
     md = (tmp_path / "real_path_speed.md").read_text()
     assert "Machine: " in md and "| StreetNeRF | 110.0 | 120.0 |" in md and "160 (2.7 min)" in md
     assert "warm-started from the masks reference" in md and "100/100" in md
+    doc["options"] = asdict(RealPathOptions(capture="kitti", view_downscale=2, splatfacto_steps=4200))
+    write_results(tmp_path, doc)  # the half-size views' path lands beside the default's, not over it
+    md = (tmp_path / "real_path_speed_kitti_view_downscale2.md").read_text()
+    assert "Splatfacto 4200 steps with NeRF views (the views from above at 1/2 size)" in md
 
 
 def test_a_real_capture_becomes_a_video_of_its_first_frames_at_the_stand_ins_pixel_count(tmp_path):
