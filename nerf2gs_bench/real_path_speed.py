@@ -187,7 +187,7 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
     stages = Stages(on_stage=record)
     report = stages.run("process (frames, SfM)", lambda: process_capture(video, data, opts.frames, fov, cam_height, sfm_threads))
     log(f"[bench] process: {report.registered}/{report.frames} registered")
-    doc["registered"] = report.registered
+    doc["registered"], doc["frames_used"] = report.registered, report.frames  # a capture may hold fewer than --frames
     stages.run("masks: first reference", lambda: ensure_reference(data, ref, opts.reference_steps, progress=False, log=log))
     down = {} if opts.render_downscale is None else {"render_downscale": opts.render_downscale}
     summary = stages.run("masks: mask maths", lambda: make_masks(MasksConfig(
@@ -244,7 +244,7 @@ def results_md(doc: dict) -> str:
              f"Splatfacto {o['splatfacto_steps'] or 'default'} steps with NeRF views"
              f"{'' if o.get('view_downscale', 1) == 1 else ' (the views from above at 1/%d size)' % o['view_downscale']}; masks' renders at 1/{_downscale(doc):g}; "
              f"StreetNeRF renders with {doc.get('streetnerf_render_nerf_samples') or 'all'} fine samples per ray. "
-             f"Registered {doc.get('registered', '?')}/{o['frames']}.", "",
+             f"Registered {doc.get('registered', '?')}/{doc.get('frames_used', o['frames'])}.", "",
              "CPU seconds are user + system of the bench's process (one thread: the time the stage takes alone on one "
              "core); wall seconds depend on the machine's other load.", "",
              "| stage | CPU s | wall s |", "|---|---|---|"]
@@ -267,7 +267,7 @@ def _sfm_threads(doc: dict) -> str:
 def _source(doc: dict) -> str:
     o = doc["options"]
     if o.get("capture"):
-        return (f"Real capture: {o['capture']}'s first {o['frames']} frames as a video at {doc.get('video_size', '?')} "
+        return (f"Real capture: {o['capture']}'s first {doc.get('frames_used', o['frames'])} frames as a video at {doc.get('video_size', '?')} "
                 f"(the pixel count of {o['width']}x{o['height']})")
     return (f"Stand-in: the synthetic street (seed {o['street_seed']}{', movers' if o['movers'] else ''}) at {o['width']}x{o['height']}, "
             "its forward drive as a video")

@@ -48,6 +48,10 @@ def test_results_state_machine_options_and_total(tmp_path):
     write_results(tmp_path, doc)  # the half-size views' path lands beside the default's, not over it
     md = (tmp_path / "real_path_speed_kitti_view_downscale2.md").read_text()
     assert "Splatfacto 4200 steps with NeRF views (the views from above at 1/2 size)" in md
+    doc["frames_used"], doc["registered"] = 53, 46  # a capture shorter than --frames says how many it had
+    write_results(tmp_path, doc)
+    md = (tmp_path / "real_path_speed_kitti_view_downscale2.md").read_text()
+    assert "kitti's first 53 frames" in md and "Registered 46/53." in md
 
 
 def test_a_real_capture_becomes_a_video_of_its_first_frames_at_the_stand_ins_pixel_count(tmp_path):
