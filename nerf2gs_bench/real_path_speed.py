@@ -188,6 +188,7 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
     report = stages.run("process (frames, SfM)", lambda: process_capture(video, data, opts.frames, fov, cam_height, sfm_threads))
     log(f"[bench] process: {report.registered}/{report.frames} registered")
     doc["registered"], doc["frames_used"] = report.registered, report.frames  # a capture may hold fewer than --frames
+    doc["kept"] = json.loads((data / "transforms.json").read_text()).get("process", {}).get("kept")  # after the capture check
     stages.run("masks: first reference", lambda: ensure_reference(data, ref, opts.reference_steps, progress=False, log=log))
     down = {} if opts.render_downscale is None else {"render_downscale": opts.render_downscale}
     summary = stages.run("masks: mask maths", lambda: make_masks(MasksConfig(
@@ -244,7 +245,8 @@ def results_md(doc: dict) -> str:
              f"Splatfacto {o['splatfacto_steps'] or 'default'} steps with NeRF views"
              f"{'' if o.get('view_downscale', 1) == 1 else ' (the views from above at 1/%d size)' % o['view_downscale']}; masks' renders at 1/{_downscale(doc):g}; "
              f"StreetNeRF renders with {doc.get('streetnerf_render_nerf_samples') or 'all'} fine samples per ray. "
-             f"Registered {doc.get('registered', '?')}/{doc.get('frames_used', o['frames'])}.", "",
+             f"Registered {doc.get('registered', '?')}/{doc.get('frames_used', o['frames'])}"
+             f"{'' if doc.get('kept') in (None, doc.get('registered')) else ', %s kept by the capture check' % doc['kept']}.", "",
              "CPU seconds are user + system of the bench's process (one thread: the time the stage takes alone on one "
              "core); wall seconds depend on the machine's other load.", "",
              "| stage | CPU s | wall s |", "|---|---|---|"]

@@ -52,6 +52,9 @@ def test_results_state_machine_options_and_total(tmp_path):
     write_results(tmp_path, doc)
     md = (tmp_path / "real_path_speed_kitti_view_downscale2.md").read_text()
     assert "kitti's first 53 frames" in md and "Registered 46/53." in md
+    doc["kept"] = 40  # the capture check kept a stretch: said beside SfM's count
+    write_results(tmp_path, doc)
+    assert "Registered 46/53, 40 kept by the capture check." in (tmp_path / "real_path_speed_kitti_view_downscale2.md").read_text()
 
 
 def test_a_real_capture_becomes_a_video_of_its_first_frames_at_the_stand_ins_pixel_count(tmp_path):
