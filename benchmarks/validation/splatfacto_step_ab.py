@@ -5,10 +5,10 @@ CPU ms a step (time.process_time: run it with OMP_NUM_THREADS=1).
 Usage: python benchmarks/validation/splatfacto_step_ab.py ROOT OUT --start S --steps N [--before-csrc DIR]
 (ROOT: a real-path-speed run folder with capture/ and streetnerf/, the views in its view store)."""
 import argparse
-import time
 from pathlib import Path
 
 from nerf2gs_bench.real_path_speed import _trainer_config
+from nerf2gs_bench.step_ab import interleaved_step_cpu
 from nerf2gs_plugin.engine.model import Model
 from nerf2gs_plugin.engine.trainer import Trainer
 from nerf2gs_plugin.methods.splatfacto.model import SplatfactoModel
@@ -44,14 +44,6 @@ def use(after: bool) -> None:
 use(True)
 for step in range(args.start):
     trainer.train_step(step)
-cpu = {"after": 0.0, "before": 0.0}
-for b, s0 in enumerate(range(args.start, args.start + args.steps, block)):
-    which = "after" if b % 4 in (0, 3) else "before"
-    use(which == "after")
-    c0 = time.process_time()
-    for step in range(s0, s0 + block):
-        trainer.train_step(step)
-    cpu[which] += time.process_time() - c0
-per = {k: round(2000 * v / args.steps, 1) for k, v in cpu.items()}
-print(f"steps {args.start}-{args.start + args.steps}: CPU ms a step {per}, after/before {cpu['after'] / cpu['before']:.3f}, "
+per = interleaved_step_cpu(trainer, use, args.start, args.steps, block)
+print(f"steps {args.start}-{args.start + args.steps}: CPU ms a step { {k: round(v, 1) for k, v in per.items()} }, after/before {per['after'] / per['before']:.3f}, "
       f"{trainer.pipeline.model.num_primitives()} Gaussians")

@@ -61,6 +61,7 @@ from nerf2gs_plugin.datamanagers.image_set import ImageSet
 from nerf2gs_plugin.errors import ConfigError
 from nerf2gs_plugin.utils.model_output import check_range
 from nerf2gs_plugin.utils.parallel import render_ahead
+from nerf2gs_plugin.utils.resize import area_resize
 from nerf2gs_plugin.warn import warn
 
 RenderFn = Callable[[Cameras], dict[str, Tensor]]
@@ -186,14 +187,6 @@ def _warped_source(out: dict[str, Tensor], camera: Cameras, train: ImageSet, ren
                             clear_mask(train.mask("transient", k), *train.hw(k)), depth_along)
 
 
-def _at_size(img: Tensor, hw: tuple[int, int]) -> Tensor:
-    """``img`` ``[h, w, C]`` area-resized to ``hw`` (an input view as the reference image of an additional
-    view rendered smaller: ``--augment.view-downscale``); itself when it has that size."""
-    if tuple(img.shape[:2]) == tuple(hw):
-        return img
-    return F.interpolate(img.permute(2, 0, 1)[None].float(), size=tuple(hw), mode="area")[0].permute(1, 2, 0)
-
-
 def _extra_confidence(out: dict[str, Tensor], camera: Cameras, vis: Optional[_Visibility], config: AugmentConfig,
                       scene_box: Optional[Tensor], depth_along: str) -> Tensor:
     """``[H, W, 1]`` loss weight of one additional view's pixels: the visibility confidence (1 without one),
@@ -314,7 +307,7 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
                 if getattr(enhancer, "reference_kind", "image") == "warped":
                     src = _warped_source(out, bev[j], train, render_fn, {} if partial else renders, source_depths, depth_along)
                 else:
-                    src = _at_size(train.image(sources[j] if sources is not None else j * max(config.every_n, 1)).cpu(), rgb.shape[:2])
+                    src = area_resize(train.image(sources[j] if sources is not None else j * max(config.every_n, 1)).cpu(), rgb.shape[:2])
                 rgb = check_range(enhancer.enhance(rgb, reference=src), 0.0, 1.0, getattr(enhancer, "path", "enhancer"),
                                   f"enhanced bird's-eye view {j}")
             save_png(work / "extra" / f"{k:05d}.png", rgb)

@@ -16,13 +16,13 @@ from pathlib import Path
 from typing import Callable, Iterable, Optional
 
 import torch
-import torch.nn.functional as F
 from torch import Tensor
 
 from nerf2gs_plugin.masks import from_renders as fr
 from nerf2gs_plugin.masks.auto import AutoOptions, FrameMasks, Renders, masks_from_renders
 from nerf2gs_plugin.errors import CheckpointError, ConfigError
 from nerf2gs_plugin.utils.parallel import cpu_seconds, render_ahead
+from nerf2gs_plugin.utils.resize import area_resize
 
 MAX_PLANE_POINTS = 50_000  # RANSAC on a random subset of the rendered surface points
 
@@ -190,8 +190,7 @@ def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[
                 # the motion route measures flow on the whole frame: small movers vanish at half size
                 full = {"full_image": img, "full_intr": _intrinsics(d.cameras[i : i + 1]), "step": int(render_downscale)}
                 img = img[pixels].reshape(h, w, -1)  # the same pixels as the render
-            if tuple(img.shape[:2]) != (h, w):
-                img = F.interpolate(img.permute(2, 0, 1)[None], size=(h, w), mode="area")[0].permute(1, 2, 0)
+            img = area_resize(img, (h, w))
             views[s].append({"rgb": out["rgb"].cpu(), "depth": out["depth"][..., 0].cpu(), "acc": out["accumulation"][..., 0].cpu(),
                              "dirs": rays.directions.reshape(h, w, 3).cpu(), "origin": rays.origins[0].cpu(), "image": img,
                              "c2w": cam.camera_to_worlds[0].cpu(), "intr": _intrinsics(cam), "name": d.image_filenames[i].name, **full})

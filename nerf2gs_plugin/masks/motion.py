@@ -41,6 +41,7 @@ from torch import Tensor
 
 from nerf2gs_plugin.masks import from_renders as fr
 from nerf2gs_plugin.masks.temporal import keep_flow, persistent
+from nerf2gs_plugin.utils.parallel import map_ahead
 
 Intrinsics = tuple[float, float, float, float]  # fx, fy, cx, cy (pixel centres at +0.5)
 
@@ -396,14 +397,17 @@ def grow_regions(seeds: Tensor, image: Tensor, opts: MotionOptions) -> Tensor:
     return fr.clean_regions(m, max(4, int(opts.min_region_frac * h * w)), close_px=max(1, round(0.01 * min(h, w))))
 
 
+def _outlined(m: Tensor, image: Tensor, opts: MotionOptions) -> Tensor:
+    """Regions outlined by :func:`outline`, then cleaned as :func:`grow_regions` cleans them."""
+    h, w = m.shape
+    return fr.clean_regions(outline(m, image, opts.outline_ring), max(4, int(opts.min_region_frac * h * w)),
+                            close_px=max(1, round(0.01 * min(h, w))))
+
+
 def _regions(m: Tensor, image: Tensor, opts: MotionOptions) -> Tensor:
     """A frame's moving pixels -> its regions: grown (:func:`grow_regions`), then outlined (:func:`outline`)."""
     m = grow_regions(m, image, opts)
-    if opts.outline:
-        h, w = m.shape
-        m = fr.clean_regions(outline(m, image, opts.outline_ring), max(4, int(opts.min_region_frac * h * w)),
-                             close_px=max(1, round(0.01 * min(h, w))))
-    return m
+    return _outlined(m, image, opts) if opts.outline else m
 
 
 def motion_masks(frames: Sequence[MotionFrame], opts: MotionOptions, progress: Optional[Callable[[], None]] = None,
@@ -416,8 +420,6 @@ def motion_masks(frames: Sequence[MotionFrame], opts: MotionOptions, progress: O
     depends on the sequence alone, so the masks are those of one frame after another). One frame
     ahead is kept in memory (its seeds and flows), not the sequence; ``flows_out`` receives each
     frame's observed flows into the frames just before and after (``masks/temporal.keep_flow``)."""
-    from nerf2gs_plugin.utils.parallel import map_ahead
-
     greys = [grey(f.image) for f in frames]
     seeds: dict[int, Tensor] = {}
     flows: dict[int, dict[int, Tensor]] = {}
@@ -463,8 +465,6 @@ def frames_from_renders(views: Sequence[dict], sky: Sequence[Tensor], up: Tensor
     """The reference's renders (``render_views``: image, rgb, depth, c2w, intr) as a motion sequence:
     the rendered depth, the sky at infinity, clamped to the ground plane; the residual of the
     image against the render, after the residual route's colour fit (frames spread over the cores)."""
-    from nerf2gs_plugin.utils.parallel import map_ahead
-
     def static(k: int) -> tuple[Tensor, Optional[Tensor], Optional[Tensor]]:
         v, s = views[k], sky[k]
         dist = torch.where(s, torch.full_like(v["depth"], math.inf), v["depth"].float())
@@ -527,18 +527,12 @@ def settle_transients(renders, result: dict, kept: dict, opts: MotionOptions, lo
     :func:`add_motion`): each frame's regions outlined once more (``outline``), then those that no frame
     just before or after confirms dropped (``persist``, ``masks/temporal.py``)."""
     from nerf2gs_plugin.progress import make_progress
-    from nerf2gs_plugin.utils.parallel import map_ahead
-
     order = kept["order"]
     masks = [result[s][i].transient for _, s, i in order]
     if opts.outline:
         def again(k: int) -> Tensor:
             (_, s, i), m = order[k], masks[k]
-            if not bool(m.any()):
-                return m
-            h, w = m.shape
-            return fr.clean_regions(outline(m, renders.views[s][i]["image"], opts.outline_ring),
-                                    max(4, int(opts.min_region_frac * h * w)), close_px=max(1, round(0.01 * min(h, w))))
+            return _outlined(m, renders.views[s][i]["image"], opts) if bool(m.any()) else m
 
         masks = list(map_ahead(again, range(len(masks))))  # one frame per core
     if opts.persist > 0:

@@ -22,6 +22,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from nerf2gs_plugin.utils.parallel import map_ahead
+
 CONFIRM_SEEN = 0.25
 """A neighbour that sees this share of a region may confirm it (a mover leaving the frame: the frame after
 sees only part of it), though only those that see half of it can drop it."""
@@ -79,8 +81,6 @@ def persistent(masks: Sequence[Tensor], flows: Sequence[dict[int, Tensor]], pers
     frame ``i`` into ``j``, kept by :func:`keep_flow`) without the regions that no neighbour in
     ``flows[i]`` confirms (:func:`confirmed_regions`, its ring ``ring_frac`` of the shorter side); the
     frames spread over the cores (``utils/parallel.map_ahead``, ``workers``)."""
-    from nerf2gs_plugin.utils.parallel import map_ahead
-
     def check(i: int) -> Tensor:
         m = masks[i]
         ring = max(1, int(round(ring_frac * min(m.shape))))

@@ -3,9 +3,7 @@ up, the metric scale, and the bird's-eye views its augmentation trained on (when
 
 from __future__ import annotations
 
-import dataclasses
-
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Optional
 
@@ -55,7 +53,7 @@ def trained_birds_eye(config: Any, dataset: Optional[str], train: Cameras, up: T
     if config is None or getattr(config, "augment_from", None) is None or aug is None or not aug.extra_views:
         return None, ""
     # at the capture's size whatever size the run trained them at (--augment.view-downscale): the render's own --downscale sets it
-    made = additional_views(train, _World(up, units_per_metre), dataclasses.replace(aug, view_downscale=1))
+    made = additional_views(train, _World(up, units_per_metre), replace(aug, view_downscale=1))
     if made is None:
         return None, ""
     try:

@@ -9,11 +9,11 @@ from typing import Optional
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from torch import Tensor
 
 from nerf2gs_plugin.cameras import Cameras
 from nerf2gs_plugin.render.colorize import colorize, to_uint8  # noqa: F401  (colorize: the viewer's modes)
+from nerf2gs_plugin.utils.resize import area_resize
 
 # Colour code of the paper's Fig. 1: red input views, green additional views; eval views as in its
 # dataset figure (yellow bird's-eye evaluation views).
@@ -35,7 +35,7 @@ def thumbnail(image: Tensor, max_side: int) -> np.ndarray:
     s = min(1.0, max_side / max(h, w))
     if s < 1.0:
         size = (max(1, round(h * s)), max(1, round(w * s)))
-        image = F.interpolate(image.permute(2, 0, 1)[None].float(), size=size, mode="area")[0].permute(1, 2, 0)
+        image = area_resize(image, size)
     return to_uint8(image)
 
 
