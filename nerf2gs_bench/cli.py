@@ -1,5 +1,5 @@
 """ns2gs-bench demo | quick | paper-table | ablation | speed-quality | stability | model-size | raster | field | faults | real |
-real-photos | real-captures | real-path-speed | street-level | scale | blocks
+real-photos | real-captures | real-path-speed | street-level | scale | blocks | render-fps | paper-scale-real
 
 Results (JSON + Markdown + PNG, with the machine) go to benchmarks/results/; trained runs are kept
 under benchmarks/runs/ and reused when nothing that matters changed. ``demo`` (what make demo runs)
@@ -270,6 +270,50 @@ class Raster:
 
 
 @dataclass
+class RenderFps:
+    """Splat render speed at a display resolution (1920x1080 by default): forward FPS and one
+    forward+backward of 3DGS and 2DGS at several model sizes (``render_fps_<device>.*``)."""
+
+    device: Literal["cpu", "cuda"] = "cpu"
+    width: int = 1920
+    height: int = 1080
+    counts: tuple[int, ...] = (100_000, 500_000, 1_000_000, 3_000_000)
+    """3DGS model sizes (primitives)."""
+    surfel_counts: tuple[int, ...] = (100_000, 500_000, 1_000_000)
+    """2DGS model sizes (primitives)."""
+    out: Path = RESULTS
+
+    def main(self) -> None:
+        from nerf2gs_bench.render_fps import markdown, run
+
+        print(markdown(run(self.out, self.device, self.width, self.height, self.counts, self.surfel_counts)))
+
+
+@dataclass
+class PaperScaleReal:
+    """StreetNeRF's paper preset on a processed real capture within a wall-clock budget, beside the default
+    StreetNeRF on the same device (``paper_scale_real_<name>.*``; for a GPU)."""
+
+    data: Path
+    """A processed capture (``ns2gs-data process`` output, masks included where made)."""
+    budget_s: float = 240.0
+    """Wall seconds for the paper preset's training (a probe sets its steps)."""
+    device: str = "auto"
+    name: Optional[str] = None
+    """Results name (default: the capture folder's name)."""
+    with_default: bool = True
+    """Also train the default (CPU-scale) StreetNeRF on the same device."""
+    out: Path = RESULTS
+    runs: Path = RUNS
+
+    def main(self) -> None:
+        from nerf2gs_bench.paper_scale_real import markdown, run
+
+        print(markdown(run(self.data, self.out, self.runs, self.budget_s, device=self.device, name=self.name,
+                           with_default=self.with_default)))
+
+
+@dataclass
 class Field:
     """Hash-grid encoding speed: cpu extension vs torch reference."""
 
@@ -474,7 +518,7 @@ class Blocks:
 def main() -> None:
     cmd = tyro.extras.subcommand_cli_from_dict(
         {"demo": Demo, "quick": Quick, "paper-table": PaperTable, "ablation": Ablation, "speed-quality": SpeedQuality,
-         "stability": Stability, "model-size": ModelSize, "raster": Raster, "field": Field, "faults": Faults,
+         "stability": Stability, "model-size": ModelSize, "raster": Raster, "render-fps": RenderFps, "paper-scale-real": PaperScaleReal, "field": Field, "faults": Faults,
          "real": Real, "real-photos": RealPhotos, "real-captures": RealCaptures, "real-path-speed": RealPathSpeed,
          "street-level": StreetLevel, "scale": Scale, "blocks": Blocks},
         description=__doc__,

@@ -41,8 +41,8 @@ class RealPathOptions:
     """None: StreetNeRF's default."""
     splatfacto_steps: Optional[int] = None
     """None: Splatfacto's default (its whole schedule rescaled otherwise, as ns2gs-train --steps)."""
-    view_downscale: int = 1
-    """The views from above rendered and trained at 1/N size (--augment.view-downscale)."""
+    view_downscale: Optional[int] = None
+    """The views from above rendered and trained at 1/N size (--augment.view-downscale; None: its default)."""
     warm_start: bool = True
     """StreetNeRF continues from the masks' reference (its first steps are the reference's)."""
     render_downscale: Optional[int] = None
@@ -89,7 +89,7 @@ class Stages:
 def stem(opts: RealPathOptions) -> str:
     """The results' name: one per capture, the stand-in's the plain one."""
     name = f"{STEM}_{opts.capture}" if opts.capture else STEM
-    return f"{name}_view_downscale{opts.view_downscale}" if opts.view_downscale > 1 else name
+    return f"{name}_view_downscale{opts.view_downscale}" if (opts.view_downscale or 1) > 1 else name
 
 
 def make_capture(root: Path, opts: RealPathOptions) -> tuple[Path, float, float]:
@@ -201,7 +201,8 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
                                                       warm_start=ref if opts.warm_start else None))
     _train(stages, "Splatfacto + NeRF views: training", _trainer_config("splatfacto", data, root / "splatfacto-nerf-views",
                                                                         opts.splatfacto_steps, augment_from=sn,
-                                                                        augment_changes={"view_downscale": opts.view_downscale}),
+                                                                        augment_changes={} if opts.view_downscale is None
+                                                                        else {"view_downscale": opts.view_downscale}),
            setup_part="Splatfacto + NeRF views: reference renders")
     doc["masks_coverage"] = summary.get("coverage")
     record(final=True)
@@ -243,7 +244,7 @@ def results_md(doc: dict) -> str:
              f"{_source(doc)}; masks' reference {o['reference_steps']} steps, StreetNeRF "
              f"{o['streetnerf_steps'] or 'default'} steps ({'warm-started from the masks reference' if o['warm_start'] else 'from scratch'}), "
              f"Splatfacto {o['splatfacto_steps'] or 'default'} steps with NeRF views"
-             f"{'' if o.get('view_downscale', 1) == 1 else ' (the views from above at 1/%d size)' % o['view_downscale']}; masks' renders at 1/{_downscale(doc):g}; "
+             f"{'' if o.get('view_downscale') in (None, 1) else ' (the views from above at 1/%d size)' % o['view_downscale']}; masks' renders at 1/{_downscale(doc):g}; "
              f"StreetNeRF renders with {doc.get('streetnerf_render_nerf_samples') or 'all'} fine samples per ray. "
              f"Registered {doc.get('registered', '?')}/{doc.get('frames_used', o['frames'])}"
              f"{'' if doc.get('kept') in (None, doc.get('registered')) else ', %s kept by the capture check' % doc['kept']}.", "",

@@ -78,12 +78,18 @@ VARIANTS: dict[str, dict] = {
     "extra_decay + drop_outside_box + sky_alpha 0": {"augment": {"extra_decay": True, "drop_outside_box": True},
                                                      "model": {"sky_alpha_weight": 0.0}},
 }
-"""Label -> the augment overrides of a Splatfacto run (no ``augment`` key: the target alone) and
+"""Label -> the augment overrides of a Splatfacto run (no ``augment`` key: the target alone), over
+:data:`FULL_SIZE` (the levers were measured against views at the input views' size and the bench's steps), and
 ``model``: overrides of its model config (the sky / far levers live there); ``optimizers``: of its
 optimizers' configs; ``steps_factor``: the run
 trains this many times the bench's steps (1.8: the input views get as many samples as the target
 alone's, where the views from above take about half of the samples until the last 10% of the run; 1.4 with
 ``view_downscale`` 2: Splatfacto's CPU time of the default's, a step on a half-size view costing less)."""
+
+
+FULL_SIZE = {"view_downscale": 1, "step_factor": 1.0}
+"""Under every variant's augment overrides: the views at the input views' size, the run at the bench's steps
+(``steps_factor`` sets its length), as before the product's half-size views and longer run."""
 
 
 def variant_overrides(base: dict, variant: dict) -> dict:
@@ -256,7 +262,7 @@ def run(captures: Sequence[str], from_runs: Path, runs_root: Path, out_dir: Path
                 v_steps = int(round(steps * v.get("steps_factor", 1.0)))
                 overrides = variant_overrides({**run_overrides(opts, "splatfacto", v_steps), "seed": seed}, v)
                 spec = RunSpec(label, "splatfacto", overrides, augment_from="StreetNeRF" if "augment" in v else None,
-                               augment={"delta_h": aug.delta_h, "theta_pitch": aug.theta_pitch, **v.get("augment", {})})
+                               augment={"delta_h": aug.delta_h, "theta_pitch": aug.theta_pitch, **FULL_SIZE, **v.get("augment", {})})
                 log(f"[street-level] {name}: {label}, seed {seed}")
                 out = runner.run(spec, ref.data, reference=(ref.run_dir, ref.key) if "augment" in v else None)
                 if failure_reason(out) is not None:
@@ -357,7 +363,8 @@ def synthetic(data: Path, runs_root: Path, variants: Sequence[str], seeds: Seque
         steps = int(round(SYNTHETIC_STEPS["splatfacto"] * v.get("steps_factor", 1.0)))
         plan += [RunSpec(f"{label}, seed {seed}", "splatfacto",
                          variant_overrides({**step_overrides("splatfacto", steps), "seed": seed}, v),
-                         augment_from="StreetNeRF" if "augment" in v else None, augment=v.get("augment", {})) for seed in seeds]
+                         augment_from="StreetNeRF" if "augment" in v else None,
+                         augment={**FULL_SIZE, **v["augment"]} if "augment" in v else {}) for seed in seeds]
     results = run_plan(plan, Path(data), Path(runs_root), log=log, name=STEM)
     out: dict[str, dict] = {}
     for label in [TARGET] + [v for v in variants if v != TARGET]:

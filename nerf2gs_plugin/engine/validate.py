@@ -50,6 +50,8 @@ def check_trainer_config(cfg: Any) -> None:
         raise ConfigError(f"must be >= 1, got {aug.every_n}", "--augment.every-n")
     if not (isinstance(aug.view_downscale, int) and aug.view_downscale >= 1):
         raise ConfigError(f"must be a whole number >= 1, got {aug.view_downscale}", "--augment.view-downscale")
+    if not (math.isfinite(aug.step_factor) and aug.step_factor > 0):
+        raise ConfigError(f"must be > 0, got {aug.step_factor}", "--augment.step-factor")
     if aug.extra_prob is not None and not 0 <= aug.extra_prob <= 1:
         raise ConfigError(f"must be in [0, 1], got {aug.extra_prob}", "--augment.extra-prob")
     check_given_shares(aug)

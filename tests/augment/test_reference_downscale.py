@@ -26,7 +26,7 @@ def test_reference_at_other_downscale(tiny_scene, tmp_path):
     from tiny_scene import write_tiny_scene
 
     _, ref = _train(tiny_scene, tmp_path / "ref", downscale=2.0)
-    aug = AugmentConfig(delta_h=1.0, composites=False, min_coverage=0.0)  # a 2-step reference sees little
+    aug = AugmentConfig(delta_h=1.0, composites=False, min_coverage=0.0, view_downscale=1)  # a 2-step reference sees little
     t, _ = _train(tiny_scene, tmp_path / "tgt", downscale=1.0, augment_from=ref, augment=aug)
     dm = t.pipeline.datamanager
     extra = dm.views.extra

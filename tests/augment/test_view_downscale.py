@@ -1,4 +1,5 @@
-"""--augment.view-downscale: the additional views rendered and trained smaller than the input views."""
+"""--augment.view-downscale: the additional views rendered and trained smaller than the input views; and
+--augment.step-factor: the longer run that the smaller views pay for."""
 
 import dataclasses
 from dataclasses import asdict
@@ -31,7 +32,7 @@ def _augmented(data, root, cfg, render):
 
 
 def test_half_size_views_render_and_cache_under_their_own_keys(tiny_scene, tmp_path):
-    cfg = AugmentConfig(delta_h=2.0, min_coverage=0.0, composites=False)
+    cfg = AugmentConfig(delta_h=2.0, min_coverage=0.0, composites=False, view_downscale=1)
     full_r, half_r = SizeRecorder(), SizeRecorder()
     full = _augmented(tiny_scene, tmp_path, cfg, full_r)
     half = _augmented(tiny_scene, tmp_path, dataclasses.replace(cfg, view_downscale=2), half_r)
@@ -84,7 +85,7 @@ def test_an_image_conditioned_enhancer_gets_its_reference_at_the_view_s_size(tin
 def test_the_input_views_size_keeps_the_entries_written_before_the_option(tiny_scene):
     dm = FullImageDataManagerConfig().setup(data=tiny_scene, device="cpu")
     cams = dm.train_images.cameras
-    plain = asdict(AugmentConfig())
+    plain = asdict(AugmentConfig(view_downscale=1))
     before = {k: v for k, v in plain.items() if k != "view_downscale"}
     assert cache_key("r", "d", plain, cams, cams, "none") == cache_key("r", "d", before, cams, cams, "none")
     assert cache_key("r", "d", {**plain, "view_downscale": 2}, cams, cams, "none") != cache_key("r", "d", plain, cams, cams, "none")
@@ -102,9 +103,16 @@ def test_a_target_trains_on_views_of_another_size(tiny_scene, tmp_path):
         return t, t.train()
 
     _, ref = train("voxel-grid", tmp_path / "ref", 20)
-    trainer, _ = train("splatfacto", tmp_path / "tgt", 12, augment_from=ref,
-                       augment=AugmentConfig(delta_h=2.0, min_coverage=0.0, view_downscale=2, confidence="footprint",
-                                                     real_only_from=1.0))
+    trainer, run_dir = train("splatfacto", tmp_path / "tgt", 12, augment_from=ref,
+                             augment=AugmentConfig(delta_h=2.0, min_coverage=0.0, view_downscale=2, confidence="footprint",
+                                                   real_only_from=1.0, step_factor=1.5))
+    # 12 x 1.5 steps, the schedule with them; the saved config is the run as trained (a reload does not scale again)
+    assert trainer.step + 1 == trainer.config.max_num_iterations == 18
+    assert trainer.config.optimizers["means"].max_steps == 18
+    from nerf2gs_plugin.runs.load import load_run
+
+    saved = load_run(run_dir).config
+    assert saved.max_num_iterations == 18 and saved.augment.step_factor == 1.0
     dm = trainer.pipeline.datamanager
     assert dm.extra_images.hw(0) != dm.train_images.hw(0)
     # both sizes are drawn (extra views are about half the samples) and the model stayed finite
@@ -134,3 +142,30 @@ def test_the_birds_eye_render_path_keeps_the_captures_size(tiny_scene):
     config = SimpleNamespace(augment_from=tiny_scene / "no-such-run", augment=AugmentConfig(view_downscale=2))
     path, _ = trained_birds_eye(config, None, cams, td.up, 1.0 / td.metres_per_unit)
     assert path is not None and torch.equal(path.width, cams.width) and torch.equal(path.height, cams.height)
+
+
+def test_the_step_factor_lengthens_only_an_augmented_run():
+    from nerf2gs_plugin.engine.trainer import augmented_length
+    from nerf2gs_plugin.registry import get_method
+
+    base = get_method("splatfacto").config
+    assert AugmentConfig().step_factor == 1.4 and AugmentConfig().view_downscale == 2  # the measured defaults
+    assert augmented_length(base) is base  # no --augment-from: the method's own length
+    from pathlib import Path
+
+    cfg = dataclasses.replace(base, augment_from=Path("ref"), max_num_iterations=3000)
+    longer = augmented_length(cfg)
+    assert longer.max_num_iterations == 4200 and longer.augment.step_factor == 1.0
+    assert longer.pipeline.model.strategy.refine_every > 0  # rescaled with the run, not removed
+    same = augmented_length(dataclasses.replace(cfg, augment=AugmentConfig(step_factor=1.0)))
+    assert same.max_num_iterations == 3000
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan")])
+def test_a_bad_step_factor_is_refused(bad):
+    from nerf2gs_plugin.engine.validate import check_trainer_config
+    from nerf2gs_plugin.registry import get_method
+
+    cfg = dataclasses.replace(get_method("splatfacto").config, augment=AugmentConfig(step_factor=bad))
+    with pytest.raises(ConfigError, match="--augment.step-factor"):
+        check_trainer_config(cfg)

@@ -16,7 +16,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("runner",),  # training, evaluating and writing a bench's results
     ("paper", "speed_quality", "size", "stability", "raster", "field", "faults", "faults_capture", "real", "real_photos", "scale",
      "capture_truth", "capture_compare",
-     "blocks", "enhancer", "demo", "plans", "motion_product"),  # plans: the validation studies' runner
+     "blocks", "enhancer", "demo", "plans", "motion_product", "render_fps", "paper_scale_real"),  # plans: the validation studies' runner
     ("real_captures", "real_path_speed"),  # each capture through the real-photos bench; the path timed (on a capture too)
     ("street_level",),  # levers of the augmentation on the real captures' runs
     ("cli",),

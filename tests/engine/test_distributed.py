@@ -49,6 +49,8 @@ def _config(method, data, out, *, ranks=1, batches=1, steps=STEPS, **kw):
             stop_screen_size_at=100)))
     else:  # streetnerf: a small ray batch
         pipe = dataclasses.replace(pipe, datamanager=dataclasses.replace(pipe.datamanager, rays_per_batch=256))
+    # CPU ranks whatever the machine: these compare ranks with one process, and a one-GPU machine has no GPU for rank 1
+    kw.setdefault("device", "cpu")
     return dataclasses.replace(cfg, data=data, output_dir=out, max_num_iterations=steps, steps_per_save=4,
                                keep_all_checkpoints=True, steps_per_eval_image=0, progress=False, timestamp="run",
                                pipeline=pipe, machine=MachineConfig(num_devices=ranks, batches_per_rank=batches), **kw)

@@ -217,7 +217,7 @@ def test_augmentation_feeds_each_birds_eye_view_its_reference(tiny_scene, tiny_r
     dm = FullImageDataManagerConfig().setup(data=tiny_scene, device="cpu")
     train = dm.train_images
     world = SimpleNamespace(up=torch.tensor([0.0, 0.0, 1.0]), metres_to_world=lambda m: m / 10)  # delta-h 3 m: 0.3 units
-    cfg = AugmentConfig(composites=False, delta_h=3.0, min_coverage=0.0, use_cache=False)
+    cfg = AugmentConfig(composites=False, delta_h=3.0, min_coverage=0.0, use_cache=False, view_downscale=1)
     with torch.no_grad():
         default, warped = _Recorder("image"), _Recorder("warped")
         v1 = render_augmented_views(train, world, run.model.render_camera, "ref:a", "d", tmp_path, cfg, default, depth_along="ray")
