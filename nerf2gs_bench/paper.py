@@ -136,7 +136,7 @@ def run_plan(plan: list[RunSpec], data: Path, runs_root: Path, log: Optional[Cal
     done: dict[str, tuple[Path, str]] = {}
     results: dict[str, dict] = {}
     with make_progress() as progress:
-        bar = BenchProgress(progress, name, [planned_steps(s.method, s.overrides) for s in plan])
+        bar = BenchProgress(progress, name, [planned_steps(s.method, s.overrides, s.augment if s.augment_from else None) for s in plan])
         log = log or progress_log(progress, BenchLog(runs_root, name))
         runner = BenchRunner(runs_root, log=log, rerun=rerun)
         for i, spec in enumerate(plan):

@@ -219,11 +219,16 @@ def progress_log(progress, log_file: BenchLog) -> Callable[[str], None]:
     return log_file
 
 
-def planned_steps(method: str, overrides: dict) -> int:
-    """Training steps of a run: its method's config with the overrides applied."""
+def planned_steps(method: str, overrides: dict, augment: Optional[dict] = None) -> int:
+    """Training steps of a run: its method's config with the overrides applied (``augment``: the
+    ``--augment.*`` of a run trained with NeRF views, whose step factor lengthens it)."""
+    from nerf2gs_plugin.engine.trainer import augmented_steps
     from nerf2gs_plugin.registry import get_method
 
-    return int(apply_plain(get_method(method).config, overrides, where=f"bench run of {method}").max_num_iterations)
+    config = apply_plain(get_method(method).config, overrides, where=f"bench run of {method}")
+    if augment is not None:
+        config = apply_plain(config, {"augment_from": "reference", "augment": augment}, where=f"bench run of {method}")
+    return int(augmented_steps(config))
 
 
 class BenchProgress:

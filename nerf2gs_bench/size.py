@@ -240,7 +240,7 @@ def run(plan: list[RunSpec], data: Path, runs_root: Path, out_dir: Path, scale: 
     """Train/evaluate the sweep (failures recorded, not fatal), write model_size.{json,md,png}."""
     rows, done = [], {}
     with make_progress() as progress:
-        bar = BenchProgress(progress, "model-size", [planned_steps(s.method, s.overrides) for s in plan])
+        bar = BenchProgress(progress, "model-size", [planned_steps(s.method, s.overrides, s.augment if s.augment_from else None) for s in plan])
         log = progress_log(progress, BenchLog(runs_root, "model_size"))
         runner = BenchRunner(runs_root, log=log, rerun=rerun)
         # the same runs evaluated on the validation views, where the dataset has them (asked once, not per run)

@@ -299,7 +299,7 @@ def run(plan: list[StressCase], data: Path, runs_root: Path, out_dir: Path, scal
     method x stress stops at its first failure; write stability.{json,md,png}; returns the payload."""
     log_file = BenchLog(runs_root, "stability")
     with make_progress() as progress:
-        bar = BenchProgress(progress, "stability", [planned_steps(c.method, c.overrides) for c in plan])
+        bar = BenchProgress(progress, "stability", [planned_steps(c.method, c.overrides, {} if c.reference_overrides is not None else None) for c in plan])
         logger = log or progress_log(progress, log_file)
         runner = BenchRunner(runs_root, log=logger, rerun=rerun)
 

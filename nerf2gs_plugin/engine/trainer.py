@@ -54,6 +54,13 @@ def pick_device(name: str = "auto") -> torch.device:
     return torch.device(name)
 
 
+def augmented_steps(config: TrainerConfig) -> int:
+    """The steps a run trains: with ``--augment-from``, ``--augment.step-factor`` times its configured steps."""
+    if config.augment_from is None:
+        return config.max_num_iterations
+    return max(1, round(config.max_num_iterations * config.augment.step_factor))
+
+
 def augmented_length(config: TrainerConfig) -> TrainerConfig:
     """With ``--augment-from``, the config at ``--augment.step-factor`` times its steps (every schedule
     rescaled), the factor then recorded as applied (1), so the saved config.yml is the run as trained."""
@@ -62,7 +69,7 @@ def augmented_length(config: TrainerConfig) -> TrainerConfig:
         return config
     from nerf2gs_plugin.utils.schedule import with_steps
 
-    steps = max(1, round(config.max_num_iterations * factor))
+    steps = augmented_steps(config)
     if collectives.rank() == 0:
         print(f"with NeRF views: {steps} steps ({config.max_num_iterations} x {factor:g}, schedule rescaled; "
               f"--augment.step-factor 1 keeps {config.max_num_iterations})", flush=True)

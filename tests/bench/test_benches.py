@@ -435,3 +435,12 @@ def test_model_overrides_merge_nested_fields():
     assert model_overrides([]) == {}
     assert model_overrides(["strategy.max_gaussians=8000", "strategy.prune_weight_fraction=0.2", "depth_loss_weight=0"]) == {
         "pipeline": {"model": {"strategy": {"max_gaussians": 8000, "prune_weight_fraction": 0.2}, "depth_loss_weight": 0}}}
+
+
+def test_a_bench_plans_an_augmented_run_at_its_step_factor():
+    """The bench's progress bar counts the steps each run trains: a run with NeRF views trains longer."""
+    from nerf2gs_bench.runner import planned_steps
+
+    assert planned_steps("splatfacto", {"max_num_iterations": 700}) == 700
+    assert planned_steps("splatfacto", {"max_num_iterations": 700}, {"delta_h": 3.0}) == 980
+    assert planned_steps("splatfacto", {"max_num_iterations": 700}, {"step_factor": 1.0}) == 700
