@@ -156,7 +156,7 @@ def cache_key(ref_key: str, dataset: str, config: dict[str, Any], bev: Optional[
         relevant.pop("confidence_footprint_ratio", None)
     if relevant.get("view_downscale", 1) == 1:  # the input views' size: the entries of runs before the option
         relevant.pop("view_downscale", None)
-    for off in ("delta_h_spread", "theta_pitch_spread", "drop_outside_box", "composite_agree_tol"):  # off: the entries of runs before the option
+    for off in ("delta_h_spread", "theta_pitch_spread", "drop_outside_box"):  # off: the entries of runs before the option
         if not relevant.get(off):
             relevant.pop(off, None)
     h = hashlib.sha1()

@@ -111,35 +111,12 @@ def composite_weight(mask: Tensor, dilate_px: int = 0, feather_px: int = 0) -> T
     return m[0].permute(1, 2, 0)
 
 
-AGREE_WINDOW_PX = 5
-"""Side of the box over which a photo and the reference's render are compared before pasting."""
-
-
-def composite_share(real: Tensor, render: Tensor, mask: Tensor, dilate_px: int = 0, feather_px: int = 0,
-                    agree_tol: float = 0.0) -> Tensor:
-    """``[H,W,1]`` share of each pixel taken from ``render``: :func:`composite_weight`, and with ``agree_tol`` > 0
-    none where the photo already looks like the render (mean absolute RGB difference over a small box below
-    ``agree_tol``): a masked pixel the static reference renders as photographed shows no mover, so the
-    photo is kept there (a mask that also takes static street then costs it no real pixels)."""
-    m = composite_weight(mask, dilate_px, feather_px)
-    if agree_tol > 0:
-        diff = (real - render).abs().mean(-1)[None, None]
-        diff = F.avg_pool2d(diff, AGREE_WINDOW_PX, 1, AGREE_WINDOW_PX // 2, count_include_pad=False)[0, 0, ..., None]
-        m = torch.where(diff < agree_tol, torch.zeros_like(m), m)
-    return m
-
-
-def composite(real: Tensor, render: Tensor, mask: Tensor, dilate_px: int = 0, feather_px: int = 0,
-              agree_tol: float = 0.0) -> Tensor:
+def composite(real: Tensor, render: Tensor, mask: Tensor, dilate_px: int = 0, feather_px: int = 0) -> Tensor:
     """Real image with the masked pixels taken from ``render``. ``real``/``render`` ``[H,W,3]``,
     ``mask`` ``[H,W,1]`` bool. Pixels outside the (dilated, feathered) mask are exactly ``real``, so
-    ``render`` is read only where :func:`composite_weight` is > 0 (see :func:`composite_share`)."""
-    return paste(real, render, composite_share(real, render, mask, dilate_px, feather_px, agree_tol))
-
-
-def paste(real: Tensor, render: Tensor, share: Tensor) -> Tensor:
-    """``real`` with ``share`` ``[H,W,1]`` of each pixel from ``render``; exactly ``real`` where it is 0."""
-    return torch.where(share > 0, real * (1 - share) + render * share, real)
+    ``render`` is read only where :func:`composite_weight` is > 0."""
+    m = composite_weight(mask, dilate_px, feather_px)
+    return torch.where(m > 0, real * (1 - m) + render * m, real)
 
 
 @dataclass
@@ -275,14 +252,13 @@ def _render_entry(work: Path, train: ImageSet, bev: Optional[Cameras], render_fn
         vis = _Visibility(train, depths_z, config, depth_along) if with_conf else None
         for i in comp_idx:
             mask = train.mask("transient", i).cpu()
-            real = train.image(i).cpu()
-            share = composite_share(real, renders[i]["rgb"], mask, config.dilate_px, config.feather_px, config.composite_agree_tol)
-            comp = paste(real, renders[i]["rgb"], share)
+            comp = composite(train.image(i).cpu(), renders[i]["rgb"], mask, config.dilate_px, config.feather_px)
             save_png(work / "composites" / f"{i:05d}.png", comp)
             if config.confidence in ("unseen", "footprint"):  # a painted pixel is what its own photo could not show: kept whole
                 _save_confidence(confidence_path(work / "composites" / f"{i:05d}.png"), torch.ones_like(comp[..., :1]))
             elif vis is not None:  # real pixels weigh 1, painted ones as much as the reference knows them
-                conf = 1.0 - share + share * vis.confidence(renders[i], train.cameras[i])
+                painted = composite(torch.zeros_like(comp), torch.ones_like(comp), mask, config.dilate_px, config.feather_px)[..., :1]
+                conf = 1.0 - painted + painted * vis.confidence(renders[i], train.cameras[i])
                 _save_confidence(confidence_path(work / "composites" / f"{i:05d}.png"), conf)
         inside = inside_box(bev.centers, scene_box) if bev is not None else None
         source_depths: dict[int, Tensor] = {}  # a warped-conditioned enhancer's source views: the reference's depth there

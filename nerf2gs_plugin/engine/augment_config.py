@@ -74,9 +74,6 @@ class AugmentConfig:
     """Grow transient masks by this many pixels before compositing."""
     feather_px: int = 0
     """Soften the composite seam over this many pixels (0 = hard mask)."""
-    composite_agree_tol: float = 0.0
-    """Keep the photo where it already looks like the reference's render (mean absolute RGB difference over a
-    5 px box below this; 0: off): there the mask holds no mover, and imprecise masks then cost no real pixels."""
     extra_views: bool = True
     """Add the additional views (of every family in views) rendered by the reference."""
     views: tuple[str, ...] = ("birds-eye",)

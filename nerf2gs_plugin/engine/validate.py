@@ -42,7 +42,7 @@ def check_trainer_config(cfg: Any) -> None:
 
         check_machine_config(cfg.machine)
     aug = cfg.augment
-    for field in ("delta_h", "dilate_px", "feather_px", "extra_weight", "composite_agree_tol"):
+    for field in ("delta_h", "dilate_px", "feather_px", "extra_weight"):
         v = getattr(aug, field)
         if not (math.isfinite(v) and v >= 0):
             raise ConfigError(f"must be >= 0, got {v}", f"--augment.{field.replace('_', '-')}")
