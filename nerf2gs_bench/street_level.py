@@ -65,6 +65,7 @@ VARIANTS: dict[str, dict] = {
     "view-downscale 2": {"augment": {"view_downscale": 2}},
     "view-downscale 2, input samples matched": {"augment": {"view_downscale": 2}, "steps_factor": 1.8},
     "view-downscale 2, CPU matched": {"augment": {"view_downscale": 2}, "steps_factor": 1.4},
+    "view-downscale 2, CPU matched, bev only": {"augment": {"view_downscale": 2, "composites": False}, "steps_factor": 1.4},
     "view-downscale 4": {"augment": {"view_downscale": 4}},
     "extra_decay": {"augment": {"extra_decay": True}},
     "extra_decay floor 0.5": {"augment": {"extra_decay": True, "extra_decay_floor": 0.5}},
