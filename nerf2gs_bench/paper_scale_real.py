@@ -82,13 +82,10 @@ def run(data: Path, out: Path, runs: Path, budget_s: float = 240.0, probe_steps:
     doc = {"data": str(data), "name": name, "device": device, "budget_s": budget_s, "probe_steps": probe_steps,
            "probe_seconds_per_step": rate, "paper_steps_full": PAPER_STEPS, "default_steps": DEFAULT_STEPS,
            "rows": rows, "seconds": time.perf_counter() - t_all, "machine": machine_info()}
-    try:
-        import torch  # noqa: PLC0415
+    import torch  # noqa: PLC0415
 
-        if torch.cuda.is_available():
-            doc["gpu"] = torch.cuda.get_device_name()
-    except ImportError:
-        pass
+    if torch.cuda.is_available():
+        doc["gpu"] = torch.cuda.get_device_name()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / f"paper_scale_real_{name}.json", json.dumps(doc, indent=1, default=str))
