@@ -14,6 +14,7 @@ import os
 import shutil
 import sys
 import threading
+import time
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator, Optional, Sequence
@@ -26,6 +27,7 @@ CFLAGS = ("-O3", "-fopenmp", "-march=native")
 _EXTS: dict[str, Any] = {}
 _FAILED: dict[str, str] = {}
 _LOCK = threading.Lock()
+_BUILD_SECONDS = [0.0]
 
 
 class KernelBuildError(UserError):
@@ -73,10 +75,18 @@ def load_extension(name: str, sources: Sequence[Path], headers: Sequence[Path] =
         return _EXTS[name]
     with _LOCK:
         if name not in _EXTS and name not in _FAILED:
+            t0 = time.perf_counter()
             _build(name, [Path(s) for s in sources], [Path(h) for h in headers], list(extra_cflags))
+            _BUILD_SECONDS[0] += time.perf_counter() - t0
     if name in _FAILED:
         _raise_unless_opted_out(name)
     return _EXTS.get(name)
+
+
+def build_seconds() -> float:
+    """Wall seconds this process has spent compiling or loading kernels: a one-time cost that a
+    training step which first needs a kernel pays, and that timings of training leave out."""
+    return _BUILD_SECONDS[0]
 
 
 def _build(name: str, sources: list[Path], headers: list[Path], cflags: list[str]) -> None:
