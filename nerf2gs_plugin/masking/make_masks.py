@@ -59,6 +59,23 @@ class MasksConfig:
     progress: bool = True
 
 
+def _with_neighbours(data: Path, groups: dict, all_groups: dict, motion: MotionOptions, log: Callable[[str], None]) -> list[str]:
+    """The splits the auto route computes: ``groups``' and, on a sequence the motion route runs on, "train" as
+    well. The route compares each frame with its neighbours in the video; held-out frames alone (every 8th)
+    are seconds apart, and their masks would come from those gaps. Only ``groups``' masks are written; the
+    held-out frames never become the training frames' neighbours unless asked for."""
+    from nerf2gs_plugin.masks.motion import is_sequence
+
+    names = list(groups)
+    if "train" in names or "train" not in all_groups or not motion.enabled:
+        return names
+    meta = json.loads((data / "transforms.json").read_text()) if (data / "transforms.json").is_file() else {}
+    if motion.sequences_only and not is_sequence(meta):
+        return names
+    log(f"masks: {', '.join(names)} with the training frames as the motion route's neighbours (their masks are not written)")
+    return ["train", *names]
+
+
 def _parser_groups(data: Path):
     """Every split's raw frames (original image paths, sizes, distortion), as the parser lists them."""
     from nerf2gs_plugin.data import dataparser_config
@@ -91,7 +108,7 @@ def make_masks(cfg: MasksConfig, log: Callable[[str], None] = print) -> dict:
     if not data.is_dir():
         raise DataError("dataset folder does not exist", data)
     t0 = time.perf_counter()
-    groups = _parser_groups(data)
+    groups = all_groups = _parser_groups(data)
     if cfg.splits:
         unknown = [s for s in cfg.splits if s not in groups]
         if unknown:
@@ -128,7 +145,7 @@ def make_masks(cfg: MasksConfig, log: Callable[[str], None] = print) -> dict:
     if stale:
         log(f"removed {len(stale)} staging folder(s) left in {data} by a masks run that was killed")
     try:
-        _segment(cfg, data, frames, groups, staging, summary, count, log)
+        _segment(cfg, data, frames, groups, staging, summary, count, log, all_groups)
         _install(staging / "masks", data / "masks")
     finally:
         shutil.rmtree(staging, ignore_errors=True)
@@ -149,8 +166,9 @@ def _install(src: Path, dst: Path) -> None:
 
 
 def _segment(cfg: MasksConfig, data: Path, frames: list, groups: dict, out: Path, summary: dict,
-             count: Callable[[dict[str, torch.Tensor]], None], log: Callable[[str], None]) -> None:
-    """Masks of every frame into ``out/masks/<kind>/<stem>.png`` (onnx or auto)."""
+             count: Callable[[dict[str, torch.Tensor]], None], log: Callable[[str], None], all_groups: Optional[dict] = None) -> None:
+    """Masks of every frame of ``groups`` into ``out/masks/<kind>/<stem>.png`` (onnx or auto; ``all_groups``:
+    every split, of which auto takes the training frames as neighbours, below)."""
     if cfg.segmenter.startswith("onnx:"):
         from nerf2gs_plugin.data.images import load_image
         from nerf2gs_plugin.masks.onnx_segmenter import OnnxSegmenter
@@ -189,7 +207,8 @@ def _segment(cfg: MasksConfig, data: Path, frames: list, groups: dict, out: Path
         summary["reference_seconds"] = round(time.perf_counter() - t_ref, 1)
         t_m = time.perf_counter()
         timings: dict = {}
-        result = auto_masks(maskless_view(data), ref, list(groups), cfg.auto, log, cfg.progress, motion=cfg.motion,
+        computed = _with_neighbours(data, groups, all_groups or groups, cfg.motion, log)
+        result = auto_masks(maskless_view(data), ref, computed, cfg.auto, log, cfg.progress, motion=cfg.motion,
                             render_downscale=cfg.render_downscale, stats=timings)
         summary.update(timings)
         for split, fs in groups.items():

@@ -509,3 +509,42 @@ def test_median_compare_is_the_sorted_median_compared(size):
         med = fr.median_filter(x, size)
         assert torch.equal(fr.median_compare(x, t, size), med < t)
         assert torch.equal(fr.median_compare(x, t, size, below=False), med >= t)
+
+
+@pytest.mark.parametrize("sequence, motion_on, splits, expected", [
+    (True, True, ("test",), ["train", "test"]),  # held-out frames alone are seconds apart: train as neighbours
+    (True, True, ("train",), ["train"]),  # the training masks never see the held-out frames
+    (False, True, ("test",), ["test"]),  # photos: the motion route does not run
+    (True, False, ("test",), ["test"]),
+])
+def test_masks_of_held_out_frames_take_the_training_frames_as_neighbours(tmp_path, monkeypatch, sequence, motion_on, splits, expected):
+    """``--splits test`` on a video: the auto route computes the training frames too (the motion route's
+    neighbours), and writes the held-out frames' masks only."""
+    from nerf2gs_plugin.masking import auto_masks, mask_reference
+    from nerf2gs_plugin.masks.motion import MotionOptions
+
+    data = _tiny(tmp_path, "scene")
+    shutil.rmtree(data / "masks")
+    meta = json.loads((data / "transforms.json").read_text())
+    meta["eval_splits"] = {"test": [meta["frames"][-1]["file_path"]]}
+    if sequence:
+        meta["process"] = {"source": "video"}
+    (data / "transforms.json").write_text(json.dumps(meta))
+    seen: list = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_auto(view, reference, names, *a, **k):
+        seen.extend(names)
+        raise Stop
+
+    monkeypatch.setattr(mask_reference, "ensure_reference", lambda *a, **k: tmp_path / "ref")
+    monkeypatch.setattr(auto_masks, "auto_masks", fake_auto)
+    logs: list[str] = []
+    with pytest.raises(Stop):
+        make_masks(MasksConfig(data=data, reference=tmp_path / "ref", splits=splits, progress=False,
+                               motion=MotionOptions(enabled=motion_on)), log=logs.append)
+    assert seen == expected
+    assert any("neighbours" in line for line in logs) == (expected != list(splits))
+    assert not (data / "masks" / "transient").is_dir()  # nothing written before all of them are made

@@ -1,0 +1,110 @@
+"""Static PSNR of held-out frames against hand labels, beside the masks stage's estimate.
+
+``ns2gs-eval`` scores static pixels outside ``masks/transient/<image>.png``; for held-out frames those are
+the masks stage's own estimate (``ns2gs-data masks --splits test``), whose misses count the movers as
+static. This script scores the same runs on a view of the capture whose held-out frames carry hand-drawn
+labels instead (``labels/<name>.json``: 'moving' and 'ignore' polygons both leave the score). The capture's
+frames must be the labels' source frames (``frame_000031.jpg`` <-> key ``000031``), cropped to
+the labels' ``crop_rows`` rows of the source and resized: the real path's capture (``ns2gs-bench real-path-speed
+--capture nuscenes``).
+
+Usage: python benchmarks/validation/static_psnr_hand_labels.py CAPTURE OUT_STEM RUN [RUN ...]
+[--labels nuscenes_moving_heldout] [--estimated CAPTURE_WITH_ALL_MASKS]
+Writes OUT_STEM.{json,md}: per run, PSNR over all pixels, static PSNR on the estimated masks and on the
+hand labels (held-out frames that have both), Gaussians.
+"""
+import argparse
+import json
+import re
+import tempfile
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from nerf2gs_plugin.utils.io import atomic_write_text
+
+LABELS = Path(__file__).parent / "labels"
+
+
+def label_mask(entry: dict, size: tuple[int, int], labels: dict) -> np.ndarray:
+    """The frame's 'moving' and 'ignore' polygons, and the labels' 'ego' polygon (what of the ego car every frame
+    shows), as one uint8 mask (255) at ``size`` (w, h): the labels' frame (the same crop) resized."""
+    lw, lh = labels["size"]
+    sx, sy = size[0] / lw, size[1] / lh
+    m = np.zeros(size[::-1], np.uint8)
+    for polys in [*entry.values(), [labels["ego"]] if labels.get("ego") else []]:
+        for p in polys:
+            q = np.round(np.array(p, np.float64) * [sx, sy]).astype(np.int32)
+            cv2.fillPoly(m, [q], 255)
+    return m
+
+
+def labelled_view(capture: Path, labels: dict, out: Path) -> list[str]:
+    """``out``: the capture's files linked, its masks copied, the labelled frames' transient masks replaced
+    by the labels; returns the labelled image stems."""
+    out.mkdir(parents=True, exist_ok=True)
+    for f in capture.iterdir():
+        if f.name != "masks":
+            (out / f.name).symlink_to(f.resolve())
+    for kind in ("sky", "ground", "transient"):
+        src = capture / "masks" / kind
+        if src.is_dir():
+            (out / "masks" / kind).mkdir(parents=True, exist_ok=True)
+            for m in src.iterdir():
+                (out / "masks" / kind / m.name).symlink_to(m.resolve())
+    stems = []
+    for img in sorted((capture / "images").iterdir()):
+        key = re.search(r"(\d+)$", img.stem)
+        if not key or key.group(1)[-6:] not in labels["frames"]:
+            continue
+        h, w = cv2.imread(str(img)).shape[:2]
+        dst = out / "masks" / "transient" / f"{img.stem}.png"
+        dst.unlink(missing_ok=True)
+        cv2.imwrite(str(dst), label_mask(labels["frames"][key.group(1)[-6:]], (w, h), labels))
+        stems.append(img.stem)
+    return stems
+
+
+def evaluate(run: Path, data: Path | None) -> dict:
+    from nerf2gs_plugin.eval.evaluate import evaluate_run
+    from nerf2gs_plugin.runs.load import load_run
+
+    loaded = load_run(run, device="cpu", data=data)
+    doc = evaluate_run(loaded, ["test"])
+    res = doc["results"]["test"]
+    return {"psnr": res["psnr"], "static_psnr": res["static_psnr"], "static_psnr_images": res["static_psnr_images"],
+            "primitives": doc["size"].get("primitives")}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("capture", type=Path)
+    ap.add_argument("out", type=Path)
+    ap.add_argument("runs", type=Path, nargs="+")
+    ap.add_argument("--labels", default="nuscenes_moving_heldout")
+    ap.add_argument("--estimated", type=Path, help="the same capture with the masks stage's masks of every frame "
+                    "(ns2gs-data masks over all splits); default: CAPTURE's own masks")
+    args = ap.parse_args()
+    labels = json.loads((LABELS / f"{args.labels}.json").read_text())
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        view = Path(tmp) / args.capture.name
+        stems = labelled_view(args.capture, labels, view)
+        for run in args.runs:
+            rows[run.name] = {"estimated": evaluate(run, args.estimated), "hand": evaluate(run, view)}
+            print(run.name, json.dumps(rows[run.name]))
+    doc = {"capture": str(args.capture), "estimated": str(args.estimated or args.capture), "labels": args.labels, "labelled_frames": stems, "runs": rows}
+    atomic_write_text(args.out.with_suffix(".json"), json.dumps(doc, indent=1))
+    lines = [f"# Static PSNR of held-out frames: estimated masks vs hand labels ({args.labels})", "",
+             f"Labelled held-out frames: {', '.join(stems)}.", "",
+             "| run | PSNR (all) | static, estimated masks | static, hand labels | primitives |", "|---|---|---|---|---|"]
+    for name, r in rows.items():
+        e, h = r["estimated"], r["hand"]
+        lines.append(f"| {name} | {e['psnr']:.2f} | {e['static_psnr']:.2f} ({e['static_psnr_images']}) | "
+                     f"{h['static_psnr']:.2f} ({h['static_psnr_images']}) | {e['primitives']} |")
+    atomic_write_text(args.out.with_suffix(".md"), "\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()
