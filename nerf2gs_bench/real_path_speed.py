@@ -52,6 +52,8 @@ class RealPathOptions:
     a video, scaled to the pixel count of --width x --height (aspect kept), with its field of view and camera height."""
     data_root: Optional[Path] = None
     """Where the real captures' folders are (None: real-captures' default, $NERF2GS_REAL_DATA)."""
+    crop_bottom: Optional[float] = None
+    """--capture: the share of each frame's height cut off at the bottom (a bonnet); None: the capture's own."""
 
 
 class Stages:
@@ -89,6 +91,8 @@ class Stages:
 def stem(opts: RealPathOptions) -> str:
     """The results' name: one per capture, the stand-in's the plain one."""
     name = f"{STEM}_{opts.capture}" if opts.capture else STEM
+    if opts.capture and opts.crop_bottom is not None:
+        name += f"_crop{round(100 * opts.crop_bottom)}"
     return f"{name}_view_downscale{opts.view_downscale}" if (opts.view_downscale or 1) > 1 else name
 
 
@@ -128,7 +132,7 @@ def real_capture_video(root: Path, opts: RealPathOptions) -> tuple[Path, float, 
     frames = capture_frames(cap, Path(opts.data_root or default_data_root()))[: opts.frames]
     Path(root).mkdir(parents=True, exist_ok=True)
     h0, w0 = cv2.imread(str(frames[0])).shape[:2]
-    h0 = int(round(h0 * (1 - cap.crop_bottom)))
+    h0 = int(round(h0 * (1 - (cap.crop_bottom if opts.crop_bottom is None else opts.crop_bottom))))
     f = (opts.width * opts.height / (w0 * h0)) ** 0.5
     size = (2 * round(w0 * f / 2), 2 * round(h0 * f / 2))
 
@@ -270,8 +274,9 @@ def _sfm_threads(doc: dict) -> str:
 def _source(doc: dict) -> str:
     o = doc["options"]
     if o.get("capture"):
+        crop = "" if o.get("crop_bottom") is None else f", the bottom {100 * o['crop_bottom']:g}% of each frame cut off"
         return (f"Real capture: {o['capture']}'s first {doc.get('frames_used', o['frames'])} frames as a video at {doc.get('video_size', '?')} "
-                f"(the pixel count of {o['width']}x{o['height']})")
+                f"(the pixel count of {o['width']}x{o['height']}{crop})")
     return (f"Stand-in: the synthetic street (seed {o['street_seed']}{', movers' if o['movers'] else ''}) at {o['width']}x{o['height']}, "
             "its forward drive as a video")
 
