@@ -3,13 +3,13 @@
 ``ns2gs-eval`` scores static pixels outside ``masks/transient/<image>.png``; for held-out frames those are
 the masks stage's own estimate (``ns2gs-data masks --splits test``), whose misses count the movers as
 static. This script scores the same runs on a view of the capture whose held-out frames carry hand-drawn
-labels instead (``labels/<name>.json``: 'moving' and 'ignore' polygons both leave the score). The capture's
-frames must be the labels' source frames (``frame_000031.jpg`` <-> key ``000031``), cropped to
-the labels' ``crop_rows`` rows of the source and resized: the real path's capture (``ns2gs-bench real-path-speed
---capture nuscenes``).
+labels instead (``labels/<name>.json``, in the source frames' pixels: 'moving' and 'ignore' polygons and the
+'ego' polygon all leave the score). The capture's frames must be the labels' source frames
+(``frame_000031.jpg`` <-> key ``000031``), their first ``--crop-rows`` rows kept and resized: the real path's
+capture (``ns2gs-bench real-path-speed --capture nuscenes [--crop-bottom F]``).
 
 Usage: python benchmarks/validation/static_psnr_hand_labels.py CAPTURE OUT_STEM RUN [RUN ...]
-[--labels nuscenes_moving_heldout] [--estimated CAPTURE_WITH_ALL_MASKS]
+[--labels nuscenes_moving_heldout] [--crop-rows 810] [--estimated CAPTURE_WITH_ALL_MASKS]
 Writes OUT_STEM.{json,md}: per run, PSNR over all pixels, static PSNR on the estimated masks and on the
 hand labels (held-out frames that have both), Gaussians.
 """
@@ -27,11 +27,10 @@ from nerf2gs_plugin.utils.io import atomic_write_text
 LABELS = Path(__file__).parent / "labels"
 
 
-def label_mask(entry: dict, size: tuple[int, int], labels: dict) -> np.ndarray:
-    """The frame's 'moving' and 'ignore' polygons, and the labels' 'ego' polygon (what of the ego car every frame
-    shows), as one uint8 mask (255) at ``size`` (w, h): the labels' frame (the same crop) resized."""
-    lw, lh = labels["size"]
-    sx, sy = size[0] / lw, size[1] / lh
+def label_mask(entry: dict, size: tuple[int, int], labels: dict, crop_rows: int) -> np.ndarray:
+    """The frame's 'moving' and 'ignore' polygons, and the labels' 'ego' polygon (the ego car, in every frame),
+    as one uint8 mask (255) at ``size`` (w, h): the source frame's first ``crop_rows`` rows resized."""
+    sx, sy = size[0] / labels["size"][0], size[1] / crop_rows
     m = np.zeros(size[::-1], np.uint8)
     for polys in [*entry.values(), [labels["ego"]] if labels.get("ego") else []]:
         for p in polys:
@@ -40,9 +39,9 @@ def label_mask(entry: dict, size: tuple[int, int], labels: dict) -> np.ndarray:
     return m
 
 
-def labelled_view(capture: Path, labels: dict, out: Path) -> list[str]:
-    """``out``: the capture's files linked, its masks copied, the labelled frames' transient masks replaced
-    by the labels; returns the labelled image stems."""
+def labelled_view(capture: Path, labels: dict, crop_rows: int, out: Path) -> list[str]:
+    """``out``: the capture's files linked, its masks too, the held-out frames' transient masks replaced by the
+    labels where they have them; returns those frames' image stems."""
     out.mkdir(parents=True, exist_ok=True)
     for f in capture.iterdir():
         if f.name != "masks":
@@ -53,15 +52,17 @@ def labelled_view(capture: Path, labels: dict, out: Path) -> list[str]:
             (out / "masks" / kind).mkdir(parents=True, exist_ok=True)
             for m in src.iterdir():
                 (out / "masks" / kind / m.name).symlink_to(m.resolve())
+    from nerf2gs_plugin.data import dataparser_config
+
     stems = []
-    for img in sorted((capture / "images").iterdir()):
+    for img in sorted(f.image for f in dataparser_config(capture).raw_frames().get("test", [])):
         key = re.search(r"(\d+)$", img.stem)
         if not key or key.group(1)[-6:] not in labels["frames"]:
             continue
         h, w = cv2.imread(str(img)).shape[:2]
         dst = out / "masks" / "transient" / f"{img.stem}.png"
         dst.unlink(missing_ok=True)
-        cv2.imwrite(str(dst), label_mask(labels["frames"][key.group(1)[-6:]], (w, h), labels))
+        cv2.imwrite(str(dst), label_mask(labels["frames"][key.group(1)[-6:]], (w, h), labels, crop_rows))
         stems.append(img.stem)
     return stems
 
@@ -83,6 +84,8 @@ def main() -> None:
     ap.add_argument("out", type=Path)
     ap.add_argument("runs", type=Path, nargs="+")
     ap.add_argument("--labels", default="nuscenes_moving_heldout")
+    ap.add_argument("--crop-rows", type=int, help="the source rows the capture's frames keep (a bonnet cut off: "
+                    "real-path-speed --crop-bottom); default: all")
     ap.add_argument("--estimated", type=Path, help="the same capture with the masks stage's masks of every frame "
                     "(ns2gs-data masks over all splits); default: CAPTURE's own masks")
     args = ap.parse_args()
@@ -90,14 +93,19 @@ def main() -> None:
     rows = {}
     with tempfile.TemporaryDirectory() as tmp:
         view = Path(tmp) / args.capture.name
-        stems = labelled_view(args.capture, labels, view)
+        stems = labelled_view(args.capture, labels, args.crop_rows or labels["size"][1], view)
         for run in args.runs:
             rows[run.name] = {"estimated": evaluate(run, args.estimated), "hand": evaluate(run, view)}
             print(run.name, json.dumps(rows[run.name]))
-    doc = {"capture": str(args.capture), "estimated": str(args.estimated or args.capture), "labels": args.labels, "labelled_frames": stems, "runs": rows}
+    from nerf2gs_bench.machine import machine_info, machine_line
+
+    doc = {"machine": machine_info(), "capture": str(args.capture), "crop_rows": args.crop_rows, "estimated": str(args.estimated or args.capture), "labels": args.labels, "labelled_frames": stems, "runs": rows}
     atomic_write_text(args.out.with_suffix(".json"), json.dumps(doc, indent=1))
     lines = [f"# Static PSNR of held-out frames: estimated masks vs hand labels ({args.labels})", "",
-             f"Labelled held-out frames: {', '.join(stems)}.", "",
+             f"Machine: {machine_line(doc['machine'])}. Capture {args.capture.resolve().parent.name} (its source frames' first "
+             f"{args.crop_rows or 'all'} rows); labelled held-out frames: {', '.join(stems)}. Hand labels: the moving "
+             "objects, the undecided ones and the bonnet leave the score. Estimated: the masks stage's transient masks of "
+             f"{'every frame (' + args.estimated.name + ')' if args.estimated else 'the capture'}.", "",
              "| run | PSNR (all) | static, estimated masks | static, hand labels | primitives |", "|---|---|---|---|---|"]
     for name, r in rows.items():
         e, h = r["estimated"], r["hand"]

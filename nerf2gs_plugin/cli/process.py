@@ -45,7 +45,8 @@ class ProcessVideo(ProcessOptions):
         n = None if self.fps else self.num_frames
 
         def frames(frame_dir: Path, progress):
-            return extract_video_frames(self.video, frame_dir, self.fps, n, self.blur_ratio, self.max_size, progress=progress)
+            return extract_video_frames(self.video, frame_dir, self.fps, n, self.blur_ratio, self.max_size, progress=progress,
+                                        crop=self.crop_factor)
 
         hint = video_size_hint(self.video, self.fps, n, self.max_size)
         for line in run_process(frames, self, is_video=True, size_hint=hint).lines():
@@ -66,10 +67,11 @@ class ProcessImages(ProcessOptions):
         from nerf2gs_plugin.data.process.pipeline import exif_focal_for, run_process
 
         def frames(frame_dir: Path, progress):
-            return collect_images(self.images, frame_dir, self.max_size, progress)
+            return collect_images(self.images, frame_dir, self.max_size, progress, crop=self.crop_factor)
 
         sources = list_images(self.images)
-        report = run_process(frames, self, is_video=False, focal_px_fn=lambda d, names: exif_focal_for(sources, d, names),
+        kept = 1.0 - self.crop_factor[2] - self.crop_factor[3]
+        report = run_process(frames, self, is_video=False, focal_px_fn=lambda d, names: exif_focal_for(sources, d, names, kept),
                              size_hint=images_size_hint(sources, self.max_size))
         for line in report.lines():
             print(line)

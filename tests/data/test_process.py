@@ -280,3 +280,29 @@ def test_truncated_video_drops_the_half_decoded_frame(tmp_path, cut):
     whole = extract_video_frames(_write_video(tmp_path / "w.avi", _textured(np.random.default_rng(2), 8)), tmp_path / "g",
                                  fps=None, num_frames=8, blur_ratio=0.0, max_size=0)
     assert len(whole.names) == 8  # an intact video keeps its last frame
+
+
+def test_crop_factor_cuts_the_frames_before_the_sfm(tmp_path):
+    """--crop-factor (top bottom left right) as nerfstudio's: video frames and photos lose those shares of their
+    sides (then --max-size); a photo is cropped again when the crop changes; bad shares are one error line."""
+    from nerf2gs_plugin.data.process.frames import collect_images
+    from nerf2gs_plugin.data.process.pipeline import ProcessOptions, check_options
+    from nerf2gs_plugin.errors import ConfigError
+
+    frames = _textured(np.random.default_rng(3), 8)  # 96x64
+    video = _write_video(tmp_path / "v.avi", frames)
+    rep = extract_video_frames(video, tmp_path / "f", fps=None, num_frames=8, blur_ratio=0.0, max_size=0, crop=(0.0, 0.25, 0.0, 0.0))
+    got = cv2.imread(str(tmp_path / "f" / rep.names[0]))
+    assert got.shape[:2] == (48, 96)  # the bottom quarter (a bonnet) cut off
+    photos = tmp_path / "photos"
+    photos.mkdir()
+    for i, f in enumerate(frames[:6]):
+        cv2.imwrite(str(photos / f"p{i}.png"), f)
+    collect_images(photos, tmp_path / "c", 0, crop=(0.0, 0.0, 0.25, 0.25))
+    crop = cv2.imread(str(tmp_path / "c" / "p0.png"))
+    assert crop.shape[:2] == (64, 48) and np.abs(crop.astype(int) - frames[0][:, 24:72]).max() <= 2
+    collect_images(photos, tmp_path / "c", 0)  # no crop now: copied again, whole
+    assert cv2.imread(str(tmp_path / "c" / "p0.png")).shape[:2] == (64, 96)
+    for bad in ((0.0, 1.0, 0.0, 0.0), (-0.1, 0.0, 0.0, 0.0), (0.5, 0.5, 0.0, 0.0)):
+        with pytest.raises(ConfigError, match="crop-factor"):
+            check_options(ProcessOptions(crop_factor=bad))

@@ -50,8 +50,18 @@ def _write_atomic(path: Path, bgr: np.ndarray, jpeg_quality: int) -> None:
     os.replace(tmp, path)
 
 
-def _fit(bgr: np.ndarray, max_size: int) -> np.ndarray:
+Crop = tuple[float, float, float, float]
+"""Shares of a frame cut off: top, bottom, left, right."""
+NO_CROP: Crop = (0.0, 0.0, 0.0, 0.0)
+
+
+def _fit(bgr: np.ndarray, max_size: int, crop: Crop = NO_CROP) -> np.ndarray:
+    """``bgr`` cropped (shares of its sides), then shrunk to ``max_size`` on its longest side."""
     h, w = bgr.shape[:2]
+    if any(crop):
+        t, b, l, r = crop
+        bgr = bgr[int(round(h * t)): h - int(round(h * b)), int(round(w * l)): w - int(round(w * r))]
+        h, w = bgr.shape[:2]
     if max_size > 0 and max(h, w) > max_size:
         s = max_size / max(h, w)
         bgr = cv2.resize(bgr, (max(1, round(w * s)), max(1, round(h * s))), interpolation=cv2.INTER_AREA)
@@ -86,9 +96,10 @@ class FrameReport:
 
 
 def extract_video_frames(video: Path, out_dir: Path, fps: Optional[float], num_frames: Optional[int], blur_ratio: float,
-                         max_size: int, ext: str = ".jpg", progress=None) -> FrameReport:
+                         max_size: int, ext: str = ".jpg", progress=None, crop: Crop = NO_CROP) -> FrameReport:
     """One frame per window of ``video_fps / fps`` (or ``total / num_frames``) frames, the sharpest
-    of its window; then :func:`relative_blur_drop`. Writes ``frame_<index>.<ext>`` into ``out_dir``."""
+    of its window; then :func:`relative_blur_drop`. Writes ``frame_<index>.<ext>`` into ``out_dir``
+    (cropped by ``crop`` and shrunk to ``max_size``)."""
     video = Path(video)
     if not video.is_file():
         raise DataError("video file does not exist", video)
@@ -128,7 +139,7 @@ def extract_video_frames(video: Path, out_dir: Path, fps: Optional[float], num_f
         w = int(i // step)
         if w != window and best[2] is not None:
             picked.append((best[1], best[0]))
-            _write_atomic(out_dir / f"frame_{best[1]:06d}{ext}", _fit(best[2], max_size), 95)
+            _write_atomic(out_dir / f"frame_{best[1]:06d}{ext}", _fit(best[2], max_size, crop), 95)
             best = (-1.0, -1, None)
         window = w
         s = sharpness(frame)
@@ -141,7 +152,7 @@ def extract_video_frames(video: Path, out_dir: Path, fps: Optional[float], num_f
     cap.release()
     if best[2] is not None:
         picked.append((best[1], best[0]))
-        _write_atomic(out_dir / f"frame_{best[1]:06d}{ext}", _fit(best[2], max_size), 95)
+        _write_atomic(out_dir / f"frame_{best[1]:06d}{ext}", _fit(best[2], max_size, crop), 95)
     if task is not None:
         progress.update(task, total=i, completed=i)
     keep = relative_blur_drop(np.array([s for _, s in picked]), blur_ratio)
@@ -175,10 +186,10 @@ SOURCES_SUFFIX = ".sources.json"
 """Beside the frames folder: each copied photo's source content hash, --max-size and frame size."""
 
 
-def collect_images(folder: Path, out_dir: Path, max_size: int, progress=None) -> FrameReport:
-    """Copy (or, above ``max_size``, shrink) every readable image of ``folder`` into ``out_dir``.
+def collect_images(folder: Path, out_dir: Path, max_size: int, progress=None, crop: Crop = NO_CROP) -> FrameReport:
+    """Copy (or, above ``max_size`` or with a ``crop``, crop and shrink) every readable image of ``folder`` into ``out_dir``.
 
-    A frame is reused only when its photo's content (hash) and ``max_size`` are those it was made from:
+    A frame is reused only when its photo's content (hash), ``max_size`` and ``crop`` are those it was made from:
     a photo replaced under the same name is copied again. Unreadable photos are named in a warning;
     photos of more than one size are an error (:func:`check_one_size`)."""
     import json
@@ -205,8 +216,9 @@ def collect_images(folder: Path, out_dir: Path, max_size: int, progress=None) ->
         except OSError:  # no read permission: as unreadable as a broken file
             digest = None
         old = record.get(p.name)
-        if digest is not None and dst.is_file() and isinstance(old, list) and len(old) == 4 and old[:2] == [digest, max_size]:
-            sizes[p.name] = (int(old[2]), int(old[3]))
+        made = [digest, max_size] + ([list(crop)] if any(crop) else [])
+        if digest is not None and dst.is_file() and isinstance(old, list) and len(old) == len(made) + 2 and old[:-2] == made:
+            sizes[p.name] = (int(old[-2]), int(old[-1]))
         else:
             head = cv2.imread(str(p), cv2.IMREAD_COLOR) if digest is not None else None
             if head is None:
@@ -214,15 +226,15 @@ def collect_images(folder: Path, out_dir: Path, max_size: int, progress=None) ->
                 if task is not None:
                     progress.update(task, advance=1, stats=f"{len(unreadable)} unreadable")
                 continue
-            if max_size > 0 and max(head.shape[:2]) > max_size:
-                head = _fit(head, max_size)
+            if any(crop) or (max_size > 0 and max(head.shape[:2]) > max_size):
+                head = _fit(head, max_size, crop)
                 _write_atomic(dst, head, 95)
             else:
                 tmp = dst.with_name(f".{dst.name}.tmp")
                 shutil.copyfile(p, tmp)
                 os.replace(tmp, dst)
             sizes[p.name] = (int(head.shape[1]), int(head.shape[0]))
-        done[p.name] = [digest, max_size, *sizes[p.name]]
+        done[p.name] = [*made, *sizes[p.name]]
         names.append(p.name)
         if task is not None:
             progress.update(task, advance=1, stats=f"{len(unreadable)} unreadable" if unreadable else "")

@@ -37,6 +37,9 @@ class ProcessOptions:
     focal prior for the SfM (photos use their EXIF focal; without either COLMAP guesses ~45 deg and refines)."""
     max_size: int = 1600
     """Frames larger than this (longest side, px) are shrunk before the SfM (0: keep)."""
+    crop_factor: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    """Share of each frame cut off before the SfM: top, bottom, left, right (as nerfstudio's). A dashcam that sees
+    its bonnet: 0 0.15 0 0 (the bonnet moves with the camera, so the masks mark it as moving)."""
     min_registered_fraction: float = 0.5
     """Fewer registered frames than this fraction is an error."""
     broken_join: Literal["drop", "keep"] = "drop"
@@ -79,6 +82,11 @@ def check_options(opts: ProcessOptions) -> None:
 
     if opts.fov_deg is not None and not 1.0 < opts.fov_deg < 179.0:
         raise ConfigError(f"--fov-deg must be in (1, 179), got {opts.fov_deg}", "--fov-deg")
+    t, b, l, r = opts.crop_factor
+    if not all(0.0 <= c < 1.0 for c in opts.crop_factor) or t + b > 0.9 or l + r > 0.9:
+        raise ConfigError("--crop-factor: four shares of the frame (top bottom left right), each in [0, 1), at most 0.9 "
+                          f"of the height (top + bottom) and of the width (left + right), got {' '.join(f'{c:g}' for c in opts.crop_factor)}",
+                          "--crop-factor")
 
 
 def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=None, size_hint: tuple[int, float] = (0, 0.0)) -> ProcessReport:
@@ -128,7 +136,8 @@ def _sfm_stages(work: Path, names: list[str], opts: ProcessOptions, is_video: bo
     if opts.fov_deg is not None:
         from nerf2gs_plugin.data.images import image_size
 
-        focal = 0.5 * image_size(frame_dir / names[0])[0] / np.tan(np.radians(opts.fov_deg) / 2)
+        kept = 1.0 - opts.crop_factor[2] - opts.crop_factor[3]  # the field of view is the uncropped frame's
+        focal = 0.5 * image_size(frame_dir / names[0])[0] / kept / np.tan(np.radians(opts.fov_deg) / 2)
     method = sfm.choose_matching(opts.sfm, len(names), is_video)
     mapped, stage_times = run_sfm_stages(work, names, opts.sfm, focal, hashes, content, method, work / LOGS, progress)
     times.update(stage_times)
@@ -160,7 +169,7 @@ def _export_stages(root: Path, mapped, method: str, frames: int, opts: ProcessOp
     extra = {"process": {"source": "video" if is_video else "images", "frames": frames, "registered": mapped.registered,
                          "kept": len(reg_names),
                          "matching": method, "camera_height_m": opts.camera_height, "scale_source": scale.source,
-                         "capture_check": check}}
+                         "capture_check": check, **({"crop_factor": list(opts.crop_factor)} if any(opts.crop_factor) else {})}}
     if scale.plane is not None:
         extra["ground_plane"] = scale.plane.to_json()
     export.write_transforms(root, rec, scale.metres_per_unit, scale.up, extra)
@@ -280,8 +289,9 @@ def check_reconstruction(rec, names: list[str], c2w: np.ndarray, up: np.ndarray,
     return {**doc, "line": line}
 
 
-def exif_focal_for(sources: list[Path], frame_dir: Path, names: list[str]) -> Optional[float]:
-    """The shared EXIF focal (px, at the copied frames' size) when the first photos agree on one."""
+def exif_focal_for(sources: list[Path], frame_dir: Path, names: list[str], crop_width: float = 1.0) -> Optional[float]:
+    """The shared EXIF focal (px, at the copied frames' size) when the first photos agree on one; ``crop_width``:
+    the share of each photo's width the frames keep (--crop-factor)."""
     from nerf2gs_plugin.data.images import image_size
     from nerf2gs_plugin.data.process.exif import exif_focal_px
 
@@ -295,7 +305,7 @@ def exif_focal_for(sources: list[Path], frame_dir: Path, names: list[str]) -> Op
         f = exif_focal_px(src, w, h)
         if f is None:
             return None
-        vals.append(f * image_size(frame_dir / n)[0] / w)
+        vals.append(f * image_size(frame_dir / n)[0] / (w * crop_width))
     return float(np.median(vals)) if vals else None
 
 
