@@ -78,6 +78,11 @@ def evaluate(run: Path, data: Path | None) -> dict:
             "primitives": doc["size"].get("primitives")}
 
 
+def _static(r: dict) -> str:
+    """Static PSNR and the images it is over (n/a where no held-out frame has a mask)."""
+    return "n/a" if r["static_psnr"] is None else f"{r['static_psnr']:.2f} ({r['static_psnr_images']})"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("capture", type=Path)
@@ -109,8 +114,7 @@ def main() -> None:
              "| run | PSNR (all) | static, estimated masks | static, hand labels | primitives |", "|---|---|---|---|---|"]
     for name, r in rows.items():
         e, h = r["estimated"], r["hand"]
-        lines.append(f"| {name} | {e['psnr']:.2f} | {e['static_psnr']:.2f} ({e['static_psnr_images']}) | "
-                     f"{h['static_psnr']:.2f} ({h['static_psnr_images']}) | {e['primitives']} |")
+        lines.append(f"| {name} | {e['psnr']:.2f} | {_static(e)} | {_static(h)} | {e['primitives']} |")
     atomic_write_text(args.out.with_suffix(".md"), "\n".join(lines) + "\n")
 
 
