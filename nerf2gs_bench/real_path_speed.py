@@ -290,6 +290,6 @@ def write_results(out_dir: Path, doc: dict) -> None:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     o = doc["options"]
-    name = stem(RealPathOptions(capture=o.get("capture"), view_downscale=o.get("view_downscale", 1)))
+    name = stem(RealPathOptions(capture=o.get("capture"), view_downscale=o.get("view_downscale", 1), crop_bottom=o.get("crop_bottom")))
     atomic_write_text(out_dir / f"{name}.json", json.dumps(doc, indent=1, default=str))
     atomic_write_text(out_dir / f"{name}.md", results_md(doc))

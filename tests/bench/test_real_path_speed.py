@@ -55,6 +55,10 @@ def test_results_state_machine_options_and_total(tmp_path):
     doc["kept"] = 40  # the capture check kept a stretch: said beside SfM's count
     write_results(tmp_path, doc)
     assert "Registered 46/53, 40 kept by the capture check." in (tmp_path / "real_path_speed_kitti_view_downscale2.md").read_text()
+    doc["options"] = asdict(RealPathOptions(capture="nuscenes", crop_bottom=0.17))
+    write_results(tmp_path, doc)  # another crop of the capture lands beside it, not over its default crop's results
+    assert "the bottom 17% of each frame cut off" in (tmp_path / "real_path_speed_nuscenes_crop17.md").read_text()
+    assert not (tmp_path / "real_path_speed_nuscenes.md").exists()
 
 
 def test_a_real_capture_becomes_a_video_of_its_first_frames_at_the_stand_ins_pixel_count(tmp_path):
