@@ -56,13 +56,14 @@ def labelled_view(capture: Path, labels: dict, crop_rows: int, out: Path) -> lis
 
     stems = []
     for img in sorted(f.image for f in dataparser_config(capture).raw_frames().get("test", [])):
-        key = re.search(r"(\d+)$", img.stem)
-        if not key or key.group(1)[-6:] not in labels["frames"]:
+        digits = re.search(r"(\d+)$", img.stem)
+        key = digits.group(1)[-6:] if digits else None
+        if key not in labels["frames"]:
             continue
         h, w = cv2.imread(str(img)).shape[:2]
         dst = out / "masks" / "transient" / f"{img.stem}.png"
         dst.unlink(missing_ok=True)
-        cv2.imwrite(str(dst), label_mask(labels["frames"][key.group(1)[-6:]], (w, h), labels, crop_rows))
+        cv2.imwrite(str(dst), label_mask(labels["frames"][key], (w, h), labels, crop_rows))
         stems.append(img.stem)
     return stems
 

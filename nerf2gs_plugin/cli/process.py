@@ -70,8 +70,7 @@ class ProcessImages(ProcessOptions):
             return collect_images(self.images, frame_dir, self.max_size, progress, crop=self.crop_factor)
 
         sources = list_images(self.images)
-        kept = 1.0 - self.crop_factor[2] - self.crop_factor[3]
-        report = run_process(frames, self, is_video=False, focal_px_fn=lambda d, names: exif_focal_for(sources, d, names, kept),
+        report = run_process(frames, self, is_video=False, focal_px_fn=lambda d, names: exif_focal_for(sources, d, names, self.kept_width),
                              size_hint=images_size_hint(sources, self.max_size))
         for line in report.lines():
             print(line)

@@ -166,7 +166,7 @@ def _install(src: Path, dst: Path) -> None:
 
 
 def _segment(cfg: MasksConfig, data: Path, frames: list, groups: dict, out: Path, summary: dict,
-             count: Callable[[dict[str, torch.Tensor]], None], log: Callable[[str], None], all_groups: Optional[dict] = None) -> None:
+             count: Callable[[dict[str, torch.Tensor]], None], log: Callable[[str], None], all_groups: dict) -> None:
     """Masks of every frame of ``groups`` into ``out/masks/<kind>/<stem>.png`` (onnx or auto; ``all_groups``:
     every split, of which auto takes the training frames as neighbours, below)."""
     if cfg.segmenter.startswith("onnx:"):
@@ -207,7 +207,7 @@ def _segment(cfg: MasksConfig, data: Path, frames: list, groups: dict, out: Path
         summary["reference_seconds"] = round(time.perf_counter() - t_ref, 1)
         t_m = time.perf_counter()
         timings: dict = {}
-        computed = _with_neighbours(data, groups, all_groups or groups, cfg.motion, log)
+        computed = _with_neighbours(data, groups, all_groups, cfg.motion, log)
         result = auto_masks(maskless_view(data), ref, computed, cfg.auto, log, cfg.progress, motion=cfg.motion,
                             render_downscale=cfg.render_downscale, stats=timings)
         summary.update(timings)

@@ -30,3 +30,18 @@ def test_exif_focal_35mm(tmp_path):
     r = tmp_path / "c.png"
     cv2.imwrite(str(r), np.zeros((8, 8, 3), np.uint8))
     assert exif_focal_px(r, 8, 8) is None
+
+
+def test_exif_focal_of_cropped_frames_is_the_photos_focal(tmp_path):
+    """Photos cut at the sides (--crop-factor) keep their lens: the focal in pixels is the photo's, scaled only
+    by the shrink, not by the narrower frame."""
+    from nerf2gs_plugin.data.process.frames import collect_images
+    from nerf2gs_plugin.data.process.pipeline import ProcessOptions, exif_focal_for
+
+    src = tmp_path / "photos"
+    src.mkdir()
+    photos = [_jpeg_with_f35(src / f"p{i}.jpg", 28) for i in range(5)]
+    opts = ProcessOptions(crop_factor=(0.0, 0.0, 0.25, 0.25))
+    rep = collect_images(src, tmp_path / "f", 0, crop=opts.crop_factor)
+    assert cv2.imread(str(tmp_path / "f" / rep.names[0])).shape[1] == 32
+    assert abs(exif_focal_for(photos, tmp_path / "f", rep.names, opts.kept_width) - 28 / 36 * 64) < 1e-9

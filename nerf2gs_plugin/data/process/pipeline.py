@@ -48,6 +48,11 @@ class ProcessOptions:
     other frames, as COLMAP keeps its largest model; keep keeps every frame (the warning only)."""
     progress: bool = True
 
+    @property
+    def kept_width(self) -> float:
+        """The share of each frame's width that --crop-factor keeps (focal priors are the uncropped frame's)."""
+        return 1.0 - self.crop_factor[2] - self.crop_factor[3]
+
 
 @dataclass
 class ProcessReport:
@@ -136,8 +141,7 @@ def _sfm_stages(work: Path, names: list[str], opts: ProcessOptions, is_video: bo
     if opts.fov_deg is not None:
         from nerf2gs_plugin.data.images import image_size
 
-        kept = 1.0 - opts.crop_factor[2] - opts.crop_factor[3]  # the field of view is the uncropped frame's
-        focal = 0.5 * image_size(frame_dir / names[0])[0] / kept / np.tan(np.radians(opts.fov_deg) / 2)
+        focal = 0.5 * image_size(frame_dir / names[0])[0] / opts.kept_width / np.tan(np.radians(opts.fov_deg) / 2)
     method = sfm.choose_matching(opts.sfm, len(names), is_video)
     mapped, stage_times = run_sfm_stages(work, names, opts.sfm, focal, hashes, content, method, work / LOGS, progress)
     times.update(stage_times)
