@@ -55,12 +55,53 @@ def extension_cache_dir() -> Path:
     return Path(_get_build_directory("", verbose=False))  # ".../py311_cpu/": Path drops the slash, not the level
 
 
-def _build_name(name: str, sources: Sequence[Path], headers: Sequence[Path]) -> str:
-    """``name`` plus a hash of every source and header: an edited kernel is rebuilt, never stale."""
+def _build_name(name: str, sources: Sequence[Path], headers: Sequence[Path], cflags: Sequence[str] = CFLAGS) -> str:
+    """``name`` plus a hash of every source and header, the flags, torch's version and, for
+    ``-march=native``, the CPU: an edited kernel is rebuilt, never stale, and a kernel built for
+    another CPU (a home folder shared by several machines) is never loaded."""
+    import torch
+
     digest = hashlib.sha1()
     for f in [*sources, *headers]:
         digest.update(Path(f).read_bytes())
+    digest.update(" ".join([*cflags, torch.__version__]).encode())
+    if "-march=native" in cflags:
+        digest.update(_cpu_key().encode())
     return f"{name}_{digest.hexdigest()[:10]}"
+
+
+def _cpu_key() -> str:
+    """The CPU's model and instruction-set flags (what ``-march=native`` compiles for)."""
+    import platform
+
+    try:
+        info = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return platform.machine() + platform.processor()
+    keep = [ln.split(":", 1)[1].strip() for ln in info.splitlines()
+            if ln.split(":", 1)[0].strip() in ("model name", "flags", "Features", "CPU part")]
+    return platform.machine() + "|".join(dict.fromkeys(keep))
+
+
+def _load_built(build_name: str, folder: Path) -> Optional[Any]:
+    """The module of a kernel already built in ``folder`` (None if none is, or it does not load).
+
+    Loaded as it is: torch's ``load`` would hand it to ninja, which rebuilds whenever the sources'
+    paths or times differ from the build's (another checkout, a fresh clone), although the build
+    name already pins their content."""
+    import importlib.util
+
+    so = folder / f"{build_name}.so"
+    if not so.is_file():
+        return None
+    try:
+        spec = importlib.util.spec_from_file_location(build_name, so)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+    except (ImportError, OSError):  # a build cut short: made again by torch's load
+        so.unlink(missing_ok=True)
+        return None
 
 
 def load_extension(name: str, sources: Sequence[Path], headers: Sequence[Path] = (),
@@ -93,15 +134,18 @@ def _build(name: str, sources: list[Path], headers: list[Path], cflags: list[str
     try:
         from torch.utils.cpp_extension import load  # noqa: PLC0415 - torch is heavy; only on first build
 
-        build_name = _build_name(name, sources, headers)
+        build_name = _build_name(name, sources, headers, cflags)
         cache = extension_cache_dir()
         cache.mkdir(parents=True, exist_ok=True)
         with build_lock(cache / f"{build_name}.build-lock") as exclusive:
             # holding the build lock, no other process of ours is building this kernel: a torch lock
             # there was left by a killed build, and torch would wait on it forever
             _remove_stale_lock(cache / build_name / "lock", 0.0 if exclusive else STALE_LOCK_SECONDS)
-            if not (cache / build_name / f"{build_name}.so").is_file():
-                print(f"compiling the {name} kernel (first use, about 1 min)...", file=sys.stderr, flush=True)
+            built = _load_built(build_name, cache / build_name)
+            if built is not None:
+                _EXTS[name] = built
+                return
+            print(f"compiling the {name} kernel (first use, about 1 min)...", file=sys.stderr, flush=True)
             include = sorted({str(h.parent) for h in headers})
             _EXTS[name] = load(name=build_name, sources=[str(s) for s in sources], extra_cflags=cflags,
                                extra_include_paths=include, extra_ldflags=["-fopenmp"], verbose=False)

@@ -122,3 +122,66 @@ def test_cache_dir_is_where_torch_builds(monkeypatch, tmp_path):
         shutil.rmtree(probe, ignore_errors=True)
     monkeypatch.setenv("TORCH_EXTENSIONS_DIR", str(tmp_path))
     assert extension_cache_dir() / "probe" == Path(_get_build_directory("probe", verbose=False))
+
+
+def _tiny_module(build: Path, name: str) -> None:
+    """A CPython extension ``name`` (plain C, built in a second) at ``build/name.so``: what torch's build leaves."""
+    import subprocess
+    import sysconfig
+
+    build.mkdir(parents=True)
+    c = build / "tiny.c"
+    c.write_text('#include <Python.h>\nstatic struct PyModuleDef m = {PyModuleDef_HEAD_INIT, "%s", NULL, -1, NULL};\n'
+                 "PyMODINIT_FUNC PyInit_%s(void) { PyObject* o = PyModule_Create(&m); "
+                 'PyModule_AddIntConstant(o, "answer", 42); return o; }\n' % (name, name))
+    subprocess.run(["cc", "-shared", "-fPIC", f"-I{sysconfig.get_paths()['include']}", str(c), "-o", str(build / f"{name}.so")],
+                   check=True, capture_output=True)
+
+
+@pytest.mark.skipif(not extensions.compiler_available(), reason="needs a C compiler")
+def test_a_built_kernel_is_loaded_from_another_checkout_without_a_rebuild(tmp_path, monkeypatch, capsys):
+    """The same sources in another folder, newer (a fresh clone): the build name pins their content, so the built
+    module is loaded as it is; torch's load (ninja, which rebuilds when paths or times differ) is not called."""
+    import os
+    import time
+
+    import torch.utils.cpp_extension as cpp
+
+    monkeypatch.setattr(extensions, "_FAILED", {})
+    monkeypatch.setattr(extensions, "_EXTS", {})
+    monkeypatch.setenv("TORCH_EXTENSIONS_DIR", str(tmp_path / "ext"))
+    first, second = tmp_path / "a" / "k.cpp", tmp_path / "b" / "k.cpp"
+    for f in (first, second):
+        f.parent.mkdir()
+        f.write_text("// the kernel\n")
+    later = time.time() + 60
+    os.utime(second, (later, later))
+    build_name = extensions._build_name("nerf2gs_test_tiny", [first], [])
+    assert extensions._build_name("nerf2gs_test_tiny", [second], []) == build_name  # content, not path or time
+    _tiny_module(tmp_path / "ext" / build_name, build_name)
+
+    def no_build(**kw):
+        raise AssertionError("torch's load was called for a built kernel")
+
+    monkeypatch.setattr(cpp, "load", no_build)
+    assert load_extension("nerf2gs_test_tiny", [second]).answer == 42
+    assert "compiling" not in capsys.readouterr().err
+
+
+def test_the_build_name_follows_the_flags_and_the_cpu(tmp_path, monkeypatch):
+    """-march=native builds for this CPU: another CPU (a home folder shared by machines) gets its own build."""
+    src = tmp_path / "k.cpp"
+    src.write_text("// the kernel\n")
+    base = extensions._build_name("k", [src], [])
+    assert extensions._build_name("k", [src], [], ("-O3",)) != base
+    monkeypatch.setattr(extensions, "_cpu_key", lambda: "another CPU")
+    assert extensions._build_name("k", [src], []) != base
+    assert extensions._build_name("k", [src], [], ("-O3",)) == extensions._build_name("k", [src], [], ("-O3",))
+
+
+def test_a_build_cut_short_is_made_again(tmp_path, monkeypatch):
+    """A truncated module (a link that was killed) is removed, so torch's load builds it again."""
+    build = tmp_path / "ext" / "k_0"
+    build.mkdir(parents=True)
+    (build / "k_0.so").write_bytes(b"\x7fELF")
+    assert extensions._load_built("k_0", build) is None and not (build / "k_0.so").exists()
