@@ -30,6 +30,26 @@ def test_stage_cpu_seconds_count_work_not_waiting():
     assert cpu_seconds() > 0
 
 
+def test_a_kernel_compiled_inside_a_stage_is_named(monkeypatch):
+    """A stage that compiled a kernel says so (a rebuild once hid a minute in Splatfacto's first step)."""
+    from nerf2gs_bench.real_path_speed import results_md
+    from nerf2gs_plugin.utils import extensions
+
+    monkeypatch.setattr(extensions, "_BUILD_SECONDS", [0.0])
+    st = Stages()
+    st.run("StreetNeRF", lambda: None)
+    st.run("Splatfacto", lambda: extensions._BUILD_SECONDS.__setitem__(0, extensions._BUILD_SECONDS[0] + 64.0))
+    assert st.kernel_seconds == {"StreetNeRF": 0.0, "Splatfacto": 64.0}
+    doc = {"options": {"frames": 100, "width": 480, "height": 360, "reference_steps": 1000, "streetnerf_steps": None,
+                       "warm_start": True, "splatfacto_steps": None, "street_seed": 0, "movers": True},
+           "machine": {}, "stage_seconds": {}, "total_cpu_s": 0.0, "total_wall_s": 0.0, "target_minutes": 12.0}
+    assert "Kernels compiled during the run (wall s, inside the stages above): Splatfacto 64." in results_md(
+        {**doc, "kernel_build_seconds": st.kernel_seconds})
+    assert "No kernel was compiled during the run (loads 1.5 s in all)." in results_md(
+        {**doc, "kernel_build_seconds": {"StreetNeRF": 1.5}})
+    assert "compiled" not in results_md(doc)  # results of before the field say nothing
+
+
 def test_results_state_machine_options_and_total(tmp_path):
     from nerf2gs_bench.machine import machine_info
     from dataclasses import asdict
