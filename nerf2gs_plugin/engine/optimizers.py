@@ -58,9 +58,9 @@ class Optimizers:
             if not params:
                 continue
             cfg = configs[name]
-            # foreach: the same update as the per-tensor loop (bit-for-bit), with one Python call per operation
-            # for the whole group instead of one per tensor (a field's dozens of small tensors)
-            self.optimizers[name] = torch.optim.Adam(params, lr=cfg.lr, eps=cfg.eps, weight_decay=cfg.weight_decay, foreach=True)
+            # fused: the whole update in one pass over each tensor (foreach makes one pass per operation,
+            # about 3x the time on a CPU), one call for the whole group
+            self.optimizers[name] = torch.optim.Adam(params, lr=cfg.lr, eps=cfg.eps, weight_decay=cfg.weight_decay, fused=True)
 
     def zero_grad(self) -> None:
         for opt in self.optimizers.values():

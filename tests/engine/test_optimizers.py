@@ -1,4 +1,4 @@
-"""Optimizers: the grouped (foreach) Adam update is the per-tensor one, bit for bit."""
+"""Optimizers: the fused Adam update is the per-tensor one, to float rounding."""
 
 import torch
 
@@ -11,12 +11,12 @@ def _params(seed: int) -> dict[str, list[torch.nn.Parameter]]:
     return {k: [torch.nn.Parameter(torch.randn(s, generator=g) * 1e-2) for s in v] for k, v in shapes.items()}
 
 
-def test_grouped_adam_is_the_per_tensor_update_bit_for_bit():
+def test_fused_adam_is_the_per_tensor_update():
     configs = {"fields": OptimizerConfig(lr=1e-2, eps=1e-15, lr_final=1e-3, max_steps=20),
                "other": OptimizerConfig(lr=5e-3, eps=1e-15, weight_decay=1e-4)}
     ours, ref = _params(0), _params(0)
     opts = Optimizers(configs, ours)
-    assert all(o.defaults["foreach"] for o in opts.optimizers.values())
+    assert all(o.defaults["fused"] for o in opts.optimizers.values())
     reference = {k: torch.optim.Adam(v, lr=configs[k].lr, eps=configs[k].eps, weight_decay=configs[k].weight_decay, foreach=False)
                  for k, v in ref.items()}
     g = torch.Generator().manual_seed(1)
@@ -46,5 +46,5 @@ def test_grouped_adam_is_the_per_tensor_update_bit_for_bit():
             opt.step()
     for name in ours:
         for a, b in zip(ours[name], ref[name]):
-            assert torch.equal(a, b)
+            assert a.shape == b.shape and torch.allclose(a, b, rtol=1e-5, atol=1e-7)  # one pass: other roundings
     assert not torch.equal(ours["fields"][0], _params(0)["fields"][0])  # it did train

@@ -384,21 +384,18 @@ def test_render_camera_pixels_renders_only_those(trained):
 
 
 def test_training_steps_are_bit_for_bit_those_of_the_plain_ops(tiny_scene, tmp_path, monkeypatch):
-    """The step's savings (point rays without colour, grouped Adam, level weights in the hash-grid kernel) train
-    the very same parameters as the plain ops: colour for every ray, Adam per tensor, a separate multiply."""
+    """The step's savings (point rays without colour, level weights in the hash-grid kernel) train the very same
+    parameters as the plain ops: colour for every ray, a separate multiply (the fused Adam: test_optimizers)."""
     from nerf2gs_plugin.fields import hash_encoding
 
     def train(plain: bool) -> dict:
         torch.manual_seed(0)
-        # the CPU: the savings are the CPU kernels'; on a GPU, CUDA's multi-tensor Adam rounds differently
+        # the CPU: the savings are the CPU kernels'
         tr = make_trainer(tiny_scene, tmp_path / ("plain" if plain else "lean"), device="cpu")
         model = tr.pipeline.model
         if plain:
             render = model._render_rays
             model._render_rays = lambda r, idx, *a, colour=True: render(r, idx, *a, colour=True)
-            for opt in tr.optimizers.optimizers.values():
-                for group in opt.param_groups:
-                    group["foreach"] = False
             monkeypatch.setattr(hash_encoding, "_fused_available", lambda *a: False)
         for step in range(4):
             tr.train_step(step)
