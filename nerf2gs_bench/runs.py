@@ -90,6 +90,11 @@ def evaluation_lock(run_dir: Path) -> Iterator[None]:
         os.close(fd)
 
 
+_TRAINED_HERE: set[Path] = set()
+"""Runs this process trained: --rerun takes them as fresh (the bench's enhancer trains the StreetNeRF that
+the plan then reuses; retraining it would leave the enhancer keyed on another checkpoint)."""
+
+
 def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, reference: Optional[tuple[Path, str]] = None,
                    progress: bool = True, log=print, step_hook=None, device: str = "auto",
                    rerun: bool = False, _lock_tries: int = 3) -> tuple[Path, str]:
@@ -109,7 +114,7 @@ def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, ref
                               device=str(torch_device))
     run_dir = cfg.get_run_dir()
     wait_for_other_training(run_dir, log)
-    if rerun and run_dir.exists():
+    if rerun and run_dir.exists() and run_dir.resolve() not in _TRAINED_HERE:
         log(f"[bench] --rerun: retraining {spec.label} (removing {run_dir})")
         shutil.rmtree(run_dir)
     if reference is not None:
@@ -143,6 +148,7 @@ def train_or_reuse(spec: RunSpec, data: Path, runs_root: Path, dataset: str, ref
         time.sleep(1.0)  # the other process may hold the lock only a moment (a setup that failed, a resume): let it go first
         return train_or_reuse(spec, data, runs_root, dataset, reference, progress, log, step_hook, device, False,
                               _lock_tries=_lock_tries - 1)
+    _TRAINED_HERE.add(run_dir.resolve())
     # saved with the run: a bench reusing it reports these seconds, not the ~0 s of the reuse
     trained = {"machine": machine_line(), "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), "device": device_label(torch_device),
                "seconds": round(time.perf_counter() - t0 + setup_seconds, 3), "resumed": bool(ckpts)}

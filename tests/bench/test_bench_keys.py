@@ -109,6 +109,12 @@ def test_bench_retrains_after_a_loss_change_reevaluates_after_a_metric_change_an
     assert changed.key != first.key and any(line.startswith("[bench] train vox") for line in lines)
 
     lines.clear()
+    fresh = runner(rerun=True).run(spec, tiny_scene)  # trained by this process already: fresh, not again
+    assert fresh.key == changed.key and any(line.startswith("[bench] reuse vox") for line in lines)
+    assert not any("--rerun" in line for line in lines)
+
+    monkeypatch.setattr(bench_runs, "_TRAINED_HERE", set())  # another invocation
+    lines.clear()
     forced = runner(rerun=True).run(spec, tiny_scene)
     assert forced.key == changed.key and any("--rerun" in line for line in lines)
     assert any(line.startswith("[bench] train vox") for line in lines)
