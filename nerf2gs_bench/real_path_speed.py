@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Optional
 
+from nerf2gs_plugin.utils.extensions import build_seconds
 from nerf2gs_plugin.utils.io import atomic_write_text
 from nerf2gs_plugin.utils.parallel import cpu_seconds
 
@@ -67,8 +68,6 @@ class Stages:
         self.on_stage = on_stage
 
     def run(self, name: str, fn: Callable):
-        from nerf2gs_plugin.utils.extensions import build_seconds
-
         w0, c0, k0 = time.perf_counter(), cpu_seconds(), build_seconds()
         out = fn()
         self.add(name, time.perf_counter() - w0, cpu_seconds() - c0)

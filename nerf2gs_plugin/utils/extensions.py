@@ -80,7 +80,7 @@ def _cpu_key() -> str:
         return platform.machine() + platform.processor()
     keep = [ln.split(":", 1)[1].strip() for ln in info.splitlines()
             if ln.split(":", 1)[0].strip() in ("model name", "flags", "Features", "CPU part")]
-    return platform.machine() + "|".join(dict.fromkeys(keep))
+    return "|".join([platform.machine(), *dict.fromkeys(keep)])
 
 
 def _load_built(build_name: str, folder: Path) -> Optional[Any]:

@@ -30,6 +30,13 @@ def test_stage_cpu_seconds_count_work_not_waiting():
     assert cpu_seconds() > 0
 
 
+def _old_doc() -> dict:
+    """A results document with only the fields the first results had (options without the later ones)."""
+    return {"options": {"frames": 100, "width": 480, "height": 360, "reference_steps": 1000, "streetnerf_steps": None,
+                        "warm_start": True, "splatfacto_steps": None, "street_seed": 0, "movers": True},
+            "machine": {}, "stage_seconds": {}, "total_cpu_s": 0.0, "total_wall_s": 0.0, "target_minutes": 12.0}
+
+
 def test_a_kernel_compiled_inside_a_stage_is_named(monkeypatch):
     """A stage that compiled a kernel says so (a rebuild once hid a minute in Splatfacto's first step)."""
     from nerf2gs_bench.real_path_speed import results_md
@@ -40,9 +47,7 @@ def test_a_kernel_compiled_inside_a_stage_is_named(monkeypatch):
     st.run("StreetNeRF", lambda: None)
     st.run("Splatfacto", lambda: extensions._BUILD_SECONDS.__setitem__(0, extensions._BUILD_SECONDS[0] + 64.0))
     assert st.kernel_seconds == {"StreetNeRF": 0.0, "Splatfacto": 64.0}
-    doc = {"options": {"frames": 100, "width": 480, "height": 360, "reference_steps": 1000, "streetnerf_steps": None,
-                       "warm_start": True, "splatfacto_steps": None, "street_seed": 0, "movers": True},
-           "machine": {}, "stage_seconds": {}, "total_cpu_s": 0.0, "total_wall_s": 0.0, "target_minutes": 12.0}
+    doc = _old_doc()
     assert "Kernels compiled during the run (wall s, inside the stages above): Splatfacto 64." in results_md(
         {**doc, "kernel_build_seconds": st.kernel_seconds})
     assert "No kernel was compiled during the run (loads 1.5 s in all)." in results_md(
@@ -136,8 +141,6 @@ def test_the_process_stage_runs_sfm_on_the_products_default_threads(tmp_path, mo
     with pytest.raises(Stop):
         rps.run(tmp_path / "root", tmp_path / "out", RealPathOptions())
     assert seen["threads"] == SfmOptions().num_threads == -1
-    doc = {"options": {"frames": 100, "width": 480, "height": 360, "reference_steps": 1000, "streetnerf_steps": None,
-                       "warm_start": True, "splatfacto_steps": None, "street_seed": 0, "movers": True},
-           "machine": {}, "stage_seconds": {}, "total_cpu_s": 0.0, "total_wall_s": 0.0, "target_minutes": 12.0}
+    doc = _old_doc()
     assert "SfM threads 1;" in rps.results_md(doc)  # results of before the field: one thread
     assert "SfM threads all cores (the product's default);" in rps.results_md({**doc, "sfm_threads": -1})
