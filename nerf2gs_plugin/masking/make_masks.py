@@ -154,6 +154,10 @@ def make_masks(cfg: MasksConfig, log: Callable[[str], None] = print) -> dict:
     atomic_write_text(data / "masks" / "masks.json", json.dumps(summary, indent=1, default=str))
     log(f"wrote masks for {len(frames)} images to {data / 'masks'} in {summary['seconds']:.1f} s; "
         + ", ".join(f"{k} {100 * v:.1f}%" for k, v in summary["coverage"].items()) + " of the pixels")
+    if summary.get("reference"):
+        # the first reference is StreetNeRF's first steps on these frames: the full StreetNeRF goes on from it
+        log(f"next: ns2gs-train streetnerf --data {data} --warm-start {summary['reference']} "
+            f"(continues that reference: its steps are not trained again; same frames and downscale)")
     return summary
 
 

@@ -354,6 +354,8 @@ def test_make_masks_auto_with_a_very_short_reference(tmp_path):
     logs: list[str] = []
     summary = make_masks(MasksConfig(data=data, reference=ref, reference_steps=5, progress=False, render_downscale=1), log=logs.append)
     assert (ref / "config.yml").is_file() and summary["reference"] == str(ref)
+    # the closing line gives the StreetNeRF command that goes on from this reference
+    assert f"ns2gs-train streetnerf --data {data} --warm-start {ref} " in logs[-1]
     from nerf2gs_plugin.engine.config import read_config_doc
 
     assert Path(read_config_doc(ref / "config.yml")["config"]["run_dir"]) == ref.absolute()  # the trainer's --run-dir

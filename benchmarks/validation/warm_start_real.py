@@ -1,0 +1,62 @@
+"""StreetNeRF warm-started from the masks' first reference against StreetNeRF from scratch, on real captures.
+
+Each pair is two StreetNeRF runs of one capture with the default 3000 steps: one ``--warm-start``ed from the masks
+stage's 1000-step reference (2000 steps trained here; the real path of ``ns2gs-bench real-path-speed`` and of the
+README), one from scratch (``ns2gs-train streetnerf --data CAPTURE``). Both are scored by ``ns2gs-eval`` on the
+capture's held-out frames (every 8th) and from above; ``--static NAME=FILE`` adds capture NAME's static PSNR
+from a JSON that ``static_psnr_hand_labels.py`` wrote for its two runs (hand-labelled held-out frames).
+
+Usage: python benchmarks/validation/warm_start_real.py OUT_STEM NAME WARM_EVAL SCRATCH_EVAL [NAME WARM SCRATCH ...]
+[--static NAME=STATIC.json ...]
+"""
+import argparse
+import json
+from pathlib import Path
+
+from nerf2gs_bench.machine import machine_line
+from nerf2gs_plugin.utils.io import atomic_write_text
+
+
+def _row(eval_json: Path) -> dict:
+    doc = json.loads(Path(eval_json).read_text())
+    test = doc["results"]["test"]
+    steps = doc["step"] + 1
+    warm = Path(doc["checkpoint"]).parent.parent / "warm_start.json"
+    start = json.loads(warm.read_text())["step"] + 1 if warm.is_file() else 0
+    return {"run": str(Path(doc["checkpoint"]).parent.parent), "steps_trained": steps - start, "held_out": test["num_images"],
+            "psnr": test["psnr"], "ssim": test["ssim"], "lpips": test["lpips"], "bev_hole_fraction": doc["bev_hole_fraction"]}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("out", type=Path)
+    ap.add_argument("triples", nargs="+", help="NAME WARM_EVAL.json SCRATCH_EVAL.json, repeated")
+    ap.add_argument("--static", action="append", default=[], help="NAME=static_psnr_hand_labels.py JSON of that capture's runs")
+    args = ap.parse_args()
+    if len(args.triples) % 3:
+        ap.error("give NAME WARM_EVAL SCRATCH_EVAL per capture")
+    static = {}  # capture -> run folder name -> static PSNR
+    for item in args.static:
+        name, _, f = item.partition("=")
+        static[name] = {run: r["hand"]["static_psnr"] for run, r in json.loads(Path(f).read_text())["runs"].items()}
+    doc = {"machine": machine_line(), "captures": {}}
+    lines = ["# StreetNeRF warm-started from the masks' reference vs from scratch (real captures)", "",
+             f"Machine: {doc['machine']}. Default StreetNeRF (3000 steps); held-out frames every 8th, scored by "
+             "`ns2gs-eval`; holes from above: 16 fly-over views 10 m up (accumulation < 0.5). One seed each.", "",
+             "| capture | run | steps trained | PSNR | SSIM | LPIPS | static PSNR (hand labels) | holes from above |",
+             "|---|---|---|---|---|---|---|---|"]
+    for i in range(0, len(args.triples), 3):
+        name, warm, scratch = args.triples[i], Path(args.triples[i + 1]), Path(args.triples[i + 2])
+        rows = {"warm": _row(warm), "scratch": _row(scratch)}
+        for kind, r in rows.items():
+            r["static_psnr"] = static.get(name, {}).get(Path(r["run"]).name)
+            st = f"{r['static_psnr']:.2f}" if r["static_psnr"] is not None else "-"
+            lines.append(f"| {name} ({r['held_out']} held out) | {kind} | {r['steps_trained']} | {r['psnr']:.2f} | {r['ssim']:.3f} | "
+                         f"{r['lpips']:.3f} | {st} | {100 * r['bev_hole_fraction']:.2f}% |")
+        doc["captures"][name] = rows
+    atomic_write_text(args.out.with_suffix(".json"), json.dumps(doc, indent=1))
+    atomic_write_text(args.out.with_suffix(".md"), "\n".join(lines) + "\n")
+
+
+if __name__ == "__main__":
+    main()
