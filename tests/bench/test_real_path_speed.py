@@ -144,3 +144,31 @@ def test_the_process_stage_runs_sfm_on_the_products_default_threads(tmp_path, mo
     doc = _old_doc()
     assert "SfM threads 1;" in rps.results_md(doc)  # results of before the field: one thread
     assert "SfM threads all cores (the product's default);" in rps.results_md({**doc, "sfm_threads": -1})
+
+
+def test_the_readme_path_is_the_benched_path(tmp_path):
+    """The README's "Your own capture" commands train what real-path-speed times: StreetNeRF warm-started from
+    the masks' reference with its default config, Splatfacto with the NeRF views at the augmentation's defaults
+    (a flag in the README that the bench does not pass would make the bench's minutes and scores another path's)."""
+    import shlex
+    from pathlib import Path
+
+    from nerf2gs_plugin.cli.train import parse_args
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    lines = [line.split("#")[0] for line in readme.splitlines() if line.startswith("ns2gs-train ") and "data/drive" in line]
+    assert {line.split()[1] for line in lines} == {"streetnerf", "splatfacto"} and len(lines) >= 4  # the pipeline and "Your own capture"
+    for sn_line, sf_line in zip([x for x in lines if x.split()[1] == "streetnerf"], [x for x in lines if x.split()[1] == "splatfacto"]):
+        _check_readme_pair(parse_args(shlex.split(sn_line)[1:])[0], parse_args(shlex.split(sf_line)[1:])[0], tmp_path)
+
+
+def _check_readme_pair(sn, sf, tmp_path):
+    from nerf2gs_bench.real_path_speed import _trainer_config
+    from nerf2gs_plugin.masking.mask_reference import default_reference_dir
+
+    assert RealPathOptions().warm_start and sn.warm_start == default_reference_dir(sn.data)
+    bench_sn = _trainer_config("streetnerf", sn.data, tmp_path / "sn", None, warm_start=sn.warm_start)
+    assert (sn.pipeline, sn.max_num_iterations, sn.optimizers) == (bench_sn.pipeline, bench_sn.max_num_iterations, bench_sn.optimizers)
+    bench_sf = _trainer_config("splatfacto", sf.data, tmp_path / "sf", None, augment_from=sf.augment_from)
+    assert sf.augment_from is not None and sf.augment == bench_sf.augment
+    assert (sf.pipeline, sf.max_num_iterations) == (bench_sf.pipeline, bench_sf.max_num_iterations)
