@@ -44,8 +44,9 @@ browser:
 demo: setup
 	$(VENV)/bin/ns2gs-bench demo
 
+# two workers (each with its share of the cores: tests/conftest.py): most tests are small and single-threaded
 test: setup
-	$(PY) -m pytest -q tests
+	$(PY) -m pytest -q -n 2 tests
 
 bench: setup
 	$(VENV)/bin/ns2gs-bench paper-table
