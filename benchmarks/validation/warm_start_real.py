@@ -14,16 +14,17 @@ import json
 from pathlib import Path
 
 from nerf2gs_bench.machine import machine_line
+from nerf2gs_plugin.engine.checkpoints import resolve_checkpoint
 from nerf2gs_plugin.utils.io import atomic_write_text
 
 
 def _row(eval_json: Path) -> dict:
     doc = json.loads(Path(eval_json).read_text())
     test = doc["results"]["test"]
-    steps = doc["step"] + 1
-    warm = Path(doc["checkpoint"]).parent.parent / "warm_start.json"
+    run, _ = resolve_checkpoint(Path(doc["checkpoint"]))
+    warm = run / "warm_start.json"  # the step the run started from, when it was warm-started
     start = json.loads(warm.read_text())["step"] + 1 if warm.is_file() else 0
-    return {"run": str(Path(doc["checkpoint"]).parent.parent), "steps_trained": steps - start, "held_out": test["num_images"],
+    return {"run": str(run), "steps_trained": doc["step"] + 1 - start, "held_out": test["num_images"],
             "psnr": test["psnr"], "ssim": test["ssim"], "lpips": test["lpips"], "bev_hole_fraction": doc["bev_hole_fraction"]}
 
 
