@@ -380,6 +380,8 @@ def render_augmented_views(train: ImageSet, world: WorldFrame, render_fn: Render
         for i in manifest.composited_images:
             images[i] = load_png(manifest.composite_png(i))
         composites = train.to("cpu").with_images(images)
+        if config.composite_loss == "either":
+            composites = composites.with_photos(train.pixels.cpu())
         if with_conf:
             ones = [torch.ones(*train.hw(i), 1) for i in range(len(train))]
             composites = composites.with_confidence(

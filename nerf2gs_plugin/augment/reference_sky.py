@@ -76,4 +76,5 @@ def with_sky(images: ImageSet, sky: list[Tensor]) -> ImageSet:
     if "sky" in images.masks:
         flat = flat | images.masks["sky"].to(flat.device)
     masks = {**images.masks, "sky": flat}
-    return ImageSet(images.cameras, images.pixels, images.offsets, masks, images.weights, list(images.names), images.confidence)
+    return ImageSet(images.cameras, images.pixels, images.offsets, masks, images.weights, list(images.names), images.confidence,
+                    images.photos)

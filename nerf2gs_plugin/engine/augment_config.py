@@ -74,6 +74,10 @@ class AugmentConfig:
     """Grow transient masks by this many pixels before compositing."""
     feather_px: int = 0
     """Soften the composite seam over this many pixels (0 = hard mask)."""
+    composite_loss: Literal["paint", "either"] = "paint"
+    """paint: a composite's painted pixels are the target. either (Splatfacto, Scaffold-GS): each pixel is learnt
+    as painted or as photographed, whichever the render is nearer (a false alarm of the masks on a static surface
+    that the other views show keeps its photo; a mover the other views contradict gives way to the paint)."""
     extra_views: bool = True
     """Add the additional views (of every family in views) rendered by the reference."""
     views: tuple[str, ...] = ("birds-eye",)

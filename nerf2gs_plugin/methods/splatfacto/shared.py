@@ -133,6 +133,11 @@ def image_loss(
     pred, gt = outputs["rgb"], batch["image"].to(outputs["rgb"])
     if sky_background is not None and batch.get("sky_mask") is not None:
         gt = torch.where(batch["sky_mask"].to(pred.device), sky_background.to(gt).expand_as(gt), gt)
+    photo = batch.get("photo")
+    if photo is not None:  # a composite's pixel may be learnt as painted or as photographed, whichever is nearer
+        photo = photo.to(pred)
+        nearer = ((pred - photo).abs().mean(-1, keepdim=True) < (pred - gt).abs().mean(-1, keepdim=True)).detach()
+        gt = torch.where(nearer, photo, gt)
     weight = torch.as_tensor(batch.get("weight", 1.0), dtype=pred.dtype, device=pred.device)
     if mask_transients and batch.get("transient_mask") is not None:
         m = batch["transient_mask"].to(pred.device)
