@@ -39,7 +39,8 @@ CACHE_DIR_NAME = "augment_cache"
 MANIFEST_NAME = "manifest.json"
 # AugmentConfig fields that do not change a rendered image (so not in the key)
 UNKEYED_FIELDS = ("extra_prob", "extra_weight", "use_cache", "enhancer", "real_only_from", "birds_eye_share", "seed_points", "extra_decay", "extra_decay_floor",
-                  "seed_points_per_family", "reference_sky", "step_factor", "composite_loss")
+                  "seed_points_per_family", "reference_sky", "step_factor", "composite_loss",
+                  "composite_loss_margin")
 UNKEYED_FAMILY_FIELDS = ("share",)
 """A view family's parameters that do not change its views (how often they are sampled)."""
 

@@ -381,7 +381,7 @@ def render_augmented_views(train: ImageSet, world: WorldFrame, render_fn: Render
             images[i] = load_png(manifest.composite_png(i))
         composites = train.to("cpu").with_images(images)
         if config.composite_loss == "either":
-            composites = composites.with_photos(train.pixels.cpu())
+            composites = composites.with_photos(train.pixels.cpu(), config.composite_loss_margin)
         if with_conf:
             ones = [torch.ones(*train.hw(i), 1) for i in range(len(train))]
             composites = composites.with_confidence(

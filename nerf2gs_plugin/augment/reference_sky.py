@@ -77,4 +77,4 @@ def with_sky(images: ImageSet, sky: list[Tensor]) -> ImageSet:
         flat = flat | images.masks["sky"].to(flat.device)
     masks = {**images.masks, "sky": flat}
     return ImageSet(images.cameras, images.pixels, images.offsets, masks, images.weights, list(images.names), images.confidence,
-                    images.photos)
+                    images.photos, images.photo_margin)

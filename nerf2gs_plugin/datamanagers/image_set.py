@@ -25,6 +25,7 @@ class ImageSet:
     names: list[str] = field(default_factory=list)
     confidence: Optional[Tensor] = None  # [P] float in [0, 1]: per-pixel loss weight (reference renders), None = all 1
     photos: Optional[Tensor] = None  # [P, 3]: the photos under composites (a second target, --augment.composite-loss either)
+    photo_margin: float = 0.0  # the photo is that target unless the image is nearer the render by more than this
 
     def __post_init__(self) -> None:
         if self.weights is None:
@@ -63,6 +64,7 @@ class ImageSet:
             batch["confidence"] = self._slice(self.confidence, i)
         if self.photos is not None:
             batch["photo"] = self._slice(self.photos, i)
+            batch["photo_margin"] = self.photo_margin
         return batch
 
     def locate(self, flat_index: Tensor) -> tuple[Tensor, Tensor, Tensor]:
@@ -82,25 +84,28 @@ class ImageSet:
             list(self.names),
             self.confidence.to(device) if self.confidence is not None else None,
             self.photos.to(device) if self.photos is not None else None,
+            self.photo_margin,
         )
 
     def with_images(self, images: list[Tensor]) -> "ImageSet":
         """Same cameras, masks and confidence, new pixels (e.g. composites)."""
         return ImageSet(self.cameras, torch.cat([im.reshape(-1, 3) for im in images]), self.offsets, dict(self.masks), self.weights,
-                        list(self.names), self.confidence, self.photos)
+                        list(self.names), self.confidence, self.photos, self.photo_margin)
 
-    def with_photos(self, photos: Optional[Tensor]) -> "ImageSet":
-        """Same images, with ``photos`` ``[P, 3]`` (the pixels before compositing) as a second target (None: none)."""
+    def with_photos(self, photos: Optional[Tensor], margin: float = 0.0) -> "ImageSet":
+        """Same images, with ``photos`` ``[P, 3]`` (the pixels before compositing) as a second target (None: none),
+        taken unless the image is nearer the render by more than ``margin`` (mean absolute RGB)."""
         if photos is not None and photos.shape != self.pixels.shape:
             raise ValueError(f"photos hold {photos.shape[0]} pixels, the images {self.num_pixels}")
-        return ImageSet(self.cameras, self.pixels, self.offsets, dict(self.masks), self.weights, list(self.names), self.confidence, photos)
+        return ImageSet(self.cameras, self.pixels, self.offsets, dict(self.masks), self.weights, list(self.names), self.confidence,
+                        photos, margin)
 
     def with_confidence(self, maps: Optional[list[Tensor]]) -> "ImageSet":
         """Same images, a per-pixel confidence map ``[H, W, 1]`` per image (None: none)."""
         flat = torch.cat([m.reshape(-1).float() for m in maps]).to(self.pixels.device) if maps is not None else None
         if flat is not None and flat.shape[0] != self.num_pixels:
             raise ValueError(f"confidence maps hold {flat.shape[0]} pixels, the images {self.num_pixels}")
-        return ImageSet(self.cameras, self.pixels, self.offsets, dict(self.masks), self.weights, list(self.names), flat, self.photos)
+        return ImageSet(self.cameras, self.pixels, self.offsets, dict(self.masks), self.weights, list(self.names), flat, self.photos, self.photo_margin)
 
     @staticmethod
     def from_images(cameras: Cameras, images: list[Tensor], masks: Optional[dict[str, list[Tensor]]] = None,

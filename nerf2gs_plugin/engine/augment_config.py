@@ -76,8 +76,11 @@ class AugmentConfig:
     """Soften the composite seam over this many pixels (0 = hard mask)."""
     composite_loss: Literal["paint", "either"] = "paint"
     """paint: a composite's painted pixels are the target. either (Splatfacto, Scaffold-GS): each pixel is learnt
-    as painted or as photographed, whichever the render is nearer (a false alarm of the masks on a static surface
+    as painted or as photographed, whichever the render is nearer (composite-loss-margin) (a false alarm of the masks on a static surface
     that the other views show keeps its photo; a mover the other views contradict gives way to the paint)."""
+    composite_loss_margin: float = 0.05
+    """either: the photo is the target unless the render is nearer the paint by more than this (mean absolute
+    RGB in [0, 1]): early in training a render is as blurry as the paint, and would take it over the photo."""
     extra_views: bool = True
     """Add the additional views (of every family in views) rendered by the reference."""
     views: tuple[str, ...] = ("birds-eye",)

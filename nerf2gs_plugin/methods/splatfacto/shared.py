@@ -134,9 +134,9 @@ def image_loss(
     if sky_background is not None and batch.get("sky_mask") is not None:
         gt = torch.where(batch["sky_mask"].to(pred.device), sky_background.to(gt).expand_as(gt), gt)
     photo = batch.get("photo")
-    if photo is not None:  # a composite's pixel may be learnt as painted or as photographed, whichever is nearer
-        photo = photo.to(pred)
-        nearer = ((pred - photo).abs().mean(-1, keepdim=True) < (pred - gt).abs().mean(-1, keepdim=True)).detach()
+    if photo is not None:  # a composite's pixel is learnt as photographed unless the paint is clearly nearer
+        photo, margin = photo.to(pred), float(batch.get("photo_margin", 0.0))
+        nearer = ((pred - photo).abs().mean(-1, keepdim=True) < (pred - gt).abs().mean(-1, keepdim=True) + margin).detach()
         gt = torch.where(nearer, photo, gt)
     weight = torch.as_tensor(batch.get("weight", 1.0), dtype=pred.dtype, device=pred.device)
     if mask_transients and batch.get("transient_mask") is not None:

@@ -33,3 +33,13 @@ def test_image_sets_carry_the_photos_to_the_batch():
     batch = comp.to("cpu").with_confidence([torch.ones(4, 4, 1)] * 2).image_batch(1)
     assert torch.equal(batch["photo"], images[1]) and torch.allclose(batch["image"], images[1] * 0.5)
     assert "photo" not in base.image_batch(0)
+
+
+def test_the_photo_wins_unless_the_paint_is_nearer_by_the_margin():
+    photo, comp = torch.full((8, 8, 3), 0.2), torch.full((8, 8, 3), 0.8)
+    pred = torch.full((8, 8, 3), 0.52)  # 0.32 from the photo, 0.28 from the paint
+    to_paint = image_loss({"rgb": pred}, {"image": comp}, ssim_lambda=0.0)["main_loss"]
+    to_photo = image_loss({"rgb": pred}, {"image": photo}, ssim_lambda=0.0)["main_loss"]
+    no_margin = image_loss({"rgb": pred}, {"image": comp, "photo": photo}, ssim_lambda=0.0)["main_loss"]
+    margin = image_loss({"rgb": pred}, {"image": comp, "photo": photo, "photo_margin": 0.05}, ssim_lambda=0.0)["main_loss"]
+    assert torch.allclose(no_margin, to_paint) and torch.allclose(margin, to_photo)
