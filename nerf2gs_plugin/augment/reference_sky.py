@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+from dataclasses import replace
 from pathlib import Path
 from typing import Callable, Optional
 
@@ -76,5 +77,4 @@ def with_sky(images: ImageSet, sky: list[Tensor]) -> ImageSet:
     if "sky" in images.masks:
         flat = flat | images.masks["sky"].to(flat.device)
     masks = {**images.masks, "sky": flat}
-    return ImageSet(images.cameras, images.pixels, images.offsets, masks, images.weights, list(images.names), images.confidence,
-                    images.photos, images.photo_margin)
+    return replace(images, masks=masks, names=list(images.names))

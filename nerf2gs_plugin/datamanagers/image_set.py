@@ -3,7 +3,7 @@ gathered with tensor indexing whatever the image sizes."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Optional
 
 import torch
@@ -89,23 +89,21 @@ class ImageSet:
 
     def with_images(self, images: list[Tensor]) -> "ImageSet":
         """Same cameras, masks and confidence, new pixels (e.g. composites)."""
-        return ImageSet(self.cameras, torch.cat([im.reshape(-1, 3) for im in images]), self.offsets, dict(self.masks), self.weights,
-                        list(self.names), self.confidence, self.photos, self.photo_margin)
+        return replace(self, pixels=torch.cat([im.reshape(-1, 3) for im in images]), masks=dict(self.masks), names=list(self.names))
 
     def with_photos(self, photos: Optional[Tensor], margin: float = 0.0) -> "ImageSet":
         """Same images, with ``photos`` ``[P, 3]`` (the pixels before compositing) as a second target (None: none),
         taken unless the image is nearer the render by more than ``margin`` (mean absolute RGB)."""
         if photos is not None and photos.shape != self.pixels.shape:
             raise ValueError(f"photos hold {photos.shape[0]} pixels, the images {self.num_pixels}")
-        return ImageSet(self.cameras, self.pixels, self.offsets, dict(self.masks), self.weights, list(self.names), self.confidence,
-                        photos, margin)
+        return replace(self, masks=dict(self.masks), names=list(self.names), photos=photos, photo_margin=margin)
 
     def with_confidence(self, maps: Optional[list[Tensor]]) -> "ImageSet":
         """Same images, a per-pixel confidence map ``[H, W, 1]`` per image (None: none)."""
         flat = torch.cat([m.reshape(-1).float() for m in maps]).to(self.pixels.device) if maps is not None else None
         if flat is not None and flat.shape[0] != self.num_pixels:
             raise ValueError(f"confidence maps hold {flat.shape[0]} pixels, the images {self.num_pixels}")
-        return ImageSet(self.cameras, self.pixels, self.offsets, dict(self.masks), self.weights, list(self.names), flat, self.photos, self.photo_margin)
+        return replace(self, masks=dict(self.masks), names=list(self.names), confidence=flat)
 
     @staticmethod
     def from_images(cameras: Cameras, images: list[Tensor], masks: Optional[dict[str, list[Tensor]]] = None,

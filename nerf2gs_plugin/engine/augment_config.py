@@ -76,8 +76,8 @@ class AugmentConfig:
     """Soften the composite seam over this many pixels (0 = hard mask)."""
     composite_loss: Literal["paint", "either"] = "paint"
     """paint: a composite's painted pixels are the target. either (Splatfacto, Scaffold-GS): each pixel is learnt
-    as painted or as photographed, whichever the render is nearer (composite-loss-margin) (a false alarm of the masks on a static surface
-    that the other views show keeps its photo; a mover the other views contradict gives way to the paint)."""
+    as painted or as photographed, whichever the render is nearer (see composite-loss-margin): a false alarm of the
+    masks on a static surface that the other views show keeps its photo; a mover they contradict gives way to the paint."""
     composite_loss_margin: float = 0.1
     """either: the photo is the target unless the render is nearer the paint by more than this (mean absolute
     RGB in [0, 1]): early in training a render is as blurry as the paint, and would take it over the photo."""

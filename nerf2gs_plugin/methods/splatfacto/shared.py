@@ -131,13 +131,13 @@ def image_loss(
     pixels become that colour, i.e. the sky is treated as transparent (nerfstudio's alpha images).
     """
     pred, gt = outputs["rgb"], batch["image"].to(outputs["rgb"])
-    if sky_background is not None and batch.get("sky_mask") is not None:
-        gt = torch.where(batch["sky_mask"].to(pred.device), sky_background.to(gt).expand_as(gt), gt)
     photo = batch.get("photo")
     if photo is not None:  # a composite's pixel is learnt as photographed unless the paint is clearly nearer
         photo, margin = photo.to(pred), float(batch.get("photo_margin", 0.0))
         nearer = ((pred - photo).abs().mean(-1, keepdim=True) < (pred - gt).abs().mean(-1, keepdim=True) + margin).detach()
         gt = torch.where(nearer, photo, gt)
+    if sky_background is not None and batch.get("sky_mask") is not None:  # after the choice: the sky stays transparent
+        gt = torch.where(batch["sky_mask"].to(pred.device), sky_background.to(gt).expand_as(gt), gt)
     weight = torch.as_tensor(batch.get("weight", 1.0), dtype=pred.dtype, device=pred.device)
     if mask_transients and batch.get("transient_mask") is not None:
         m = batch["transient_mask"].to(pred.device)

@@ -43,3 +43,14 @@ def test_the_photo_wins_unless_the_paint_is_nearer_by_the_margin():
     no_margin = image_loss({"rgb": pred}, {"image": comp, "photo": photo}, ssim_lambda=0.0)["main_loss"]
     margin = image_loss({"rgb": pred}, {"image": comp, "photo": photo, "photo_margin": 0.05}, ssim_lambda=0.0)["main_loss"]
     assert torch.allclose(no_margin, to_paint) and torch.allclose(margin, to_photo)
+
+
+def test_sky_stays_the_step_background_whichever_target_is_taken():
+    photo, comp = torch.full((4, 4, 3), 0.2), torch.full((4, 4, 3), 0.8)
+    pred = photo.clone()  # nearer the photo everywhere
+    sky = torch.zeros(4, 4, 1, dtype=torch.bool)
+    sky[0] = True
+    bg = torch.tensor([0.2, 0.5, 0.9])
+    loss = image_loss({"rgb": pred}, {"image": comp, "photo": photo, "sky_mask": sky}, ssim_lambda=0.0, sky_background=bg)
+    expected = (pred - torch.where(sky, bg.expand(4, 4, 3), photo)).abs().mean()
+    assert torch.allclose(loss["main_loss"], expected) and float(loss["main_loss"]) > 0
