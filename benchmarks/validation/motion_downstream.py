@@ -38,14 +38,17 @@ from nerf2gs_bench.real_path_speed import Stages, _train, _trainer_config  # noq
 from nerf2gs_plugin.data.images import load_image, load_mask  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
-ARMS = ("without_motion", "with_motion")
+ARMS = ("without_motion", "with_motion", "with_motion_either")
+EITHER = {"composite_loss": "either"}
+"""The third arm: the route's masks and StreetNeRF, the target learning each composite pixel as painted or as
+photographed (``--augment.composite-loss either``): do the ghosts come back?"""
 ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
 ap.add_argument("work", type=Path, help="a motion bench WORK folder (street/, estimated/, renders.pt)")
 ap.add_argument("runs", type=Path)
 ap.add_argument("out_stem", type=Path)
 ap.add_argument("--steps", type=int, default=600, help="StreetNeRF and Splatfacto steps")
 ap.add_argument("--factor", type=int, default=2, help="training images at 1/FACTOR per side")
-ap.add_argument("--arm", choices=(*ARMS, "both"), default="both", help="train one arm only (run the two side by side)")
+ap.add_argument("--arm", choices=(*ARMS, "both"), default="both", help="train one arm only (both: the first two)")
 ap.add_argument("--train-seed", type=int, default=42, help="the trainings' seed (another one: the runs' own spread)")
 ap.add_argument("--reuse", action="store_true", help="keep a StreetNeRF already trained in RUNS")
 ap.add_argument("--md-only", action="store_true")
@@ -105,7 +108,8 @@ def masks_for_arms(work: Path, est: Path) -> tuple[dict, list[str], dict]:
         c = sum(counts(m.transient, load_mask(street / meta["frames"][br.frame_index(Path(n))]["transient_mask_path"]))
                 for n, m in zip(names, res["train"]))
         rows[arm]["transient"] = stats(c)
-    return {"without_motion": base["train"], "with_motion": with_motion["train"]}, names, rows
+    rows["with_motion_either"] = dict(rows["with_motion"])
+    return {"without_motion": base["train"], "with_motion": with_motion["train"], "with_motion_either": with_motion["train"]}, names, rows
 
 
 def arm_capture(est: Path, out: Path, f: int, names: list[str], masks: list) -> Path:
@@ -190,17 +194,21 @@ def run_scene() -> dict:
     held = sorted(br.frame_index(Path(n)) for n in every if n not in names)
     size = tuple(int(v) for v in load_image(est / json.loads((est / "transforms.json").read_text())["frames"][0]["file_path"]).shape[1::-1])
     bg = backgrounds(street, held, size) if street.is_dir() else {}
-    for arm in ARMS if args.arm == "both" else (args.arm,):
+    for arm in ARMS[:2] if args.arm == "both" else (args.arm,):
         stages, sn = Stages(), runs / arm / "streetnerf"
-        if args.reuse and any((sn / "checkpoints").glob("*.ckpt")):  # an interrupted run's StreetNeRF
-            data = runs / arm / "capture"
+        if arm == "with_motion_either":  # the same masks and StreetNeRF as with_motion
+            sn = runs / "with_motion" / "streetnerf"
+        if (args.reuse or arm == "with_motion_either") and any((sn / "checkpoints").glob("*.ckpt")):  # an interrupted run's StreetNeRF
+            data = sn.parent / "capture"
         else:
             data = arm_capture(est, runs / arm / "capture", args.factor, names, masks[arm])
             sn = _train(stages, "StreetNeRF", _trainer_config("streetnerf", data, sn, args.steps, seed=args.train_seed))
         rows[arm]["streetnerf"] = evaluate(sn, street, bg, args.factor)
         if street.is_dir():
+            changes = EITHER if arm == "with_motion_either" else None
             gs = _train(stages, "Splatfacto + NeRF views", _trainer_config("splatfacto", data, runs / arm / "splatfacto-nerf-views", args.steps,
-                                                                           augment_from=sn, seed=args.train_seed), setup_part="NeRF views: renders")
+                                                                           changes, augment_from=sn, seed=args.train_seed),
+                        setup_part="NeRF views: renders")
             rows[arm]["splatfacto_nerf_views"] = evaluate(gs, street, bg, args.factor)
         rows[arm]["cpu_s"] = {k: v["cpu_s"] for k, v in stages.rows.items()}
         print(arm, rows[arm], flush=True)

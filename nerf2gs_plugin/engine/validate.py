@@ -55,9 +55,15 @@ def check_trainer_config(cfg: Any) -> None:
     if aug.extra_prob is not None and not 0 <= aug.extra_prob <= 1:
         raise ConfigError(f"must be in [0, 1], got {aug.extra_prob}", "--augment.extra-prob")
     check_given_shares(aug)
+    dm = getattr(getattr(cfg, "pipeline", None), "datamanager", None)
+    if not (math.isfinite(aug.composite_loss_margin) and aug.composite_loss_margin >= 0):
+        raise ConfigError(f"must be >= 0, got {aug.composite_loss_margin}", "--augment.composite-loss-margin")
+    if aug.composite_loss == "either" and getattr(cfg, "augment_from", None) is not None and hasattr(dm, "rays_per_batch"):
+        # rays drawn from the composites carry no photo beside the paint: the option would do nothing
+        raise ConfigError("either needs a method that learns whole images (Splatfacto, Scaffold-GS, 2DGS); this one samples "
+                          "rays: leave it at paint", "--augment.composite-loss")
     if not math.isfinite(aug.theta_pitch):
         raise ConfigError(f"must be finite, got {aug.theta_pitch}", "--augment.theta-pitch")
-    dm = getattr(getattr(cfg, "pipeline", None), "datamanager", None)
     ds = getattr(getattr(dm, "dataparser", None), "downscale", 1.0)
     if not (isinstance(ds, (int, float)) and math.isfinite(ds) and ds > 0):
         raise ConfigError(f"must be a positive finite number, got {ds}", "--pipeline.datamanager.dataparser.downscale")

@@ -54,3 +54,25 @@ def test_sky_stays_the_step_background_whichever_target_is_taken():
     loss = image_loss({"rgb": pred}, {"image": comp, "photo": photo, "sky_mask": sky}, ssim_lambda=0.0, sky_background=bg)
     expected = (pred - torch.where(sky, bg.expand(4, 4, 3), photo)).abs().mean()
     assert torch.allclose(loss["main_loss"], expected) and float(loss["main_loss"]) > 0
+
+
+def test_a_ray_sampled_target_refuses_either_and_image_targets_take_it(tmp_path):
+    import dataclasses
+
+    import pytest
+
+    from nerf2gs_plugin.engine.validate import check_trainer_config
+    from nerf2gs_plugin.errors import ConfigError
+    from nerf2gs_plugin.registry import get_method
+
+    def cfg(method: str, **aug):
+        c = get_method(method).config
+        return dataclasses.replace(c, augment_from=tmp_path, augment=dataclasses.replace(c.augment, **aug))
+
+    with pytest.raises(ConfigError, match="--augment.composite-loss"):
+        check_trainer_config(cfg("streetnerf", composite_loss="either"))
+    check_trainer_config(cfg("streetnerf"))  # paint: rays are fine
+    for method in ("splatfacto", "scaffold-gs", "2dgs"):
+        check_trainer_config(cfg(method, composite_loss="either"))
+    with pytest.raises(ConfigError, match="--augment.composite-loss-margin"):
+        check_trainer_config(cfg("splatfacto", composite_loss="either", composite_loss_margin=-0.1))
