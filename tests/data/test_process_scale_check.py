@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from nerf2gs_plugin.data.process.scale_check import (MAX_HEIGHT_JUMP, MAX_STEP_JUMP_PHOTOS, local_camera_heights, path_jump,
-                                                     scale_jump)
+                                                     scale_jump, standing_frames)
 
 
 def _street(n: int, height: float, spacing: float, x0: float = 0.0, seed: int = 0):
@@ -72,6 +72,16 @@ def test_a_jump_along_an_ordered_path_is_found():
     assert one.consistent and one.ratio == pytest.approx(1.0)
     stop = np.concatenate([np.arange(20) * 0.5, np.full(15, 9.5), 9.5 + np.arange(1, 21) * 0.5])  # a car at a red light
     assert path_jump(np.stack([stop, np.zeros(55), np.zeros(55)], 1)).consistent
+    # a stop with the SfM's noise on it, then the drive's own uneven speed: no jump (half the window standing
+    # made the median of the steps around the first moving one a fraction of it)
+    rng = np.random.default_rng(0)
+    steps = np.concatenate([np.full(30, 1.2), rng.uniform(0, 0.002, 25), [1.25, 1.3, 1.13, 1.11, 0.9, 0.45, 0.3, 0.3], np.full(20, 1.0)])
+    go = np.stack([np.concatenate([[0.0], np.cumsum(steps)]), np.zeros(len(steps) + 1), np.zeros(len(steps) + 1)], 1)
+    assert path_jump(go).consistent
+    # ... but a wrong join right after the stop is still one
+    steps[55] = 6.5
+    jumped = path_jump(np.stack([np.concatenate([[0.0], np.cumsum(steps)]), np.zeros(len(steps) + 1), np.zeros(len(steps) + 1)], 1))
+    assert not jumped.consistent and jumped.index == 55
     assert path_jump(np.zeros((3, 3))) is None
     assert path_jump(centres, max_ratio=MAX_STEP_JUMP_PHOTOS).consistent  # a photo set may jump 6x (a walker's photos)
 
@@ -110,8 +120,25 @@ def test_check_reconstruction_reads_a_reconstruction_and_warns(recwarn):
 
 
 def test_a_broken_capture_whose_longest_stretch_is_short_is_an_error(tmp_path):
-    from nerf2gs_plugin.data.process.pipeline import _keep_only
+    from nerf2gs_plugin.data.process.pipeline import _check_kept
     from nerf2gs_plugin.errors import DataError
 
     with pytest.raises(DataError, match=r"longest consistent stretch holds only 12 of 30 frames.*--broken-join keep"):
-        _keep_only(tmp_path, None, ["frame_000012.jpg"], 12, 30, 0.5)
+        _check_kept(tmp_path, 12, 30, 0.5)
+    _check_kept(tmp_path, 15, 30, 0.5)
+
+
+def test_a_stop_keeps_its_first_frame_and_a_turn_on_the_spot():
+    """A red light: the frames after the first of a stop repeat its view (SfM noise on the pose) and go; a camera
+    that turns while it stands sees something new and stays; the drive's slow steps stay."""
+    rng = np.random.default_rng(1)
+    x = np.concatenate([np.arange(10) * 1.0, 9.0 + rng.normal(0, 0.003, 8), 9.0 + np.cumsum([0.3, 0.6, 1.0, 1.0, 1.0, 1.0])])
+    yaw = np.zeros(len(x))
+    yaw[14:18] = [5.0, 10.0, 10.0, 10.5]  # standing, the camera turns 5 degrees twice, then holds
+    c2w = np.tile(np.eye(4), (len(x), 1, 1))
+    a = np.radians(yaw)
+    c2w[:, 0, 0], c2w[:, 0, 1], c2w[:, 1, 0], c2w[:, 1, 1] = np.cos(a), -np.sin(a), np.sin(a), np.cos(a)
+    c2w[:, 0, 3] = x
+    names = [f"f{i:02d}" for i in range(len(x))]
+    assert standing_frames(c2w, names) == ["f10", "f11", "f12", "f13", "f16", "f17"]
+    assert standing_frames(c2w[:3], names[:3]) == []

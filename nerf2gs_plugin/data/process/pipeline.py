@@ -46,6 +46,10 @@ class ProcessOptions:
     """A reconstruction the capture check finds broken (SfM joined two stretches of the capture at different
     scales or in the wrong place): drop keeps the longest consistent stretch (up to 3 cuts) and drops the
     other frames, as COLMAP keeps its largest model; keep keeps every frame (the warning only)."""
+    standing: Literal["drop", "keep"] = "keep"
+    """Frames of a video (or sequential photos) where the camera stood still (a red light): drop keeps the
+    first of each stop (the others repeat its view: training draws it as often); keep keeps them all (what
+    crosses in front of a standing camera shows the street behind it)."""
     progress: bool = True
 
     @property
@@ -214,9 +218,17 @@ MAX_CUTS = 3
 
 def checked_reconstruction(root: Path, rec, opts: ProcessOptions, ordered: bool, frames: int):
     """(names, c2w, metric scale, capture check) of the undistorted model ``rec`` (in ``root/sparse/0``),
-    after ``--broken-join drop`` kept its longest consistent stretch (written back over ``root``)."""
+    without the frames where an ordered capture's camera stood (``--standing drop``), after ``--broken-join
+    drop`` kept its longest consistent stretch (both written back over ``root``)."""
     from nerf2gs_plugin.data.process import export
+    from nerf2gs_plugin.data.process.scale_check import standing_frames
+    from nerf2gs_plugin.warn import warn
 
+    standing: list[str] = []
+    if ordered and opts.standing == "drop":
+        names, c2w, _ = export.camera_arrays(rec)
+        standing = standing_frames(c2w, names)
+        _deregister(rec, set(standing))
     dropped: list[str] = []
     for cut in range(MAX_CUTS + 1):
         names, c2w, _ = export.camera_arrays(rec)
@@ -227,48 +239,58 @@ def checked_reconstruction(root: Path, rec, opts: ProcessOptions, ordered: bool,
             break
         dropped += drop_shorter_stretch(rec, names, check)
     if dropped:
-        _keep_only(root, rec, dropped, len(names), frames, opts.min_registered_fraction)
+        _check_kept(root, len(names), frames - len(standing), opts.min_registered_fraction)
+        warn(f"kept the longest consistent stretch of the broken reconstruction: {len(names)} of {frames - len(standing)} frames",
+             f"dropped {len(dropped)} ({min(dropped)} .. {max(dropped)}); --broken-join keep keeps them", stacklevel=2)
         check["line"] += f"; kept the longest consistent stretch, {len(names)} frames ({len(dropped)} dropped)"
+    if standing:
+        check["line"] += f"; {len(standing)} frames where the camera stood dropped (--standing drop)"
+    if dropped or standing:
+        _write_kept(root, rec, dropped + standing)
     check["dropped"] = sorted(dropped)
+    check["standing"] = sorted(standing)
     return names, c2w, scale, check
 
 
 def drop_shorter_stretch(rec, names: list[str], check: dict) -> list[str]:
     """Deregister, from the pycolmap reconstruction ``rec``, the frames on the shorter side of the failed
-    check's split (the path jump's when it failed, else the height split) with their observations (a
-    point seen only there goes with them). Returns their names."""
+    check's split (the path jump's when it failed, else the height split). Returns their names."""
     jump = check.get("path_jump")
     at = jump["index"] + 1 if jump is not None and not jump["consistent"] else check["split"]
     drop = set(names[at:] if at >= len(names) - at else names[:at])
+    _deregister(rec, drop)
+    return sorted(drop)
+
+
+def _deregister(rec, drop: set[str]) -> None:
+    """Deregister the frames named ``drop`` from ``rec`` with their observations (a point seen only there goes with them)."""
     for im in list(rec.images.values()):
         if im.name in drop and im.has_pose:
             for idx, p in enumerate(im.points2D):
                 if p.has_point3D():
                     rec.delete_observation(im.image_id, idx)
             rec.deregister_frame(im.frame_id)
-    return sorted(drop)
 
 
-def _keep_only(root: Path, rec, dropped: list[str], kept: int, frames: int, min_fraction: float) -> None:
-    """Write the cut reconstruction over ``root/sparse/0`` (temp folder, then renamed) and remove the
-    dropped frames' images; an error when what is left is fewer than ``min_fraction`` of the frames."""
-    from nerf2gs_plugin.warn import warn
-
+def _check_kept(root: Path, kept: int, frames: int, min_fraction: float) -> None:
+    """An error when the longest consistent stretch holds fewer than ``min_fraction`` of the frames."""
     if kept < min_fraction * frames:
         raise DataError(f"the reconstruction is broken (see the capture check above) and its longest consistent stretch holds only "
                         f"{kept} of {frames} frames (fewer than {min_fraction:.0%}): process the stretches separately, or pass "
                         "--broken-join keep to keep every frame", root)
+
+
+def _write_kept(root: Path, rec, removed: list[str]) -> None:
+    """Write the cut reconstruction over ``root/sparse/0`` (temp folder, then renamed) and remove the
+    ``removed`` frames' images."""
     tmp = root / "sparse" / "0.tmp"
     shutil.rmtree(tmp, ignore_errors=True)
     tmp.mkdir(parents=True)
     rec.write(str(tmp))
     shutil.rmtree(root / "sparse" / "0")
     os.replace(tmp, root / "sparse" / "0")
-    for n in dropped:
+    for n in removed:
         (root / "images" / n).unlink(missing_ok=True)
-    names = sorted(dropped)
-    warn(f"kept the longest consistent stretch of the broken reconstruction: {kept} of {frames} frames",
-         f"dropped {len(names)} ({names[0]} .. {names[-1]}); --broken-join keep keeps them", stacklevel=3)
 
 
 def check_reconstruction(rec, names: list[str], c2w: np.ndarray, up: np.ndarray, ordered: bool = False) -> dict:

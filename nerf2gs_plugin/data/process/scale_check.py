@@ -43,6 +43,10 @@ MAX_STEP_JUMP_PHOTOS = 10.0
 jump, a wrong join (two passes joined, a frame misplaced) jumps more."""
 STEP_WINDOW = 5
 """Steps on each side a step is compared with."""
+STANDING = 0.1
+"""A step under this fraction of the path's moving scale (its steps' 75th percentile) is the camera standing."""
+STANDING_DEG = 2.0
+"""A frame within :data:`STANDING` of the last frame kept is still a new view when it turned by more than this."""
 MIN_POINTS_BELOW = 10
 """Fewer observed points below a camera than this: no local height for it."""
 
@@ -163,20 +167,42 @@ class PathJump:
 
 
 def path_jump(centres: np.ndarray, names: Optional[Sequence[str]] = None, max_ratio: float = MAX_STEP_JUMP) -> Optional[PathJump]:
-    """The step of the path ``centres [N, 3]`` (capture order) largest against the median of the
-    :data:`STEP_WINDOW` steps on each side, flagged above ``max_ratio``; None for fewer than 4 frames.
-    A standing camera (steps ~0 around it) is skipped: any motion would be a jump there."""
+    """The step of the path ``centres [N, 3]`` (capture order) largest against the median of the moving steps
+    among the :data:`STEP_WINDOW` steps on each side, flagged above ``max_ratio``; None for fewer than 4 frames.
+    Standing steps (under :data:`STANDING` of the path's moving scale: a car at a red light) are compared with
+    nothing and taken as nothing's neighbour: beside a stop, half the window would be ~0 and any motion a jump."""
     c = np.asarray(centres, dtype=np.float64)
     if len(c) < 4:
         return None
     steps = np.linalg.norm(np.diff(c, axis=0), axis=1)
     n, w = len(steps), STEP_WINDOW
     ratio = np.zeros(n)
-    floor = 1e-3 * float(np.median(steps))
-    for i in range(n):
-        around = np.concatenate([steps[max(0, i - w):i], steps[i + 1:i + 1 + w]])
-        med = float(np.median(around))
-        if med > floor:
-            ratio[i] = steps[i] / med
+    moving = steps > STANDING * float(np.percentile(steps, 75))
+    for i in np.flatnonzero(moving):
+        around = np.concatenate([steps[max(0, i - w):i][moving[max(0, i - w):i]], steps[i + 1:i + 1 + w][moving[i + 1:i + 1 + w]]])
+        if len(around):
+            ratio[i] = steps[i] / float(np.median(around))
     i = int(ratio.argmax())
     return PathJump(float(ratio[i]), i, (names[i], names[i + 1]) if names is not None else ("", ""), max_ratio)
+
+
+def standing_frames(c2w: np.ndarray, names: Sequence[str]) -> list[str]:
+    """The frames of an ordered capture (``c2w [N, 3|4, 4]``, capture order) where the camera stood: within
+    :data:`STANDING` of the path's moving scale and :data:`STANDING_DEG` of the last frame kept (the first of
+    a stop is kept). A car at a red light films one view many times: the training draws it as often, and
+    the views from above repeat it."""
+    c2w = np.asarray(c2w, dtype=np.float64)
+    if len(c2w) < 4:
+        return []
+    centres = c2w[:, :3, 3]
+    steps = np.linalg.norm(np.diff(centres, axis=0), axis=1)
+    near = STANDING * float(np.percentile(steps, 75))
+    cos_max = np.cos(np.radians(STANDING_DEG))
+    out, last = [], 0
+    for i in range(1, len(c2w)):
+        turn = (np.trace(c2w[last, :3, :3].T @ c2w[i, :3, :3]) - 1) / 2  # cos of the rotation between them
+        if np.linalg.norm(centres[i] - centres[last]) < near and turn > cos_max:
+            out.append(str(names[i]))
+        else:
+            last = i
+    return out
