@@ -4,7 +4,7 @@ Stand-in for a 100-frame 480x360 dashcam clip: the synthetic street with movers 
 riding ahead at the drive's speed, pedestrians, parked cars) rendered at 480x360, its forward drive
 written as a video. The path is what a user runs with default configs: ``process video`` ->
 ``masks`` (auto: first reference, its renders, the mask maths) -> StreetNeRF (``--warm-start`` from
-the masks' reference unless ``--no-warm-start``) -> Splatfacto ``--augment-from`` StreetNeRF (the
+the masks' reference as their second pass left it, unless ``--no-warm-start``) -> Splatfacto ``--augment-from`` StreetNeRF (the
 reference's renders, then the training). Every stage gets wall seconds and CPU seconds (user + sys of
 this process and its children: robust to other load on a shared machine, and with one thread the
 time the stage takes alone on one core). Writes ``real_path_speed.{json,md}``.
@@ -45,7 +45,8 @@ class RealPathOptions:
     view_downscale: Optional[int] = None
     """The views from above rendered and trained at 1/N size (--augment.view-downscale; None: its default)."""
     warm_start: bool = True
-    """StreetNeRF continues from the masks' reference (its first steps are the reference's)."""
+    """StreetNeRF continues from the masks' reference, as continued by their second pass when it ran (its first
+    steps are the reference's)."""
     render_downscale: Optional[int] = None
     """The masks' renders at every d-th pixel per side (ns2gs-data masks --render-downscale); None: its default."""
     capture: Optional[str] = None
@@ -180,7 +181,7 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
 
     root = Path(root)
     video, fov, cam_height = make_capture(root, opts)
-    for stale in ("capture", "masks-reference", "streetnerf", "splatfacto-nerf-views"):
+    for stale in ("capture", "masks-reference", "masks-reference-second-pass", "streetnerf", "splatfacto-nerf-views"):
         shutil.rmtree(root / stale, ignore_errors=True)
     data, ref = root / "capture", root / "masks-reference"
     sfm_threads = SfmOptions().num_threads  # what a user's SfM runs on (the accuracy benches take one thread: repeatable)
@@ -205,8 +206,10 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
     stages.split("masks: mask maths", "masks: renders", summary["render_seconds"], summary["render_cpu_seconds"])
     if "second_pass_seconds" in summary:
         stages.split("masks: mask maths", "masks: second pass", summary["second_pass_seconds"], summary["second_pass_cpu_seconds"])
+    warm = Path(summary.get("second_pass_run") or ref)  # what `ns2gs-data masks` tells StreetNeRF to go on from
+    doc["warm_start_from"] = warm.name if opts.warm_start else None
     sn = _train(stages, "StreetNeRF", _trainer_config("streetnerf", data, root / "streetnerf", opts.streetnerf_steps,
-                                                      warm_start=ref if opts.warm_start else None))
+                                                      warm_start=warm if opts.warm_start else None))
     _train(stages, "Splatfacto + NeRF views: training", _trainer_config("splatfacto", data, root / "splatfacto-nerf-views",
                                                                         opts.splatfacto_steps, augment_from=sn,
                                                                         augment_changes={} if opts.view_downscale is None
@@ -245,12 +248,14 @@ def results_md(doc: dict) -> str:
     from nerf2gs_bench.machine import machine_line
 
     o = doc["options"]
+    second = str(doc.get("warm_start_from") or "").endswith("-second-pass")
+    warm = ("warm-started from the masks' " + ("second-pass reference" if second else "reference")) if o["warm_start"] else "from scratch"
     lines = [f"# The real path, stage by stage ({o['frames']} frames, {o['width']}x{o['height']})", "",
              f"Machine: {machine_line(doc['machine'])}; torch threads {doc['machine'].get('torch_threads')}; "
              f"SfM threads {_sfm_threads(doc)}; "
              f"load average at the end {doc.get('load_average')}.",
              f"{_source(doc)}; masks' reference {o['reference_steps']} steps, StreetNeRF "
-             f"{o['streetnerf_steps'] or 'default'} steps ({'warm-started from the masks reference' if o['warm_start'] else 'from scratch'}), "
+             f"{o['streetnerf_steps'] or 'default'} steps ({warm}), "
              f"Splatfacto {o['splatfacto_steps'] or 'default'} steps with NeRF views"
              f"{'' if o.get('view_downscale') in (None, 1) else ' (the views from above at 1/%d size)' % o['view_downscale']}; masks' renders at 1/{_downscale(doc):g}; "
              f"StreetNeRF renders with {doc.get('streetnerf_render_nerf_samples') or 'all'} fine samples per ray. "

@@ -7,7 +7,9 @@ capture's held-out frames (every 8th) and from above; ``--static NAME=FILE`` add
 from a JSON that ``static_psnr_hand_labels.py`` wrote for its two runs (hand-labelled held-out frames).
 
 Usage: python benchmarks/validation/warm_start_real.py OUT_STEM NAME WARM_EVAL SCRATCH_EVAL [NAME WARM SCRATCH ...]
-[--static NAME=STATIC.json ...]
+[--static NAME=STATIC.json ...] [--kinds A B --title TITLE]
+(``--kinds second-pass first-reference``: any two runs of a capture, e.g. StreetNeRF warm-started from the masks'
+second-pass reference against from their first reference: produced ``warm_start_second_pass.{json,md}``.)
 """
 import argparse
 import json
@@ -33,6 +35,8 @@ def main() -> None:
     ap.add_argument("out", type=Path)
     ap.add_argument("triples", nargs="+", help="NAME WARM_EVAL.json SCRATCH_EVAL.json, repeated")
     ap.add_argument("--static", action="append", default=[], help="NAME=static_psnr_hand_labels.py JSON of that capture's runs")
+    ap.add_argument("--kinds", nargs=2, default=["warm", "scratch"], help="the two runs' labels")
+    ap.add_argument("--title", default="StreetNeRF warm-started from the masks' reference vs from scratch (real captures)")
     args = ap.parse_args()
     if len(args.triples) % 3:
         ap.error("give NAME WARM_EVAL SCRATCH_EVAL per capture")
@@ -41,14 +45,14 @@ def main() -> None:
         name, _, f = item.partition("=")
         static[name] = {run: r["hand"]["static_psnr"] for run, r in json.loads(Path(f).read_text())["runs"].items()}
     doc = {"machine": machine_line(), "captures": {}}
-    lines = ["# StreetNeRF warm-started from the masks' reference vs from scratch (real captures)", "",
+    lines = [f"# {args.title}", "",
              f"Machine: {doc['machine']}. Default StreetNeRF (3000 steps); held-out frames every 8th, scored by "
              "`ns2gs-eval`; holes from above: 16 fly-over views 10 m up (accumulation < 0.5). One seed each.", "",
              "| capture | run | steps trained | PSNR | SSIM | LPIPS | static PSNR (hand labels) | holes from above |",
              "|---|---|---|---|---|---|---|---|"]
     for i in range(0, len(args.triples), 3):
         name, warm, scratch = args.triples[i], Path(args.triples[i + 1]), Path(args.triples[i + 2])
-        rows = {"warm": _row(warm), "scratch": _row(scratch)}
+        rows = {args.kinds[0]: _row(warm), args.kinds[1]: _row(scratch)}
         for kind, r in rows.items():
             r["static_psnr"] = static.get(name, {}).get(Path(r["run"]).name)
             st = f"{r['static_psnr']:.2f}" if r["static_psnr"] is not None else "-"

@@ -52,8 +52,8 @@ class TrainerConfig:
     """Resume from this run directory or .ckpt file (same method)."""
     warm_start: Optional[Path] = None
     """Start this new run from another run's weights and step (a run directory or .ckpt): e.g.
-    StreetNeRF from the masks stage's first reference (outputs/<data>/masks-reference), which trained
-    its first steps already. Refused unless it is the same method, images, cameras and model
+    StreetNeRF from the masks stage's reference as its second pass left it
+    (outputs/<data>/masks-reference-second-pass), which trained its first steps already. Refused unless it is the same method, images, cameras and model
     configuration (loss weights may differ); the run goes on from that run's step."""
     augment_from: Optional[Path] = None
     """Reference run directory or .ckpt: train on its composites and bird's-eye views."""

@@ -9,6 +9,7 @@ surface points of the training views.
 from __future__ import annotations
 
 import json
+import shutil
 import time
 import warnings
 from dataclasses import replace
@@ -206,24 +207,27 @@ def render_views(view: Path, reference: Path, splits: list[str], log: Callable[[
 
 def auto_masks(view: Path, reference: Path, splits: list[str], opts: AutoOptions,
                log: Callable[[str], None] = print, progress: bool = True, motion=None, render_downscale: int = 1,
-               stats: Optional[dict] = None) -> dict[str, list[FrameMasks]]:
+               stats: Optional[dict] = None, keep_second_pass: bool = False) -> dict[str, list[FrameMasks]]:
     """:func:`render_views` then :func:`masks_for_renders`; ``stats`` receives ``render_seconds`` and
-    ``render_cpu_seconds`` (and the second pass's seconds)."""
+    ``render_cpu_seconds`` (and the second pass's seconds and, with ``keep_second_pass``, its kept run)."""
     renders = render_views(view, reference, splits, log, progress, render_downscale)
     if stats is not None:
         stats["render_seconds"], stats["render_cpu_seconds"] = round(renders.seconds, 1), round(renders.cpu_seconds, 1)
-    return masks_for_renders(view, reference, renders, opts, log, progress, motion, stats, render_downscale)
+    return masks_for_renders(view, reference, renders, opts, log, progress, motion, stats, render_downscale,
+                             keep_second_pass=keep_second_pass)
 
 
 def masks_for_renders(view: Path, reference: Path, renders: Renders, opts: AutoOptions, log: Callable[[str], None] = print,
                       progress: bool = True, motion=None, stats: Optional[dict] = None, render_downscale: int = 1,
                       first_pass: Optional[Callable[[dict[str, list[FrameMasks]]], None]] = None,
-                      before_settle: Optional[Callable[[dict[str, list[FrameMasks]]], None]] = None) -> dict[str, list[FrameMasks]]:
+                      before_settle: Optional[Callable[[dict[str, list[FrameMasks]]], None]] = None,
+                      keep_second_pass: bool = False) -> dict[str, list[FrameMasks]]:
     """:func:`~nerf2gs_plugin.masks.auto.masks_from_renders` on ``reference``'s renders of ``view``, plus
     what moves against the static scene's flow (``motion``: :class:`~nerf2gs_plugin.masks.motion.MotionOptions`)
     and its second pass (``render_downscale``: that of ``renders``), then the neighbours' check
     (``masks/motion.settle_transients``); ``first_pass`` and ``before_settle`` (benchmarks) see the masks
-    before the second pass and before that check."""
+    before the second pass and before that check. ``keep_second_pass``: the second pass's run stays beside the
+    reference (an earlier one there goes whether or not a second pass runs now)."""
     result = masks_from_renders(renders, opts, log)
     if motion is not None:
         from nerf2gs_plugin.masks.motion import add_motion, is_sequence, settle_transients
@@ -234,11 +238,13 @@ def masks_for_renders(view: Path, reference: Path, renders: Renders, opts: AutoO
         moved = add_motion(full, result, motion, log, progress, sequence=is_sequence(meta), kept=kept)
         if first_pass is not None:
             first_pass(result)
-        if moved and motion.second_pass_steps > 0:
-            from nerf2gs_plugin.masking.second_pass import second_pass
+        from nerf2gs_plugin.masking.second_pass import kept_run_dir, second_pass
 
+        if keep_second_pass:
+            shutil.rmtree(kept_run_dir(reference), ignore_errors=True)  # another run's: not what these masks came from
+        if moved and motion.second_pass_steps > 0:
             took = second_pass(view, reference, full, result, motion.second_pass_steps, motion.second_pass_margin, log, progress,
-                               render_step=max(1, int(render_downscale)))
+                               render_step=max(1, int(render_downscale)), keep=keep_second_pass)
             if stats is not None:
                 stats.update(took)
         if moved:

@@ -155,8 +155,8 @@ def make_masks(cfg: MasksConfig, log: Callable[[str], None] = print) -> dict:
     log(f"wrote masks for {len(frames)} images to {data / 'masks'} in {summary['seconds']:.1f} s; "
         + ", ".join(f"{k} {100 * v:.1f}%" for k, v in summary["coverage"].items()) + " of the pixels")
     if summary.get("reference"):
-        # the first reference is StreetNeRF's first steps on these frames: the full StreetNeRF goes on from it
-        log(f"next: ns2gs-train streetnerf --data {data} --warm-start {summary['reference']} "
+        # the reference (continued by the second pass, when it ran) is StreetNeRF's first steps on these frames
+        log(f"next: ns2gs-train streetnerf --data {data} --warm-start {summary.get('second_pass_run') or summary['reference']} "
             f"(continues that reference: its steps are not trained again; same frames and downscale)")
     return summary
 
@@ -213,7 +213,7 @@ def _segment(cfg: MasksConfig, data: Path, frames: list, groups: dict, out: Path
         timings: dict = {}
         computed = _with_neighbours(data, groups, all_groups, cfg.motion, log)
         result = auto_masks(maskless_view(data), ref, computed, cfg.auto, log, cfg.progress, motion=cfg.motion,
-                            render_downscale=cfg.render_downscale, stats=timings)
+                            render_downscale=cfg.render_downscale, stats=timings, keep_second_pass=True)
         summary.update(timings)
         for split, fs in groups.items():
             for f, m in zip(fs, result[split]):

@@ -2,14 +2,16 @@
 the first reference continued for ``second_pass_steps`` steps on the dataset with the first pass's
 transient masks (grown a little) excluded from its loss, then rendered where the first pass marked.
 
-The continued run lives in a temporary folder beside the first reference; the dataset it trains on is
-``DATA/.ns2gs_second_pass`` (symlinks to the mask-less view's entries and the first pass's transient
-masks). Both are removed afterwards.
+The continued run trains in a temporary folder beside the first reference and, when asked, stays there as
+``<reference>-second-pass`` (:func:`kept_run_dir`): StreetNeRF goes on from it (``--warm-start``) without
+training its steps again. The dataset it trains on is ``DATA/.ns2gs_second_pass`` (symlinks to the mask-less
+view's entries and the first pass's transient masks), removed afterwards.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import os
 import shutil
 import tempfile
 import time
@@ -29,6 +31,14 @@ from nerf2gs_plugin.utils.parallel import cpu_seconds, render_ahead
 TRAIN_GROW = 0.025
 """The first pass's masks grow by this fraction of the shorter image side before they are excluded from
 the loss: the mover's edge and shadow that the first pass cut off."""
+
+
+def kept_run_dir(reference: Path) -> Path:
+    """Where the second pass's run stays: beside the first reference's run folder (``reference``, or the run
+    of a ``.ckpt`` in it), named after it."""
+    reference = Path(reference)
+    run_dir = (reference.parent.parent if reference.parent.name == "checkpoints" else reference.parent) if reference.suffix == ".ckpt" else reference
+    return run_dir.parent / f"{run_dir.name}-second-pass"
 
 
 def masked_view(view: Path, transient: dict[str, Tensor]) -> Path:
@@ -74,11 +84,11 @@ def continue_reference(view: Path, first: Path, run: Path, steps: int, progress:
 
 
 def second_pass(view: Path, reference: Path, full: Renders, result: dict[str, list[FrameMasks]], steps: int, margin: float,
-                log: Callable[[str], None] = print, progress: bool = True, render_step: int = 1) -> dict:
+                log: Callable[[str], None] = print, progress: bool = True, render_step: int = 1, keep: bool = False) -> dict:
     """Replace ``result``'s transient masks (the first pass: residual route and motion route, at the
     size of ``full``'s views) by the second pass's (``masks/second_pass.py``), its reference rendering
     every ``render_step``-th pixel per side of the regions (the first reference's ``render_downscale``);
-    returns its seconds."""
+    returns its seconds (and, with ``keep``, ``second_pass_run``: the continued run, kept at :func:`kept_run_dir`)."""
     from nerf2gs_plugin.data import parse_dataset
     from nerf2gs_plugin.progress import make_progress
     from nerf2gs_plugin.runs.load import load_run
@@ -119,10 +129,15 @@ def second_pass(view: Path, reference: Path, full: Renders, result: dict[str, li
             for (s, i), m in zip(todo, render_ahead(mask, todo)):
                 result[s][i].transient = m
                 prog.advance(task)
+        if keep:
+            kept = kept_run_dir(reference)
+            shutil.rmtree(kept, ignore_errors=True)
+            os.replace(tmp / "run", kept)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         shutil.rmtree(mview, ignore_errors=True)
     seconds, cpu = time.perf_counter() - t0, cpu_seconds() - c0
     log(f"masks: second pass in {seconds:.1f} s (its reference {t_train:.1f} s)")
-    return {"second_pass_seconds": round(seconds, 1), "second_pass_cpu_seconds": round(cpu, 1),
+    took = {"second_pass_seconds": round(seconds, 1), "second_pass_cpu_seconds": round(cpu, 1),
             "second_pass_train_seconds": round(t_train, 1)}
+    return took | ({"second_pass_run": str(kept_run_dir(reference))} if keep else {})

@@ -68,7 +68,9 @@ def test_results_state_machine_options_and_total(tmp_path):
     assert json.loads((tmp_path / "real_path_speed.json").read_text())["total_cpu_s"] == 160.0
     md = (tmp_path / "real_path_speed.md").read_text()
     assert "Machine: " in md and "| StreetNeRF | 110.0 | 120.0 |" in md and "160 (2.7 min)" in md
-    assert "warm-started from the masks reference" in md and "100/100" in md
+    assert "warm-started from the masks' reference" in md and "100/100" in md
+    write_results(tmp_path, doc | {"warm_start_from": "masks-reference-second-pass"})
+    assert "warm-started from the masks' second-pass reference" in (tmp_path / "real_path_speed.md").read_text()
     doc["options"] = asdict(RealPathOptions(capture="kitti", view_downscale=2, splatfacto_steps=4200))
     write_results(tmp_path, doc)  # the half-size views' path lands beside the default's, not over it
     md = (tmp_path / "real_path_speed_kitti_view_downscale2.md").read_text()
@@ -166,7 +168,9 @@ def _check_readme_pair(sn, sf, tmp_path):
     from nerf2gs_bench.real_path_speed import _trainer_config
     from nerf2gs_plugin.masking.mask_reference import default_reference_dir
 
-    assert RealPathOptions().warm_start and sn.warm_start == default_reference_dir(sn.data)
+    from nerf2gs_plugin.masking.second_pass import kept_run_dir
+
+    assert RealPathOptions().warm_start and sn.warm_start == kept_run_dir(default_reference_dir(sn.data))  # what masks prints
     bench_sn = _trainer_config("streetnerf", sn.data, tmp_path / "sn", None, warm_start=sn.warm_start)
     assert (sn.pipeline, sn.max_num_iterations, sn.optimizers) == (bench_sn.pipeline, bench_sn.max_num_iterations, bench_sn.optimizers)
     bench_sf = _trainer_config("splatfacto", sf.data, tmp_path / "sf", None, augment_from=sf.augment_from)

@@ -24,7 +24,7 @@ def test_first_pass_seen_before_the_second_and_render_step_passed(tmp_path, monk
         kept.update(flows="kept")
         return True
 
-    def second(view, reference, full, result, steps, margin, log, progress, render_step=1):
+    def second(view, reference, full, result, steps, margin, log, progress, render_step=1, keep=False):
         calls["render_step"] = render_step
         result["train"][0].transient = torch.zeros(2, 2, dtype=torch.bool)
         return {"second_pass_seconds": 1.0}

@@ -92,16 +92,14 @@ def test_the_masked_view_holds_the_first_pass_grown_and_stays_out_of_the_maskles
     assert not (maskless_view(data) / SECOND_PASS_DIRNAME).exists()
 
 
-def test_the_second_pass_continues_the_first_reference_on_the_masked_view(tmp_path):
-    """The training and rendering half on the tiny scene: a 5-step first reference continued 3 steps
-    with a transient mask excluded (the warm start must accept the reference's own config), rendered
-    where the mask is; the temporary run and dataset view are removed, the masks keep their size."""
+def _tiny_first_pass(tmp_path):
+    """The tiny scene without masks, a 5-step first reference, its renders and first-pass masks with one transient
+    block per frame: (data, reference, mask-less view, full-size renders, masks)."""
     import shutil
 
     from masks.test_masks import _tiny
     from nerf2gs_plugin.masking.auto_masks import at_full_size, render_views
     from nerf2gs_plugin.masking.mask_reference import ensure_reference
-    from nerf2gs_plugin.masking.second_pass import second_pass
     from nerf2gs_plugin.masks.auto import AutoOptions, masks_from_renders
 
     data = _tiny(tmp_path, "scene")
@@ -110,14 +108,45 @@ def test_the_second_pass_continues_the_first_reference_on_the_masked_view(tmp_pa
     view = maskless_view(data)
     renders = render_views(view, ref, ["train"], log=lambda s: None, progress=False)
     result = masks_from_renders(renders, AutoOptions(), log=lambda s: None)
-    full = at_full_size(renders, result)
     for m in result["train"]:
         m.transient = torch.zeros_like(m.transient)
         m.transient[4:12, 4:14] = True
+    return data, ref, view, at_full_size(renders, result), result
+
+
+def test_the_second_pass_continues_the_first_reference_on_the_masked_view(tmp_path):
+    """The training and rendering half on the tiny scene: a 5-step first reference continued 3 steps
+    with a transient mask excluded (the warm start must accept the reference's own config), rendered
+    where the mask is; the temporary run and dataset view are removed, the masks keep their size."""
+    from nerf2gs_plugin.masking.second_pass import second_pass
+
+    data, ref, view, full, result = _tiny_first_pass(tmp_path)
     logs: list[str] = []
     took = second_pass(view, ref, full, result, 3, 0.2, log=logs.append, progress=False)
     assert any("continued for 3 steps" in line for line in logs) and took["second_pass_train_seconds"] > 0
     assert took["second_pass_cpu_seconds"] > 0 and took["second_pass_seconds"] >= took["second_pass_train_seconds"]
     assert [p.name for p in ref.parent.iterdir()] == ["ref"] and (ref / "config.yml").is_file()  # nothing left beside it
-    assert not (data / SECOND_PASS_DIRNAME).exists()
+    assert not (data / SECOND_PASS_DIRNAME).exists() and "second_pass_run" not in took
     assert all(tuple(m.transient.shape) == tuple(v["image"].shape[:2]) for m, v in zip(result["train"], full.views["train"]))
+
+
+def test_the_kept_second_pass_is_where_streetnerf_goes_on(tmp_path):
+    """``keep``: the continued run stays beside the first reference, and StreetNeRF on the capture takes it as its
+    warm start at the step after the second pass's (the second pass's steps are not trained again)."""
+    import dataclasses
+
+    from nerf2gs_plugin.engine.trainer import Trainer
+    from nerf2gs_plugin.masking.second_pass import kept_run_dir, second_pass
+    from nerf2gs_plugin.registry import get_method
+
+    data, ref, view, full, result = _tiny_first_pass(tmp_path)
+    took = second_pass(view, ref, full, result, 3, 0.2, log=lambda s: None, progress=False, keep=True)
+    kept = kept_run_dir(ref)
+    assert took["second_pass_run"] == str(kept) and kept == tmp_path / "refs" / "ref-second-pass"
+    assert kept_run_dir(ref / "checkpoints" / "step-000000004.ckpt") == kept
+    assert sorted(p.name for p in ref.parent.iterdir()) == ["ref", "ref-second-pass"] and not (data / SECOND_PASS_DIRNAME).exists()
+    cfg = dataclasses.replace(get_method("streetnerf").with_steps(12), data=data, run_dir=tmp_path / "sn", warm_start=kept,
+                              progress=False)
+    trainer = Trainer(cfg)
+    trainer.setup()
+    assert trainer.step == 8  # 5 steps of the first reference, 3 of the second pass
