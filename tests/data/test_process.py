@@ -62,6 +62,18 @@ def test_video_frames_sharpest_kept_in_order(tmp_path):
     assert len(rep2.names) == 8 and cv2.imread(str(tmp_path / "g" / rep2.names[0])).shape[1] == 48
 
 
+def test_frames_that_repeat_the_one_kept_before_are_dropped(tmp_path):
+    """A 10 fps drive written at 20 fps (every frame twice), then a stop (one view, six times): each window's frame
+    that repeats the frame kept before it is dropped; the drive's frames stay."""
+    drive = _textured(np.random.default_rng(1), 12)
+    doubled = [f for f in drive for _ in (0, 1)]
+    stop = [drive[-1].copy() for _ in range(6)]
+    video = _write_video(tmp_path / "v.avi", doubled + stop)
+    rep = extract_video_frames(video, tmp_path / "f", fps=None, num_frames=30, blur_ratio=0.0, max_size=0)
+    assert len(rep.names) == 12 and rep.dropped_repeats == 30 - 12
+    assert sorted(p.name for p in (tmp_path / "f").iterdir()) == rep.names
+
+
 def test_unreadable_video_and_too_few_frames(tmp_path, capsys):
     bad = tmp_path / "bad.mp4"
     bad.write_bytes(b"not a video at all")

@@ -93,12 +93,25 @@ class FrameReport:
     dropped_blurry: int
     video_frames: int = 0
     video_fps: float = 0.0
+    dropped_repeats: int = 0  # video: a window's frame that repeats the frame kept before it
+
+
+REPEAT_GREY = 0.5
+"""A video frame whose 1/8-size grey image differs from the last frame kept by less than this (mean absolute, grey
+levels) repeats it and is dropped: a frame-rate conversion's copies (0) or a stop with nothing moving (sensor
+noise, about 0.3). Frames of a drive differ by 10-50, a stop with people crossing by 7 or more, a car creeping at
+2 Hz key frames by 1.2 or more. A copy shows nothing new and costs the SfM and every stage after it a frame."""
+
+
+def _thumb(bgr: np.ndarray) -> np.ndarray:
+    grey = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    return cv2.resize(grey, (max(1, grey.shape[1] // 8), max(1, grey.shape[0] // 8)), interpolation=cv2.INTER_AREA)
 
 
 def extract_video_frames(video: Path, out_dir: Path, fps: Optional[float], num_frames: Optional[int], blur_ratio: float,
                          max_size: int, ext: str = ".jpg", progress=None, crop: Crop = NO_CROP) -> FrameReport:
     """One frame per window of ``video_fps / fps`` (or ``total / num_frames``) frames, the sharpest
-    of its window; then :func:`relative_blur_drop`. Writes ``frame_<index>.<ext>`` into ``out_dir``
+    of its window unless it repeats the frame kept before it (:data:`REPEAT_GREY`); then :func:`relative_blur_drop`. Writes ``frame_<index>.<ext>`` into ``out_dir``
     (cropped by ``crop`` and shrunk to ``max_size``)."""
     video = Path(video)
     if not video.is_file():
@@ -120,6 +133,19 @@ def extract_video_frames(video: Path, out_dir: Path, fps: Optional[float], num_f
     task = progress.add_task("frames: decode + pick sharpest", total=total if total < (1 << 31) else None, stats="") if progress else None
     picked: list[tuple[int, float]] = []  # (frame index, sharpness)
     best: tuple[float, int, Optional[np.ndarray]] = (-1.0, -1, None)
+    last: list[Optional[np.ndarray]] = [None]  # the thumbnail of the last frame kept
+    repeats = 0
+
+    def keep_best() -> None:
+        nonlocal repeats
+        thumb = _thumb(best[2])
+        if last[0] is not None and float(np.abs(thumb - last[0]).mean()) < REPEAT_GREY:
+            repeats += 1
+            return
+        last[0] = thumb
+        picked.append((best[1], best[0]))
+        _write_atomic(out_dir / f"frame_{best[1]:06d}{ext}", _fit(best[2], max_size, crop), 95)
+
     known = total < (1 << 31)
     window, i, frame, prev = 0, 0, first, first
     while frame is not None:
@@ -138,8 +164,7 @@ def extract_video_frames(video: Path, out_dir: Path, fps: Optional[float], num_f
         prev = frame
         w = int(i // step)
         if w != window and best[2] is not None:
-            picked.append((best[1], best[0]))
-            _write_atomic(out_dir / f"frame_{best[1]:06d}{ext}", _fit(best[2], max_size, crop), 95)
+            keep_best()
             best = (-1.0, -1, None)
         window = w
         s = sharpness(frame)
@@ -151,8 +176,7 @@ def extract_video_frames(video: Path, out_dir: Path, fps: Optional[float], num_f
         frame = ahead
     cap.release()
     if best[2] is not None:
-        picked.append((best[1], best[0]))
-        _write_atomic(out_dir / f"frame_{best[1]:06d}{ext}", _fit(best[2], max_size, crop), 95)
+        keep_best()
     if task is not None:
         progress.update(task, total=i, completed=i)
     keep = relative_blur_drop(np.array([s for _, s in picked]), blur_ratio)
@@ -166,7 +190,7 @@ def extract_video_frames(video: Path, out_dir: Path, fps: Optional[float], num_f
     if len(names) < MIN_FRAMES:
         raise DataError(f"too few frames: {len(names)} usable of {i} decoded (need at least {MIN_FRAMES}; "
                         "raise --num-frames/--fps or lower --blur-ratio)", video)
-    return FrameReport(names, len(picked), int((~keep).sum()), i, vfps)
+    return FrameReport(names, len(picked), int((~keep).sum()), i, vfps, repeats)
 
 
 def _natural_key(name: str) -> list:

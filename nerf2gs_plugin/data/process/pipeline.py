@@ -71,13 +71,15 @@ class ProcessReport:
     dropped_blurry: int = 0
     check: str = ""
     """The capture check's line (:func:`check_reconstruction`)."""
+    dropped_repeats: int = 0
 
     def lines(self) -> list[str]:
         t = ", ".join(f"{k} {v:.1f} s" for k, v in self.stage_seconds.items())
         return [
             f"registered {self.registered} of {self.frames} frames ({100.0 * self.registered / max(self.frames, 1):.0f}%), "
             f"{self.points} sparse points, matching {self.matching}"
-            + (f"; {self.dropped_blurry} blurry frames dropped" if self.dropped_blurry else ""),
+            + (f"; {self.dropped_blurry} blurry frames dropped" if self.dropped_blurry else "")
+            + (f"; {self.dropped_repeats} frames dropped that repeat the one before" if self.dropped_repeats else ""),
             f"metric scale: {self.metres_per_unit:.4g} metres per SfM unit ({self.scale_source}); stored in transforms.json",
             *([self.check] if self.check else []),
             f"time per stage: {t}",
@@ -128,7 +130,7 @@ def run_process(frames_fn, opts: ProcessOptions, is_video: bool, focal_px_fn=Non
                                 "more overlap, or less blur", root)
             scale, check_line = _export_stages(root, mapped, method, len(fr.names), opts, is_video, progress, times)
     return ProcessReport(root, len(fr.names), mapped.registered, mapped.points, method, scale.metres_per_unit, scale.source, times,
-                         fr.dropped_blurry, check_line)
+                         fr.dropped_blurry, check_line, fr.dropped_repeats)
 
 
 def _sfm_stages(work: Path, names: list[str], opts: ProcessOptions, is_video: bool, focal_px_fn, progress, times: dict):
