@@ -4,8 +4,8 @@ Stand-in for a 100-frame 480x360 dashcam clip: the synthetic street with movers 
 riding ahead at the drive's speed, pedestrians, parked cars) rendered at 480x360, its forward drive
 written as a video. The path is what a user runs with default configs: ``process video`` ->
 ``masks`` (auto: first reference, its renders, the mask maths) -> StreetNeRF (``--warm-start`` from
-the masks' reference as their second pass left it, unless ``--no-warm-start``) -> Splatfacto ``--augment-from`` StreetNeRF (the
-reference's renders, then the training). Every stage gets wall seconds and CPU seconds (user + sys of
+the masks' reference as their second pass left it, unless ``--no-warm-start``) -> Splatfacto
+``--augment-from`` StreetNeRF (the reference's renders, then the training). Every stage gets wall seconds and CPU seconds (user + sys of
 this process and its children: robust to other load on a shared machine, and with one thread the
 time the stage takes alone on one core). Writes ``real_path_speed.{json,md}``.
 """

@@ -75,8 +75,8 @@ class AugmentConfig:
     feather_px: int = 0
     """Soften the composite seam over this many pixels (0 = hard mask)."""
     composite_loss: Literal["paint", "either"] = "paint"
-    """paint: a composite's painted pixels are the target. either (image methods: Splatfacto, Scaffold-GS, 2DGS; a ray-sampled one refuses it): each pixel is learnt
-    as painted or as photographed, whichever the render is nearer (see composite-loss-margin): a false alarm of the
+    """paint: a composite's painted pixels are the target. either (image methods: Splatfacto, Scaffold-GS, 2DGS;
+    a ray-sampled one refuses it): each pixel is learnt as painted or as photographed, whichever the render is nearer (see composite-loss-margin): a false alarm of the
     masks on a static surface that the other views show keeps its photo; a mover they contradict gives way to the paint."""
     composite_loss_margin: float = 0.1
     """either: the photo is the target unless the render is nearer the paint by more than this (mean absolute

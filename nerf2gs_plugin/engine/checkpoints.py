@@ -31,14 +31,21 @@ def list_checkpoints(run_dir: Path) -> list[Path]:
     return [p for _, p in sorted(found)]
 
 
+def run_dir_of(path: Path) -> Path:
+    """The run folder of a run directory or of a ``.ckpt`` file in it (``RUN/checkpoints/step-N.ckpt`` or ``RUN/x.ckpt``)."""
+    path = Path(path)
+    if path.suffix != ".ckpt":
+        return path
+    return path.parent.parent if path.parent.name == "checkpoints" else path.parent
+
+
 def resolve_checkpoint(path: Path) -> tuple[Path, Path]:
     """A run directory (latest checkpoint) or a ``.ckpt`` file -> (run_dir, checkpoint file)."""
     path = Path(path)
     if path.is_file():
         if path.suffix != ".ckpt":
             raise CheckpointError("not a checkpoint (expected a run directory or a .ckpt file)", path)
-        run_dir = path.parent.parent if path.parent.name == "checkpoints" else path.parent
-        return run_dir, path
+        return run_dir_of(path), path
     if not path.exists():
         raise CheckpointError("no such run directory or checkpoint", path)
     ckpts = list_checkpoints(path)

@@ -53,8 +53,9 @@ class TrainerConfig:
     warm_start: Optional[Path] = None
     """Start this new run from another run's weights and step (a run directory or .ckpt): e.g.
     StreetNeRF from the masks stage's reference as its second pass left it
-    (outputs/<data>/masks-reference-second-pass), which trained its first steps already. Refused unless it is the same method, images, cameras and model
-    configuration (loss weights may differ); the run goes on from that run's step."""
+    (outputs/<data>/masks-reference-second-pass), which trained its first steps already. Refused unless it
+    is the same method, images, cameras and model configuration (loss weights may differ); the run goes
+    on from that run's step."""
     augment_from: Optional[Path] = None
     """Reference run directory or .ckpt: train on its composites and bird's-eye views."""
     augment: AugmentConfig = field(default_factory=AugmentConfig)

@@ -36,8 +36,9 @@ the loss: the mover's edge and shadow that the first pass cut off."""
 def kept_run_dir(reference: Path) -> Path:
     """Where the second pass's run stays: beside the first reference's run folder (``reference``, or the run
     of a ``.ckpt`` in it), named after it."""
-    reference = Path(reference)
-    run_dir = (reference.parent.parent if reference.parent.name == "checkpoints" else reference.parent) if reference.suffix == ".ckpt" else reference
+    from nerf2gs_plugin.engine.checkpoints import run_dir_of
+
+    run_dir = run_dir_of(reference)
     return run_dir.parent / f"{run_dir.name}-second-pass"
 
 
@@ -129,8 +130,8 @@ def second_pass(view: Path, reference: Path, full: Renders, result: dict[str, li
             for (s, i), m in zip(todo, render_ahead(mask, todo)):
                 result[s][i].transient = m
                 prog.advance(task)
-        if keep:
-            kept = kept_run_dir(reference)
+        kept = kept_run_dir(reference) if keep else None
+        if kept is not None:
             shutil.rmtree(kept, ignore_errors=True)
             os.replace(tmp / "run", kept)
     finally:
@@ -140,4 +141,4 @@ def second_pass(view: Path, reference: Path, full: Renders, result: dict[str, li
     log(f"masks: second pass in {seconds:.1f} s (its reference {t_train:.1f} s)")
     took = {"second_pass_seconds": round(seconds, 1), "second_pass_cpu_seconds": round(cpu, 1),
             "second_pass_train_seconds": round(t_train, 1)}
-    return took | ({"second_pass_run": str(kept_run_dir(reference))} if keep else {})
+    return took | ({"second_pass_run": str(kept)} if kept is not None else {})

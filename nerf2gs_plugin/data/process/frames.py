@@ -111,8 +111,9 @@ def _thumb(bgr: np.ndarray) -> np.ndarray:
 def extract_video_frames(video: Path, out_dir: Path, fps: Optional[float], num_frames: Optional[int], blur_ratio: float,
                          max_size: int, ext: str = ".jpg", progress=None, crop: Crop = NO_CROP) -> FrameReport:
     """One frame per window of ``video_fps / fps`` (or ``total / num_frames``) frames, the sharpest
-    of its window unless it repeats the frame kept before it (:data:`REPEAT_GREY`); then :func:`relative_blur_drop`. Writes ``frame_<index>.<ext>`` into ``out_dir``
-    (cropped by ``crop`` and shrunk to ``max_size``)."""
+    of its window unless it repeats the frame kept before it (:data:`REPEAT_GREY`); then
+    :func:`relative_blur_drop`. Writes ``frame_<index>.<ext>`` into ``out_dir`` (cropped by ``crop`` and
+    shrunk to ``max_size``)."""
     video = Path(video)
     if not video.is_file():
         raise DataError("video file does not exist", video)
@@ -133,16 +134,16 @@ def extract_video_frames(video: Path, out_dir: Path, fps: Optional[float], num_f
     task = progress.add_task("frames: decode + pick sharpest", total=total if total < (1 << 31) else None, stats="") if progress else None
     picked: list[tuple[int, float]] = []  # (frame index, sharpness)
     best: tuple[float, int, Optional[np.ndarray]] = (-1.0, -1, None)
-    last: list[Optional[np.ndarray]] = [None]  # the thumbnail of the last frame kept
+    last: Optional[np.ndarray] = None  # the thumbnail of the last frame kept
     repeats = 0
 
     def keep_best() -> None:
-        nonlocal repeats
+        nonlocal last, repeats
         thumb = _thumb(best[2])
-        if last[0] is not None and float(np.abs(thumb - last[0]).mean()) < REPEAT_GREY:
+        if last is not None and float(np.abs(thumb - last).mean()) < REPEAT_GREY:
             repeats += 1
             return
-        last[0] = thumb
+        last = thumb
         picked.append((best[1], best[0]))
         _write_atomic(out_dir / f"frame_{best[1]:06d}{ext}", _fit(best[2], max_size, crop), 95)
 

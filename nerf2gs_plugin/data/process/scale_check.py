@@ -166,6 +166,13 @@ class PathJump:
         return {**asdict(self), "consistent": self.consistent}
 
 
+def _steps_and_standing(centres: np.ndarray) -> tuple[np.ndarray, float]:
+    """``[N-1]`` the path's steps (capture order) and the step under which the camera stands: :data:`STANDING`
+    of the path's moving scale (its steps' 75th percentile)."""
+    steps = np.linalg.norm(np.diff(np.asarray(centres, dtype=np.float64), axis=0), axis=1)
+    return steps, STANDING * float(np.percentile(steps, 75))
+
+
 def path_jump(centres: np.ndarray, names: Optional[Sequence[str]] = None, max_ratio: float = MAX_STEP_JUMP) -> Optional[PathJump]:
     """The step of the path ``centres [N, 3]`` (capture order) largest against the median of the moving steps
     among the :data:`STEP_WINDOW` steps on each side, flagged above ``max_ratio``; None for fewer than 4 frames.
@@ -174,12 +181,13 @@ def path_jump(centres: np.ndarray, names: Optional[Sequence[str]] = None, max_ra
     c = np.asarray(centres, dtype=np.float64)
     if len(c) < 4:
         return None
-    steps = np.linalg.norm(np.diff(c, axis=0), axis=1)
+    steps, standing = _steps_and_standing(c)
     n, w = len(steps), STEP_WINDOW
     ratio = np.zeros(n)
-    moving = steps > STANDING * float(np.percentile(steps, 75))
+    moving = steps > standing
     for i in np.flatnonzero(moving):
-        around = np.concatenate([steps[max(0, i - w):i][moving[max(0, i - w):i]], steps[i + 1:i + 1 + w][moving[i + 1:i + 1 + w]]])
+        near = np.r_[max(0, i - w):i, i + 1:min(n, i + 1 + w)]
+        around = steps[near[moving[near]]]
         if len(around):
             ratio[i] = steps[i] / float(np.median(around))
     i = int(ratio.argmax())
@@ -195,8 +203,7 @@ def standing_frames(c2w: np.ndarray, names: Sequence[str]) -> list[str]:
     if len(c2w) < 4:
         return []
     centres = c2w[:, :3, 3]
-    steps = np.linalg.norm(np.diff(centres, axis=0), axis=1)
-    near = STANDING * float(np.percentile(steps, 75))
+    _, near = _steps_and_standing(centres)
     cos_max = np.cos(np.radians(STANDING_DEG))
     out, last = [], 0
     for i in range(1, len(c2w)):
