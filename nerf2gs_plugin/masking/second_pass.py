@@ -42,6 +42,16 @@ def kept_run_dir(reference: Path) -> Path:
     return run_dir.parent / f"{run_dir.name}-second-pass"
 
 
+def _repoint(run: Path, data: Path) -> None:
+    """The kept run's ``config.yml`` names its own folder and ``data`` (the mask-less view, which stays) in place of
+    the temporary folder and the masked view it trained in, both removed: ``ns2gs-eval`` / ``ns2gs-render`` take it as it is."""
+    from nerf2gs_plugin.engine.config import load_config, save_config
+    from nerf2gs_plugin.registry import get_method
+
+    cfg = load_config(run / "config.yml", get_method("streetnerf").config)
+    save_config(run / "config.yml", cfg.method_name, dataclasses.replace(cfg, data=Path(data), run_dir=Path(run)))
+
+
 def masked_view(view: Path, transient: dict[str, Tensor]) -> Path:
     """``view``'s sibling ``.ns2gs_second_pass``: ``view``'s entries (the mask-less dataset) with
     ``masks/transient/<stem>.png`` from ``transient`` (stem -> bool mask, grown by :data:`TRAIN_GROW`)."""
@@ -134,6 +144,7 @@ def second_pass(view: Path, reference: Path, full: Renders, result: dict[str, li
         if kept is not None:
             shutil.rmtree(kept, ignore_errors=True)
             os.replace(tmp / "run", kept)
+            _repoint(kept, view)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         shutil.rmtree(mview, ignore_errors=True)

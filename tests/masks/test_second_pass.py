@@ -145,6 +145,10 @@ def test_the_kept_second_pass_is_where_streetnerf_goes_on(tmp_path):
     assert took["second_pass_run"] == str(kept) and kept == tmp_path / "refs" / "ref-second-pass"
     assert kept_run_dir(ref / "checkpoints" / "step-000000004.ckpt") == kept
     assert sorted(p.name for p in ref.parent.iterdir()) == ["ref", "ref-second-pass"] and not (data / SECOND_PASS_DIRNAME).exists()
+    from nerf2gs_plugin.runs.load import load_run
+
+    run = load_run(kept, device="cpu")  # its config names the mask-less view and its own folder, both there
+    assert run.config.data == view and run.config.run_dir == kept and run.model.num_primitives() > 0
     cfg = dataclasses.replace(get_method("streetnerf").with_steps(12), data=data, run_dir=tmp_path / "sn", warm_start=kept,
                               progress=False)
     trainer = Trainer(cfg)
