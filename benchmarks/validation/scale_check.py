@@ -32,10 +32,10 @@ for arg in args.captures:
     data, _, gt = rest.partition(":")
     data = Path(data)
     rec = pycolmap.Reconstruction(str(data / "sparse" / "0"))
-    names, c2w, _ = export.camera_arrays(rec)
+    names, c2w, _ = model_arrays.camera_arrays(rec)
     meta = json.loads((data / "transforms.json").read_text())
     up = np.asarray(meta["up"])
-    heights = local_camera_heights(c2w[:, :3, 3], export.observed_points(rec, names), up)
+    heights = local_camera_heights(c2w[:, :3, 3], model_arrays.observed_points(rec, names), up)
     check = check_reconstruction(rec, names, c2w, up, ordered=meta["process"]["source"] == "video" or meta["process"]["matching"] == "sequential")
     line = check.pop("line")
     row = {"label": label, "data": str(data), "matching": meta["process"]["matching"], **check,

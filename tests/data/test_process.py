@@ -240,6 +240,63 @@ def test_mapping_retries_loosen_the_initialisation_before_moving_the_pair(tmp_pa
     assert refined == [(True, True)] + [(not known_focal, not known_focal)] * 3
 
 
+class _FakeModel:
+    """What ``reconstruct`` reads of a pycolmap model: frames registered, points, and a write."""
+
+    def __init__(self, registered: int, seed: int) -> None:
+        self.registered, self.seed = registered, seed
+
+    def num_reg_images(self) -> int:
+        return self.registered
+
+    def num_points3D(self) -> int:
+        return 100
+
+    def write(self, path: str) -> None:
+        Path(path, "seed.txt").write_text(str(self.seed))
+
+
+@pytest.mark.parametrize("registered", [12, 5])
+def test_mapping_runs_are_ranked_by_the_frames_the_capture_check_keeps(tmp_path, monkeypatch, registered):
+    """Every run registers all 12 frames but joins them in the wrong place, save the one under seed 5: with
+    the capture check's score the retries go on past ``mapping_attempts`` (other seeds, COLMAP's own pair) and
+    that run is kept; without a score the first run ends them. A capture that registers under half of its
+    frames in every run gets no more runs than ``mapping_attempts``."""
+    import pycolmap
+
+    from nerf2gs_plugin.data.process.sfm import SfmOptions, reconstruct
+
+    db = tmp_path / "database.db"
+    with pycolmap.Database.open(str(db)) as d:
+        cam = d.write_camera(pycolmap.Camera.create_from_model_name(1, "SIMPLE_PINHOLE", 100.0, 64, 48))
+        for i in range(12):
+            d.write_image(pycolmap.Image(name=f"f{i:03d}.png", camera_id=cam))
+    runs: list[tuple[int, int]] = []
+
+    def fake_mapping(database, image_dir, out, options=None, **kw):
+        runs.append((options.random_seed, options.init_image_id1))
+        return {0: _FakeModel(registered, options.random_seed)}
+
+    def score(model) -> int:  # the frames of its longest consistent stretch
+        return model.registered if model.seed == 5 else model.registered // 2
+
+    monkeypatch.setattr(pycolmap, "incremental_mapping", fake_mapping)
+    opt = SfmOptions()
+    res = reconstruct(db, tmp_path, tmp_path / "sparse", 12, opt, matches_changed=True, score=score)
+    if registered == 5:
+        assert len(runs) == opt.mapping_attempts and res.registered == 5
+        return
+    assert [seed for seed, _ in runs] == list(range(6)) and res.registered == 12
+    assert (tmp_path / "sparse" / "0" / "seed.txt").read_text() == "5"
+    assert runs[4][1] == runs[5][1] == runs[0][1]  # COLMAP's own initial pair again
+    runs.clear()
+    reconstruct(db, tmp_path, tmp_path / "sparse2", 12, opt, matches_changed=True)
+    assert len(runs) == 1
+    runs.clear()
+    res = reconstruct(db, tmp_path, tmp_path / "sparse3", 12, SfmOptions(join_attempts=0), matches_changed=True, score=score)
+    assert len(runs) == opt.mapping_attempts and (tmp_path / "sparse3" / "0" / "seed.txt").read_text() == "0"
+
+
 def test_focal_that_ran_away_from_the_known_one_is_caught():
     """A forward drive can register every frame with half the true focal: that model must not end the retries."""
     from types import SimpleNamespace

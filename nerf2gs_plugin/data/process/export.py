@@ -21,11 +21,10 @@ from typing import Optional
 
 import cv2
 import numpy as np
-import torch
 
-from nerf2gs_plugin.cameras import opencv_w2c_to_opengl_c2w
 from nerf2gs_plugin.data.images import scaled_size
 from nerf2gs_plugin.data.ply import write_ply_points
+from nerf2gs_plugin.data.process.model_arrays import camera_arrays, points_arrays
 from nerf2gs_plugin.errors import DataError
 
 DOWNSCALES = (2, 4, 8)
@@ -44,34 +43,6 @@ def undistort(model_dir: Path, image_dir: Path, out_root: Path, progress=None) -
     if task is not None:
         progress.update(task, advance=1)
     return out_root
-
-
-def camera_arrays(rec) -> tuple[list[str], np.ndarray, list]:
-    """Registered image names (sorted = capture order), OpenGL c2w ``[N, 3, 4]``, cameras."""
-    imgs = sorted((im for im in rec.images.values() if im.has_pose), key=lambda im: im.name)
-    w2c = np.tile(np.eye(4), (len(imgs), 1, 1))
-    for k, im in enumerate(imgs):
-        w2c[k, :3] = np.asarray(im.cam_from_world().matrix(), dtype=np.float64)
-    c2w = opencv_w2c_to_opengl_c2w(torch.from_numpy(w2c)).numpy()
-    return [im.name for im in imgs], c2w, [rec.cameras[im.camera_id] for im in imgs]
-
-
-def points_arrays(rec) -> tuple[np.ndarray, np.ndarray]:
-    pts = rec.points3D
-    if not len(pts):
-        return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.uint8)
-    return (np.array([p.xyz for p in pts.values()], dtype=np.float32).reshape(-1, 3),
-            np.array([p.color for p in pts.values()], dtype=np.uint8).reshape(-1, 3))
-
-
-def observed_points(rec, names: list[str]) -> list[np.ndarray]:
-    """Per image of ``names``: the ``[K, 3]`` sparse points it observes (its tracks), as the scale check reads them."""
-    by_name = {im.name: im for im in rec.images.values()}
-    out = []
-    for n in names:
-        ids = [p.point3D_id for p in by_name[n].points2D if p.has_point3D()]
-        out.append(np.array([rec.points3D[i].xyz for i in ids], dtype=np.float64).reshape(-1, 3))
-    return out
 
 
 def install_images(src: Path, root: Path) -> None:

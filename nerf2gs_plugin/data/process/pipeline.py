@@ -6,6 +6,7 @@ import json
 import os
 import shutil
 import time
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal, Optional
@@ -149,7 +150,8 @@ def _sfm_stages(work: Path, names: list[str], opts: ProcessOptions, is_video: bo
 
         focal = 0.5 * image_size(frame_dir / names[0])[0] / opts.kept_width / np.tan(np.radians(opts.fov_deg) / 2)
     method = sfm.choose_matching(opts.sfm, len(names), is_video)
-    mapped, stage_times = run_sfm_stages(work, names, opts.sfm, focal, hashes, content, method, work / LOGS, progress)
+    mapped, stage_times = run_sfm_stages(work, names, opts.sfm, focal, hashes, content, method, work / LOGS, progress,
+                                         check=dataclasses.replace(opts, progress=False), ordered=is_video or method == "sequential")
     times.update(stage_times)
     return method, mapped
 
@@ -222,24 +224,16 @@ def checked_reconstruction(root: Path, rec, opts: ProcessOptions, ordered: bool,
     """(names, c2w, metric scale, capture check) of the undistorted model ``rec`` (in ``root/sparse/0``),
     without the frames where an ordered capture's camera stood (``--standing drop``), after ``--broken-join
     drop`` kept its longest consistent stretch (both written back over ``root``)."""
-    from nerf2gs_plugin.data.process import export
+    from nerf2gs_plugin.data.process import model_arrays
     from nerf2gs_plugin.data.process.scale_check import standing_frames
     from nerf2gs_plugin.warn import warn
 
     standing: list[str] = []
     if ordered and opts.standing == "drop":
-        names, c2w, _ = export.camera_arrays(rec)
+        names, c2w, _ = model_arrays.camera_arrays(rec)
         standing = standing_frames(c2w, names)
         _deregister(rec, set(standing))
-    dropped: list[str] = []
-    for cut in range(MAX_CUTS + 1):
-        names, c2w, _ = export.camera_arrays(rec)
-        xyz, _ = export.points_arrays(rec)
-        scale = metric_scale(xyz, c2w, opts)
-        check = check_reconstruction(rec, names, c2w, scale.up, ordered=ordered)
-        if check["consistent"] or opts.broken_join == "keep" or cut == MAX_CUTS:
-            break
-        dropped += drop_shorter_stretch(rec, names, check)
+    names, c2w, scale, check, dropped = cut_to_consistent(rec, opts, ordered)
     if dropped:
         _check_kept(root, len(names), frames - len(standing), opts.min_registered_fraction)
         warn(f"kept the longest consistent stretch of the broken reconstruction: {len(names)} of {frames - len(standing)} frames",
@@ -252,6 +246,40 @@ def checked_reconstruction(root: Path, rec, opts: ProcessOptions, ordered: bool,
     check["dropped"] = sorted(dropped)
     check["standing"] = sorted(standing)
     return names, c2w, scale, check
+
+
+def cut_to_consistent(rec, opts: ProcessOptions, ordered: bool) -> tuple[list[str], np.ndarray, object, dict, list[str]]:
+    """The capture check of ``rec`` and, with ``--broken-join drop``, its longest consistent stretch (at most
+    :data:`MAX_CUTS` cuts, deregistered from ``rec`` in place): (names, c2w, metric scale, check, dropped names)."""
+    from nerf2gs_plugin.data.process import model_arrays
+
+    dropped: list[str] = []
+    for cut in range(MAX_CUTS + 1):
+        names, c2w, _ = model_arrays.camera_arrays(rec)
+        xyz, _ = model_arrays.points_arrays(rec)
+        scale = metric_scale(xyz, c2w, opts)
+        check = check_reconstruction(rec, names, c2w, scale.up, ordered=ordered)
+        if check["consistent"] or opts.broken_join == "keep" or cut == MAX_CUTS:
+            break
+        dropped += drop_shorter_stretch(rec, names, check)
+    return names, c2w, scale, check, dropped
+
+
+def consistent_frames(rec, opts: ProcessOptions, ordered: bool) -> int:
+    """How many of ``rec``'s frames the capture check keeps as one consistent stretch (a copy is cut, the
+    warnings silenced): what a mapping attempt is ranked by, so a model joined at two scales or in the wrong
+    place loses to another attempt's consistent one (:func:`~nerf2gs_plugin.data.process.sfm.reconstruct`)."""
+    import warnings
+
+    import pycolmap
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            names, *_ = cut_to_consistent(pycolmap.Reconstruction(rec), dataclasses.replace(opts, broken_join="drop"), ordered)
+        except DataError:  # no scale for it: the parent's check says why, for the model kept
+            return 0
+    return len(names)
 
 
 def drop_shorter_stretch(rec, names: list[str], check: dict) -> list[str]:
@@ -301,12 +329,12 @@ def check_reconstruction(rec, names: list[str], c2w: np.ndarray, up: np.ndarray,
     video or sequentially matched photos, held to ``MAX_STEP_JUMP``, else a photo set, to
     ``MAX_STEP_JUMP_PHOTOS``). Each failure is a warning (what to do about it is
     :func:`checked_reconstruction`'s). Returns the JSON record, with the report's ``line``."""
-    from nerf2gs_plugin.data.process import export
+    from nerf2gs_plugin.data.process import model_arrays
     from nerf2gs_plugin.data.process.scale_check import (MAX_STEP_JUMP, MAX_STEP_JUMP_PHOTOS, local_camera_heights, path_jump,
                                                          scale_jump)
     from nerf2gs_plugin.warn import warn
 
-    height = scale_jump(local_camera_heights(c2w[:, :3, 3], export.observed_points(rec, names), up), names)
+    height = scale_jump(local_camera_heights(c2w[:, :3, 3], model_arrays.observed_points(rec, names), up), names)
     jump = path_jump(c2w[:, :3, 3], names, MAX_STEP_JUMP if ordered else MAX_STEP_JUMP_PHOTOS)
     bad = [check for check in (height, jump) if check is not None and not check.consistent]
     for check in bad:

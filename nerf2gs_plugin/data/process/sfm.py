@@ -12,7 +12,7 @@ import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal, Optional
+from typing import Any, Callable, Literal, Optional
 
 from nerf2gs_plugin.errors import DataError
 
@@ -45,8 +45,9 @@ class SfmOptions:
     max_features: int = 4096
     """SIFT features per image at most."""
     mapping_attempts: int = 4
-    """Incremental mapping runs (at most) while < 90% of frames register: COLMAP's defaults, then its own
-    initial pair under looser initialisation thresholds, then initial pairs at other points of the capture.
+    """Incremental mapping runs (at most) while under 90% of the frames register as one consistent stretch (the
+    capture check's; see --join-attempts): COLMAP's defaults, then its own initial pair under looser
+    initialisation thresholds, then initial pairs at other points of the capture.
     Runs after the first hold a known focal (EXIF or --fov-deg) fixed, as --no-refine-intrinsics does; a run
     whose refined focal ran away from the known one (over 2x off) counts as failed."""
     camera_model: str = "SIMPLE_RADIAL"
@@ -54,6 +55,11 @@ class SfmOptions:
     refine_intrinsics: bool = True
     """Refine the focal length and distortion in bundle adjustment. Off (--no-refine-intrinsics) keeps
     the --fov-deg / EXIF prior: a known camera, and much steadier mapping on small or low-texture frames."""
+    join_attempts: int = 4
+    """More mapping runs (looser initialisation, COLMAP's own initial pair, another random seed each) when a
+    run registered half of the frames but no run keeps 90% of them as one consistent stretch in the capture
+    check (joined at two scales or in the wrong place): on a forward drive the seed decides where the mapper
+    joins; the run that keeps the most frames is taken (0: off)."""
     num_threads: int = -1
     """Threads for SIFT, matching and mapping (-1: all cores; 1 makes a run repeatable: COLMAP's
     multi-threaded mapping is not deterministic)."""
@@ -214,6 +220,10 @@ def _match_loop_pairs(db: Path, names: list[str], opt: SfmOptions, m, pairs_file
 
 
 FIXED_PAIR_TRIALS = 3
+
+JOIN_RETRY_REGISTERED = 0.5
+"""``join_attempts`` run when a model registered this share of the frames (the capture registers: what it
+keeps is a matter of where the mapper joins it, not of a capture that cannot register)."""
 """Mapping runs from a pair of our choice: tries of that pair (only RANSAC's randomness differs)."""
 
 
@@ -237,9 +247,12 @@ class MapResult:
 
 
 def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOptions, matches_changed: bool, progress=None,
-                content: str = "", method: str = "") -> MapResult:
-    """Incremental mapping; the largest model is kept as ``out_dir/0`` (reused when its marker records the
-    same options and frames' ``content`` and the matches did not change)."""
+                content: str = "", method: str = "", score: Optional[Callable[[Any], int]] = None) -> MapResult:
+    """Incremental mapping; the best model is kept as ``out_dir/0`` (reused when its marker records the
+    same options and frames' ``content`` and the matches did not change). Models rank by a known focal kept,
+    then ``score`` (the frames the capture check keeps: a model joined at two scales or in the wrong place
+    ranks by its longest consistent stretch; None: the frames registered), then the frames registered;
+    attempts go on while the best scores under 90% of ``total``."""
     import pycolmap
 
     marker = out_dir / "done.json"
@@ -266,11 +279,15 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
         priors = [c.mean_focal_length() for c in d.read_all_cameras() if c.has_prior_focal_length]
     known_focal = priors[0] if priors else None
 
-    def rank(r) -> tuple[bool, int]:  # a model whose focal ran away from the known one ranks below any other
-        return (known_focal is None or not focal_ran_away(r, known_focal), r.num_reg_images())
+    def rank(r) -> tuple[bool, int, int]:  # a model whose focal ran away from the known one ranks below any other
+        registered = r.num_reg_images()
+        return (known_focal is None or not focal_ran_away(r, known_focal), registered if score is None else score(r), registered)
 
-    best = None
-    for attempt in range(max(opt.mapping_attempts, 1)):
+    best, best_rank, most = None, None, 0
+    attempts, attempt = max(opt.mapping_attempts, 1), -1
+    while attempt + 1 < attempts:
+        attempt += 1
+        fixed_pair = 1 < attempt < max(opt.mapping_attempts, 1)
         # The incremental mapper can start from a poor initial pair on small or repetitive captures
         # and stall after a few images: another seed usually registers everything.
         options = pycolmap.IncrementalPipelineOptions()
@@ -290,7 +307,7 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
             options.mapper.init_min_tri_angle = 8.0
             options.mapper.init_max_forward_motion = 0.99
             options.mapper.abs_pose_min_num_inliers = 15
-        if attempt > 1 and len(ids) > 6:  # its own choice stalled again: start from a pair at another point of the capture
+        if fixed_pair and len(ids) > 6:  # its own choice stalled again: start from a pair at another point of the capture
             a = ((attempt - 1) * len(ids)) // (max(opt.mapping_attempts - 1, 2) + 1)
             options.init_image_id1, options.init_image_id2 = ids[a], ids[min(a + 2, len(ids) - 1)]
             # COLMAP retries a given pair up to init_num_trials (200) times when its model stays too
@@ -300,13 +317,20 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
         shutil.rmtree(work, ignore_errors=True)
         work.mkdir(parents=True)
         models = pycolmap.incremental_mapping(db, image_dir, work, options=options, next_image_callback=on_image)
-        for r in models.values():
-            if best is None or rank(r) > rank(best):
-                best = r
-        if best is not None and best.num_reg_images() >= 0.9 * total and rank(best)[0]:
+        for r in sorted(models.values(), key=lambda r: -r.num_reg_images()):
+            if best_rank is not None and r.num_reg_images() < best_rank[1]:
+                break  # it cannot keep more frames than the best keeps
+            r_rank = rank(r)
+            if best_rank is None or r_rank > best_rank:
+                best, best_rank = r, r_rank
+        if best is not None and best_rank[1] >= 0.9 * total and best_rank[0]:
             break
+        most = max([most, *(r.num_reg_images() for r in models.values())])
+        if attempts == max(opt.mapping_attempts, 1) and score is not None and most >= JOIN_RETRY_REGISTERED * total:
+            attempts += max(opt.join_attempts, 0)  # it registers, but breaks: other seeds join it elsewhere
         if task is not None:
-            progress.update(task, completed=0, stats=f"retry {attempt + 1}: {best.num_reg_images() if best else 0} registered")
+            kept = "" if score is None or best_rank is None else f", {best_rank[1]} consistent"
+            progress.update(task, completed=0, stats=f"retry {attempt + 1}: {best.num_reg_images() if best else 0} registered{kept}")
     if best is None:
         shutil.rmtree(work, ignore_errors=True)
         hint = "" if method == "exhaustive" else "--matching exhaustive, "  # not when it was exhaustive already

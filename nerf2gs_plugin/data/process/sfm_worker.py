@@ -62,8 +62,14 @@ def _stages(conn: Connection, job: dict) -> tuple:
     changed = sfm.match(work / "database.db", job["method"], opt, work / "matching.json", progress, content=job["content"])
     times["matching"] = time.perf_counter() - t
     t = stage("mapping")
+    score = None
+    if job.get("check") is not None:  # the capture check's options: rank the mapping attempts by what it keeps
+        from nerf2gs_plugin.data.process.pipeline import consistent_frames
+
+        def score(rec) -> int:
+            return consistent_frames(rec, job["check"], job["ordered"])
     mapped = sfm.reconstruct(work / "database.db", work / "frames", work / "distorted", len(job["names"]), opt, changed, progress,
-                             content=job["content"], method=job["method"])
+                             content=job["content"], method=job["method"], score=score)
     times["mapping"] = time.perf_counter() - t
     return mapped, times
 
@@ -105,14 +111,15 @@ def _child_main(fd: int, parent: int) -> None:
 
 
 def run_sfm_stages(work: Path, names: list[str], sfm_opts, focal: Optional[float], hashes: dict[str, str], content: str,
-                   method: str, logs: Path, progress=None) -> tuple:
+                   method: str, logs: Path, progress=None, check=None, ordered: bool = False) -> tuple:
     """Features, matching and mapping of ``work/frames`` in a child process: (``MapResult``, stage
-    seconds). A crash of the child is a :class:`DataError` naming the stage (and the disk when it is full)."""
+    seconds). ``check``: the process options whose capture check ranks the mapping attempts (``ordered``: a
+    video or sequential photos). A crash of the child is a :class:`DataError` naming the stage (and the disk when it is full)."""
     logs.mkdir(parents=True, exist_ok=True)
     ours, theirs = socket.socketpair()
     err_path = logs / f"sfm-stderr.{os.getpid()}.txt"
     job = {"work": str(work), "names": names, "sfm": sfm_opts, "focal": focal, "hashes": hashes, "content": content,
-           "method": method, "logs": logs, "progress": progress is not None}
+           "method": method, "logs": logs, "progress": progress is not None, "check": check, "ordered": ordered}
     with open(err_path, "wb") as err:
         proc = subprocess.Popen([sys.executable, "-c", _BOOT.format(data=str(Path(__file__).parents[1]), fd=theirs.fileno(), parent=os.getpid())],
                                 pass_fds=[theirs.fileno()], stderr=err)
