@@ -9,11 +9,18 @@ import torch
 
 from nerf2gs_plugin.cameras import Cameras
 from nerf2gs_plugin.datamanagers.base import DataManager, DataManagerConfig
+from nerf2gs_plugin.datamanagers.resolution import downscale_at, downscaled
+from nerf2gs_plugin.utils.schedule import scheduled
 
 
 @dataclass
 class FullImageDataManagerConfig(DataManagerConfig):
     _target: type = field(default_factory=lambda: FullImageDataManager)
+    num_downscales: int = 0
+    """Coarse to fine (nerfstudio's splatfacto ``--pipeline.model.num-downscales``): the first training steps see
+    the views at ``1/2^num_downscales`` of their size, doubled every ``resolution_schedule`` steps (0: full size throughout)."""
+    resolution_schedule: int = scheduled(300)
+    """Steps at each size before the next doubling (nerfstudio: 3000 of 30000)."""
 
 
 class FullImageDataManager(DataManager):
@@ -25,13 +32,14 @@ class FullImageDataManager(DataManager):
         self._order: list[int] = []
 
     def next_train(self, step: int) -> tuple[Cameras, dict[str, Any]]:
+        d = downscale_at(step, self.config.num_downscales, self.config.resolution_schedule)
         if self._use_extra():
             i = int(self._extra_indices(1)[0])
-            return self.extra_images.cameras[i], self.train_batch(len(self.train_images) + i)
+            return downscaled(self.extra_images.cameras[i], self.train_batch(len(self.train_images) + i), d)
         if not self._order:
             self._order = torch.randperm(len(self.train_images), generator=self.generator).tolist()
         i = self._order.pop()
-        return self.train_images.cameras[i], self.train_images.image_batch(i)
+        return downscaled(self.train_images.cameras[i], self.train_images.image_batch(i), d)
 
     def state_dict(self) -> dict:
         return {**super().state_dict(), "order": list(self._order)}

@@ -136,6 +136,7 @@ class SplatfactoModel(Model):
         self._sparse_points = len(train_data.points3D_xyz) if train_data.points3D_xyz is not None else 0
         self._path = self._capture_path(train_data, means if train_data.points3D_xyz is not None else None)
         self._depth_targets = self._sparse_depth_targets(train_data) if cfg.depth_loss_weight > 0 else None
+        self._depth_target_heights = train_data.cameras.height.tolist()  # the size the targets' pixels are at
         self._setup_strategy()
 
     @torch.no_grad()
@@ -224,6 +225,12 @@ class SplatfactoModel(Model):
         if self._depth_targets[image_idx][2].device != dev:  # built on the CPU at setup: moved once, not every step
             self._depth_targets = [tuple(t.to(dev) for t in view) for view in self._depth_targets]
         v, u, z = self._depth_targets[image_idx]
+        h, w = outputs["depth"].shape[:2]
+        f = round(self._depth_target_heights[image_idx] / h)
+        if f > 1:  # a coarse step (the datamanager's resolution schedule): the points' pixels at its size
+            v, u = v // f, u // f
+            inside = (v < h) & (u < w)
+            v, u, z = v[inside], u[inside], z[inside]
         d, a = outputs["depth"][v, u, 0], outputs["accumulation"][v, u, 0]
         # the accumulation only weights (detached): transparency must not be a way out of the loss
         return self.config.depth_loss_weight * (a.detach() * ((d - z).abs() / z).clamp(max=1.0)).mean()
