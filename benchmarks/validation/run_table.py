@@ -4,7 +4,8 @@ records), without retraining anything.
 
 Usage: python benchmarks/validation/run_table.py OUT_STEM ROWS.json
 ROWS.json: {"title": ..., "about": ..., "rows": [{"scene": ..., "variant": ..., "run": RUN_DIR,
-"splits": "val" | "test" | "eval"}, ...]}; RUN_DIR may start with a root of the plans' runner
+"splits": "val" | "test" | "eval"}, ...]} (or, for a plain ``ns2gs-train`` run, ``"eval": EVAL.json`` that
+``ns2gs-eval`` wrote instead of ``"run"``); RUN_DIR and EVAL.json may start with a root of the plans' runner
 (``{bench_runs}``, ``{val_runs}``: ``NS2GS_BENCH_RUNS``, ``NS2GS_VAL_RUNS``, see ``nerf2gs_bench/plans.py``); "val" reads the run's validation evaluation
 (val_street, val_bev), "test" / "eval" its bench evaluation (a photo set's held-out photos, or the
 street / bird's-eye views).
@@ -19,7 +20,8 @@ benchmarks/results/prune_margin/castle_val.{json,md} (rows: benchmarks/validatio
 benchmarks/results/augment_weight_val.{json,md} (rows: benchmarks/validation/augment_weight_rows.json),
 benchmarks/results/reference_length_val.{json,md} (rows: benchmarks/validation/reference_length_rows.json),
 benchmarks/results/castle_bev_geometry_val.{json,md} (rows: benchmarks/validation/castle_bev_geometry_rows.json),
-benchmarks/results/castle_steps_capacity_val.{json,md} (rows: benchmarks/validation/castle_steps_capacity_rows.json).
+benchmarks/results/castle_steps_capacity_val.{json,md} (rows: benchmarks/validation/castle_steps_capacity_rows.json),
+benchmarks/results/coarse_to_fine_synthetic.{json,md} (rows: benchmarks/validation/coarse_to_fine_synthetic_rows.json).
 """
 import argparse
 import json
@@ -37,20 +39,34 @@ def results(run: Path, splits: str) -> dict:
     return json.loads((run / name).read_text())["results"]
 
 
+def plain_run(r: dict) -> tuple[dict, int, object]:
+    """A row of a plain ``ns2gs-train`` run scored by ``ns2gs-eval`` (``"eval": EVAL.json``): its splits' results
+    (the validation ones for "val", else the bench's), steps and primitives."""
+    doc = json.loads(Path(r["eval"]).read_text())
+    keep = VAL_SPLITS if r["splits"] == "val" else EVAL_SPLITS
+    return {k: v for k, v in doc["results"].items() if k in keep}, doc["step"] + 1, doc.get("size", {}).get("primitives")
+
+
+def bench_run(r: dict) -> tuple[dict, int, object]:
+    """A row of a ``BenchRunner`` run (``"run": RUN_DIR``): as :func:`plain_run`."""
+    res = results(Path(r["run"]), r["splits"])
+    spec = json.loads((Path(r["run"]) / "bench_run.json").read_text())
+    # not bench_io.planned_steps: a row may be a run of code that was tried and not kept, whose overrides name
+    # fields today's config lacks; only its step count is read, the method's default when it set none
+    steps = spec["overrides"].get("max_num_iterations") or get_method(spec["method"]).config.max_num_iterations
+    size = json.loads((Path(r["run"]) / eval_cache_name(EVAL_SPLITS)).read_text()).get("size", {})
+    return res, steps, size.get("primitives")
+
+
 def main(out: Path, rows_path: Path) -> None:
     doc = json.loads(rows_path.read_text())
     rows = []
     for r in doc["rows"]:
-        r = {**r, "run": expand_roots(r["run"])}
-        res = results(Path(r["run"]), r["splits"])
+        r = {**r, **{k: expand_roots(r[k]) for k in ("run", "eval") if k in r}}
+        res, steps, primitives = plain_run(r) if "eval" in r else bench_run(r)
         psnr = {k: round(v["psnr"], 2) for k, v in res.items()}
-        spec = json.loads((Path(r["run"]) / "bench_run.json").read_text())
-        # not bench_io.planned_steps: a row may be a run of code that was tried and not kept, whose overrides name
-        # fields today's config lacks; only its step count is read, the method's default when it set none
-        steps = spec["overrides"].get("max_num_iterations") or get_method(spec["method"]).config.max_num_iterations
         per_view = {k: [round(x, 2) for x in v["psnr_per_image"]] for k, v in res.items() if v.get("psnr_per_image")}
-        size = json.loads((Path(r["run"]) / eval_cache_name(EVAL_SPLITS)).read_text()).get("size", {})
-        rows.append({**r, "steps": steps, "primitives": size.get("primitives"), "psnr": psnr,
+        rows.append({**r, "steps": steps, "primitives": primitives, "psnr": psnr,
                      "mean": round(sum(psnr.values()) / len(psnr), 2), "psnr_per_view": per_view})
     lines = [f"# {doc['title']}", "", f"Machine: {machine_line()}", "", doc["about"], "",
              "| scene | variant | steps | primitives | PSNR per split | mean | PSNR per view (photo sets) |", "|---|---|---|---|---|---|---|"]

@@ -17,8 +17,8 @@ from nerf2gs_plugin.utils.schedule import scheduled
 class FullImageDataManagerConfig(DataManagerConfig):
     _target: type = field(default_factory=lambda: FullImageDataManager)
     num_downscales: int = 0
-    """Coarse to fine (nerfstudio's splatfacto ``--pipeline.model.num-downscales``): the first training steps see
-    the views at ``1/2^num_downscales`` of their size, doubled every ``resolution_schedule`` steps (0: full size throughout)."""
+    """Coarse to fine (nerfstudio's splatfacto --pipeline.model.num-downscales): the first training steps see the
+    views at 1/2^N of their size, doubled every resolution-schedule steps (0: full size throughout)."""
     resolution_schedule: int = scheduled(300)
     """Steps at each size before the next doubling (nerfstudio: 3000 of 30000)."""
 
