@@ -15,7 +15,7 @@ import numpy as np
 import pycolmap
 
 from nerf2gs_plugin.data.process import export
-from nerf2gs_plugin.data.process.pipeline import check_reconstruction
+from nerf2gs_plugin.data.process.capture_check import check_reconstruction
 from nerf2gs_plugin.data.process.scale_check import MAX_HEIGHT_JUMP, MAX_STEP_JUMP, MAX_STEP_JUMP_PHOTOS, local_camera_heights
 from nerf2gs_bench.machine import machine_info, machine_line
 from nerf2gs_plugin.eval.pose_eval import pose_errors

@@ -143,7 +143,7 @@ def _courtyard(seed: int = 0, pitch_deg: float = 20.0, units_per_m: float = 0.37
 
 def test_a_plane_through_the_walls_is_rejected_and_up_comes_from_the_cameras(capsys):
     from nerf2gs_plugin.data.ground import MIN_BELOW_FRACTION, below_cameras
-    from nerf2gs_plugin.data.process.pipeline import metric_scale
+    from nerf2gs_plugin.data.process.capture_check import metric_scale
 
     pts, c2w, true_up = _courtyard()
     cam_up = c2w[:, :, 1].mean(0)

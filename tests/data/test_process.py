@@ -163,12 +163,11 @@ def test_process_video_end_to_end(tmp_path, make_config, monkeypatch):
     assert folder_fingerprint(out) == print_before
     # a broken join (forced: every step of the path counts as a jump) keeps the longest consistent stretch, in every output
     import pycolmap
-    from nerf2gs_plugin.data.process import scale_check
 
-    from nerf2gs_plugin.data.process import pipeline
+    from nerf2gs_plugin.data.process import capture_check, scale_check
 
     monkeypatch.setattr(scale_check, "MAX_STEP_JUMP", 1.0)
-    monkeypatch.setattr(pipeline, "MAX_CUTS", 1)  # one cut: the longer side (at least half) is kept
+    monkeypatch.setattr(capture_check, "MAX_CUTS", 1)  # one cut: the longer side (at least half) is kept
     main(args + ["--min-registered-fraction", "0.3"])
     cut = json.loads((out / "transforms.json").read_text())
     kept = [Path(f["file_path"]).name for f in cut["frames"]]

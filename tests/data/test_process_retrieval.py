@@ -52,7 +52,8 @@ def test_no_level_plane_and_process_asks_for_the_scale(tmp_path):
     """Sparse points only on a 40 deg plane below the cameras (a roof line, the foot of walls): no
     ground plane within ``MAX_TILT_DEG`` (``data/ground.py``, the one place of that limit), so
     ``process`` asks for ``--metres-per-unit``, and with it takes up from the cameras."""
-    from nerf2gs_plugin.data.process.pipeline import ProcessOptions, metric_scale
+    from nerf2gs_plugin.data.process.capture_check import metric_scale
+    from nerf2gs_plugin.data.process.pipeline import ProcessOptions
     from nerf2gs_plugin.errors import DataError
 
     rng = np.random.default_rng(0)

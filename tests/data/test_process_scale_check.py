@@ -88,7 +88,7 @@ def test_a_jump_along_an_ordered_path_is_found():
 
 def test_check_reconstruction_reads_a_reconstruction_and_warns(recwarn):
     """``process`` wiring: the tracks of each image of a (pycolmap-shaped) reconstruction -> the checks."""
-    from nerf2gs_plugin.data.process.pipeline import check_reconstruction
+    from nerf2gs_plugin.data.process.capture_check import check_reconstruction
 
     a = _street(10, 0.03, 0.01)
     b = _street(10, 0.75, 0.25, x0=1.0, seed=1)

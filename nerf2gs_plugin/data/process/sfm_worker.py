@@ -64,7 +64,7 @@ def _stages(conn: Connection, job: dict) -> tuple:
     t = stage("mapping")
     score = None
     if job.get("check") is not None:  # the capture check's options: rank the mapping attempts by what it keeps
-        from nerf2gs_plugin.data.process.pipeline import consistent_frames
+        from nerf2gs_plugin.data.process.capture_check import consistent_frames
 
         def score(rec) -> int:
             return consistent_frames(rec, job["check"], job["ordered"])
