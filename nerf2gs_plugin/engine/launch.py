@@ -163,7 +163,10 @@ def run_rank(fn: Callable[..., Any], config: Any, *args: Any, error_dir: Optiona
         if not code:
             pass  # sys.exit(0) inside: a success
         elif error_dir is not None:
-            Path(error_dir, f"rank{rank}").write_text(f"{time.time()!r}\t{int(peer)}\t{code}\t{line}")
+            # whole or not at all: the parent kills the other ranks once one has failed, maybe mid-write
+            tmp = Path(error_dir, f".rank{rank}.tmp")
+            tmp.write_text(f"{time.time()!r}\t{int(peer)}\t{code}\t{line}")
+            os.replace(tmp, Path(error_dir, f"rank{rank}"))
         elif isinstance(e, KeyboardInterrupt):
             if rank == 0:
                 print(line, file=sys.stderr, flush=True)
@@ -258,8 +261,10 @@ def _first_failure(error_dir: str, procs: list, failed: int, first_rank: int) ->
     saw another one go away is reported only when nothing else is known."""
     found = []
     for path in Path(error_dir).glob("rank*"):
-        t, peer, code, line = path.read_text().split("\t", 3)
-        found.append((int(peer), float(t), int(path.name[4:]), int(code), line))
+        fields = path.read_text().split("\t", 3)
+        if len(fields) == 4:
+            t, peer, code, line = fields
+            found.append((int(peer), float(t), int(path.name[4:]), int(code), line))
     if found:
         peer, _, rank, code, line = min(found)
         # the same failure on several ranks (a bad flag, a missing file): the lowest rank names it

@@ -143,3 +143,13 @@ def test_replicas_that_differ_are_an_error_naming_the_rank(tiny_scene, tmp_path,
     monkeypatch.setattr(collectives, "all_gather_object", lambda obj: [obj, collectives.param_digest(other)])
     with pytest.raises(TrainingDiverged, match=r"replicas differ at step 3: the parameters of rank\(s\) 1 are not rank 0's"):
         trainer.check_replicas(3)
+
+
+def test_a_rank_killed_while_writing_its_failure_is_not_read(tmp_path):
+    """The parent kills the other ranks once one has failed: a record cut short (an empty file) is skipped, and the
+    failing rank's own record names the failure."""
+    from nerf2gs_plugin.engine.launch import _first_failure
+
+    (tmp_path / "rank0").write_text("")  # killed mid-write
+    (tmp_path / "rank1").write_text(f"{time.time()!r}\t0\t1\tdata error: bad flag")
+    assert _first_failure(str(tmp_path), [], 1, 0) == (1, 1, "data error: bad flag")
