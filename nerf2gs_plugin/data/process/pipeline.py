@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import shutil
@@ -152,7 +151,7 @@ def _sfm_stages(work: Path, names: list[str], opts: ProcessOptions, is_video: bo
         focal = 0.5 * image_size(frame_dir / names[0])[0] / opts.kept_width / np.tan(np.radians(opts.fov_deg) / 2)
     method = sfm.choose_matching(opts.sfm, len(names), is_video)
     mapped, stage_times = run_sfm_stages(work, names, opts.sfm, focal, hashes, content, method, work / LOGS, progress,
-                                         check=dataclasses.replace(opts, progress=False), ordered=is_video or method == "sequential")
+                                         check=opts, ordered=is_video or method == "sequential")
     times.update(stage_times)
     return method, mapped
 

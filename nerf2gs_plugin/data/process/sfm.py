@@ -284,10 +284,11 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
         return (known_focal is None or not focal_ran_away(r, known_focal), registered if score is None else score(r), registered)
 
     best, best_rank, most = None, None, 0
-    attempts, attempt = max(opt.mapping_attempts, 1), -1
+    planned = max(opt.mapping_attempts, 1)
+    attempts, attempt = planned, -1
     while attempt + 1 < attempts:
         attempt += 1
-        fixed_pair = 1 < attempt < max(opt.mapping_attempts, 1)
+        fixed_pair = 1 < attempt < planned
         # The incremental mapper can start from a poor initial pair on small or repetitive captures
         # and stall after a few images: another seed usually registers everything.
         options = pycolmap.IncrementalPipelineOptions()
@@ -326,7 +327,7 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
         if best is not None and best_rank[1] >= 0.9 * total and best_rank[0]:
             break
         most = max([most, *(r.num_reg_images() for r in models.values())])
-        if attempts == max(opt.mapping_attempts, 1) and score is not None and most >= JOIN_RETRY_REGISTERED * total:
+        if attempts == planned and score is not None and most >= JOIN_RETRY_REGISTERED * total:
             attempts += max(opt.join_attempts, 0)  # it registers, but breaks: other seeds join it elsewhere
         if task is not None:
             kept = "" if score is None or best_rank is None else f", {best_rank[1]} consistent"
