@@ -161,6 +161,10 @@ def test_process_video_end_to_end(tmp_path, make_config, monkeypatch):
     # the times of a re-run live beside transforms.json: the data a run reads (its fingerprint) is unchanged
     assert set(json.loads((out / "colmap" / "stage_seconds.json").read_text())) >= {"features", "matching", "mapping"}
     assert folder_fingerprint(out) == print_before
+    # other attempts could keep another model: the mapping runs again (the matches are kept)
+    main(args + ["--mapping-attempts", "2"])
+    assert (out / "colmap" / "distorted/done.json").stat().st_mtime != stamps["distorted/done.json"]
+    assert (out / "colmap" / "matching.json").stat().st_mtime == stamps["matching.json"]
     # a broken join (forced: every step of the path counts as a jump) keeps the longest consistent stretch, in every output
     import pycolmap
 

@@ -257,8 +257,10 @@ def reconstruct(db: Path, image_dir: Path, out_dir: Path, total: int, opt: SfmOp
 
     marker = out_dir / "done.json"
     final = out_dir / "0"
+    # the attempts and the ranking decide which model is kept: another setting maps again
     key = {"total": total, "camera_model": opt.camera_model, "refine_intrinsics": opt.refine_intrinsics,
-           **({"frames": content} if content else {})}
+           "mapping_attempts": opt.mapping_attempts, "join_attempts": opt.join_attempts if score is not None else 0,
+           "ranked_by": "registered" if score is None else "capture check", **({"frames": content} if content else {})}
     if not matches_changed and _marker(marker, key) and (final / "cameras.bin").is_file():
         rec = pycolmap.Reconstruction(str(final))
         return MapResult(final, rec.num_reg_images(), total, rec.num_points3D(), True)
