@@ -210,11 +210,11 @@ def run(root: Path, out_dir: Path, opts: RealPathOptions = RealPathOptions(), lo
     doc["warm_start_from"] = warm.name if opts.warm_start else None
     sn = _train(stages, "StreetNeRF", _trainer_config("streetnerf", data, root / "streetnerf", opts.streetnerf_steps,
                                                       warm_start=warm if opts.warm_start else None))
-    _train(stages, "Splatfacto + NeRF views: training", _trainer_config("splatfacto", data, root / "splatfacto-nerf-views",
-                                                                        opts.splatfacto_steps, augment_from=sn,
-                                                                        augment_changes={} if opts.view_downscale is None
-                                                                        else {"view_downscale": opts.view_downscale}),
-           setup_part="Splatfacto + NeRF views: reference renders")
+    target = _trainer_config("splatfacto", data, root / "splatfacto-nerf-views", opts.splatfacto_steps, augment_from=sn,
+                             augment_changes={} if opts.view_downscale is None else {"view_downscale": opts.view_downscale})
+    dm = target.pipeline.datamanager
+    doc["splatfacto_coarse_to_fine"] = {"num_downscales": dm.num_downscales, "resolution_schedule": dm.resolution_schedule}
+    _train(stages, "Splatfacto + NeRF views: training", target, setup_part="Splatfacto + NeRF views: reference renders")
     doc["masks_coverage"] = summary.get("coverage")
     record(final=True)
     return doc
@@ -256,7 +256,7 @@ def results_md(doc: dict) -> str:
              f"load average at the end {doc.get('load_average')}.",
              f"{_source(doc)}; masks' reference {o['reference_steps']} steps, StreetNeRF "
              f"{o['streetnerf_steps'] or 'default'} steps ({warm}), "
-             f"Splatfacto {o['splatfacto_steps'] or 'default'} steps with NeRF views"
+             f"Splatfacto {o['splatfacto_steps'] or 'default'} steps with NeRF views{_coarse_to_fine(doc)}"
              f"{'' if o.get('view_downscale') in (None, 1) else ' (the views from above at 1/%d size)' % o['view_downscale']}; masks' renders at 1/{_downscale(doc):g}; "
              f"StreetNeRF renders with {doc.get('streetnerf_render_nerf_samples') or 'all'} fine samples per ray. "
              f"Registered {doc.get('registered', '?')}/{doc.get('frames_used', o['frames'])}"
@@ -278,6 +278,16 @@ def results_md(doc: dict) -> str:
         lines += ["", "**Incomplete: the bench stopped (or is still running) after the stages above.**"]
     lines += ["", f"Target: <= {doc['target_minutes']:g} min for the whole path on 2 cores."]
     return "\n".join(lines) + "\n"
+
+
+def _coarse_to_fine(doc: dict) -> str:
+    """Whether Splatfacto trained coarse to fine (results written before it was recorded say nothing)."""
+    c = doc.get("splatfacto_coarse_to_fine")
+    if c is None:
+        return ""
+    if c["num_downscales"] <= 0:
+        return " (full size throughout)"
+    return f" (coarse to fine: 1/{2 ** c['num_downscales']} size first, doubled every {c['resolution_schedule']} steps)"
 
 
 def _sfm_threads(doc: dict) -> str:

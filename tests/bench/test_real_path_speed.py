@@ -176,3 +176,15 @@ def _check_readme_pair(sn, sf, tmp_path):
     bench_sf = _trainer_config("splatfacto", sf.data, tmp_path / "sf", None, augment_from=sf.augment_from)
     assert sf.augment_from is not None and sf.augment == bench_sf.augment
     assert (sf.pipeline, sf.max_num_iterations) == (bench_sf.pipeline, bench_sf.max_num_iterations)
+
+
+def test_results_say_whether_splatfacto_trained_coarse_to_fine():
+    """Two timings of the target differ by a fifth with coarse to fine on: the results name which it was."""
+    import nerf2gs_bench.real_path_speed as rps
+
+    doc = _old_doc()
+    assert "coarse to fine" not in rps.results_md(doc) and "full size throughout" not in rps.results_md(doc)
+    off = {**doc, "splatfacto_coarse_to_fine": {"num_downscales": 0, "resolution_schedule": 300}}
+    on = {**doc, "splatfacto_coarse_to_fine": {"num_downscales": 2, "resolution_schedule": 300}}
+    assert "with NeRF views (full size throughout)" in rps.results_md(off)
+    assert "(coarse to fine: 1/4 size first, doubled every 300 steps)" in rps.results_md(on)
