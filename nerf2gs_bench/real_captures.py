@@ -51,7 +51,8 @@ class Capture:
     show_renders: bool = False
     """Whether the licence lets the bench's picture show renders of it."""
     labels: Optional[str] = None
-    """Folder of hand-labelled moving-object masks (same names as the frames), when any exist."""
+    """Hand labels of moving objects (``benchmarks/validation/labels/<labels>.json``, in the source frames' pixels),
+    when any exist: the masks' IoU on labelled training frames, static PSNR on labelled held-out frames."""
     truth: Optional[str] = None
     """Folder (under the data root) of ground-truth cameras ``<image name>.camera`` (Strecha's format), when surveyed."""
 
@@ -59,13 +60,13 @@ class Capture:
 CAPTURES: tuple[Capture, ...] = (
     Capture("kitti", "kitti", "github:rahulagrawal048/kitti-odometry, kitti/0001-0133.png (commit 403ebe5)",
             "CC BY-NC-SA 3.0 (KITTI)", "KITTI raw excerpt (Geiger et al.), 133 frames 800x240 from a car-mounted camera",
-            camera_height=1.65, fov_deg=81.0),
+            camera_height=1.65, fov_deg=81.0, labels="kitti_moving"),
     Capture("lund", "lund/images", "github:mapillary/OpenSfM, data/lund/images (commit 238744c)",
             "BSD-2-Clause (OpenSfM)", "29 hand-held photos of a street in Lund, 1024x768, EXIF focal and GPS",
             camera_height=1.6, mount="walk", show_renders=True),
     Capture("nuscenes", "nuscenes/image_2", "github:youngibby/nuscene, image_2/ (nuScenes CAM_FRONT)",
-            "CC BY-NC-SA 4.0 (nuScenes)", "nuScenes CAM_FRONT 1600x900, first shot (frames 0-52), bonnet cropped",
-            camera_height=1.5, fov_deg=64.0, last=53, crop_bottom=0.1),
+            "CC BY-NC-SA 4.0 (nuScenes)", "nuScenes CAM_FRONT 1600x900, first shot (frames 1-52: every 8th, held out, is labelled), bonnet cropped",
+            camera_height=1.5, fov_deg=64.0, first=1, last=53, crop_bottom=0.1, labels="nuscenes_moving_heldout"),
     Capture("herzjesu", "herzjesu/images", "github:openMVG/SfM_quality_evaluation, Benchmarking_Camera_Calibration_2008/"
             "Herz-Jesus-P25/ (images/ and gt_dense_cameras/, commit 348a981)",
             "no licence stated in the repository (Strecha et al. 2008, EPFL CVLab: research use)",
@@ -230,6 +231,18 @@ def compare_or_reuse(cap: Capture, doc: dict, output: Path, rerun: bool,
 
 
 # ----------------------------------------------------------------------------- one capture
+def hand_labels(hand: dict) -> dict:
+    """The record's keys from :func:`hand_label_scores`: the moving IoU and, where held-out frames are
+    labelled, the static PSNR by the labels (in place of the masks stage's estimate)."""
+    static = hand["static"]
+    out = {"moving_iou": None if hand["moving"] is None else hand["moving"]["iou"], "hand_labels": hand}
+    if hand["static_frames"]:
+        out["static_psnr"] = static
+        out["static_psnr_delta"] = (None if static[TARGET] is None or static[AUGMENTED] is None
+                                    else static[AUGMENTED] - static[TARGET])
+    return out
+
+
 def capture_summary(cap: Capture, doc: dict, holes: dict[str, Optional[float]]) -> dict:
     """The per-capture record of the bench from ``run_real_photos``' document and the holes from above."""
     p, res = doc["process"], doc["results"]
@@ -258,6 +271,28 @@ def capture_summary(cap: Capture, doc: dict, holes: dict[str, Optional[float]]) 
         "bev_hole_fraction": {"target": holes.get(TARGET), "augmented": holes.get(AUGMENTED), "reference": holes.get(REFERENCE)},
         "wall_seconds": doc["wall_seconds"],
     }
+
+
+def hand_label_scores(cap: Capture, data: Path, run_dirs: dict[str, str]) -> dict:
+    """Where the capture has hand labels: the masks stage's moving-object IoU on its labelled training frames
+    (``moving``, None when none is in the run), and each run's held-out PSNR over the static pixels of the
+    labelled held-out frames (``static``, by ``ns2gs-eval`` on the capture with those frames' labels as masks)."""
+    import tempfile
+
+    from nerf2gs_bench.hand_labels import labelled_view, load_labels, moving_scores
+    from nerf2gs_plugin.eval.evaluate import evaluate_run
+    from nerf2gs_plugin.runs.load import load_run
+
+    labels = load_labels(cap.labels)
+    crop_rows = int(round(labels["size"][1] * (1.0 - cap.crop_bottom)))  # as stage_frames cuts the bonnet
+    static: dict[str, Optional[float]] = {label: None for label in (REFERENCE, TARGET, AUGMENTED)}
+    with tempfile.TemporaryDirectory() as tmp:
+        view = Path(tmp) / "data"
+        frames = labelled_view(data, labels, view, crop_rows)
+        for label, run in run_dirs.items():
+            if frames:
+                static[label] = evaluate_run(load_run(Path(run), device="cpu", data=view), ["test"])["results"]["test"]["static_psnr"]
+    return {"labels": cap.labels, "moving": moving_scores(data, labels, crop_rows), "static": static, "static_frames": frames}
 
 
 def failed_record(cap: Capture, why: str) -> dict:
@@ -290,6 +325,14 @@ def run_capture(cap: Capture, data_root: Path, runs_root: Path, scale: BenchScal
     holes, views, seconds, reused = compare_or_reuse(cap, doc, root / "compare-birds-eye", rerun, log)
     doc["stage_seconds"]["holes from above"] = seconds
     summary = capture_summary(cap, doc, holes)
+    if cap.labels:
+        done = {label: r["run_dir"] for label, r in doc["results"].items() if not r.get("failed") and r.get("run_dir")}
+        hand = hand_label_scores(cap, Path(doc["data"]), done)
+        summary.update(hand_labels(hand))
+        moving = hand["moving"]
+        log(f"[bench] {cap.name}: hand labels: moving-object IoU "
+            f"{'n/a (no labelled training frame)' if moving is None else '%.3f on %d frames' % (moving['iou'], len(moving['frames']))}, "
+            f"static PSNR on {len(hand['static_frames'])} labelled held-out frames")
     summary["stage_seconds"]["holes from above"] = doc["stage_seconds"]["holes from above"]
     # named as in the record's stage_seconds (runs by their label)
     summary["reused_stages"] = [k.removeprefix("train + eval: ") for k in doc.get("reused_stages", [])] + (
@@ -401,6 +444,29 @@ def _f(v: Optional[float], fmt: str = "{:.2f}") -> str:
     return "n/a" if v is None else fmt.format(v)
 
 
+def label_lines(captures: Sequence[dict]) -> list[str]:
+    """What the hand labels measured per capture: which frames, the masks' IoU with precision and recall."""
+    out = []
+    for c in captures:
+        hand = c.get("hand_labels")
+        if not hand:
+            continue
+        m, parts = hand["moving"], []
+        if m is None:
+            parts.append("no labelled training frame in this run (no moving-object IoU)")
+        else:
+            parts.append(f"moving-object IoU {m['iou']:.3f} (precision {m['precision']:.2f}, recall {m['recall']:.2f}) "
+                         f"on {', '.join(m['frames'])}")
+        if hand["static_frames"]:
+            st = hand["static"]
+            parts.append(f"static PSNR {_f(st[TARGET])} / {_f(st[AUGMENTED])} / {_f(st[REFERENCE])} (target alone / + NeRF "
+                         f"views / StreetNeRF) on {', '.join(hand['static_frames'])}")
+        else:
+            parts.append("no labelled held-out frame in this run (no static PSNR)")
+        out.append(f"- {c['capture']} (labels `{hand['labels']}`): " + "; ".join(parts) + ".")
+    return ["", "Hand labels (moving objects drawn by eye; 'ignore' regions and the bonnet count neither way):", ""] + out if out else []
+
+
 def target_lines(captures: Sequence[dict]) -> list[str]:
     """The street-level and from-above targets per capture, measured (all pixels where no labels exist)."""
     out = []
@@ -467,9 +533,12 @@ def results_md(doc: dict) -> str:
                      f"{_f(h['reference'] and 100 * h['reference'], '{:.1f}%')} | {_f(c['moving_iou'], '{:.2f}')} |")
     lines += [""] + target_lines(doc["captures"])
     lines += truth_lines(doc["captures"])
-    lines += ["", "Static delta: PSNR outside the moving-object masks of the held-out frames (masks/transient/); the "
-              "masks stage makes them for the training frames only, so it is n/a unless the held-out frames are labelled. "
-              "Moving-object IoU needs hand labels (n/a without).", "", "## Captures, provenance and licence", ""]
+    lines += ["", "Static delta: PSNR outside the moving-object masks of the held-out frames, by hand labels (the masks "
+              "stage makes masks for the training frames only, so it is n/a unless the held-out frames are labelled). "
+              "Moving-object IoU: the masks stage's transient masks against the hand labels of the training frames "
+              "(n/a without)."]
+    lines += label_lines(doc["captures"])
+    lines += ["", "## Captures, provenance and licence", ""]
     for c in doc["captures"]:
         if c.get("failed"):
             lines += [f"- **{c['capture']}** ({c['mount']}): {c['provenance']}. Source: {c['fetch']}. Licence: {c['licence']}. "

@@ -7,15 +7,13 @@ Usage: python benchmarks/validation/static_loss_regions.py CAPTURE BASE RUN [RUN
 and hand labels; BASE: the run the others are compared with). Prints one line per region.
 """
 import argparse
-import json
 from pathlib import Path
 
 import cv2
 import numpy as np
 import torch
 
-from static_psnr_hand_labels import LABELS, label_mask
-
+from nerf2gs_bench.hand_labels import frame_key, frame_masks, load_labels
 from nerf2gs_plugin.runs.load import load_run
 
 
@@ -36,17 +34,18 @@ def main() -> None:
     ap.add_argument("--labels", default="nuscenes_moving_heldout")
     ap.add_argument("--crop-rows", type=int)
     args = ap.parse_args()
-    labels = json.loads((LABELS / f"{args.labels}.json").read_text())
+    labels = load_labels(args.labels)
     from nerf2gs_plugin.data import dataparser_config
 
     stems = [f.image.stem for f in dataparser_config(args.capture).raw_frames()["test"]]
     errs = {r.name: errors(r) for r in args.runs}
     acc: dict[str, dict[str, list[float]]] = {}
     for k, stem in enumerate(stems):
-        if stem[-6:] not in labels["frames"]:
+        if frame_key(stem) not in labels["frames"]:
             continue
         h, w = errs[args.runs[0].name][k].shape
-        hand = label_mask(labels["frames"][stem[-6:]], (w, h), labels, args.crop_rows or labels["size"][1]) > 0
+        moving, leave_out = frame_masks(labels["frames"][frame_key(stem)], labels, (w, h), args.crop_rows)
+        hand = moving | leave_out
         est = cv2.resize(cv2.imread(str(args.capture / "masks" / "transient" / f"{stem}.png"), 0), (w, h),
                          interpolation=cv2.INTER_NEAREST) > 127
         top = np.arange(h)[:, None].repeat(w, 1) < 2 * h // 3

@@ -15,57 +15,11 @@ hand labels (held-out frames that have both), Gaussians.
 """
 import argparse
 import json
-import re
 import tempfile
 from pathlib import Path
 
-import cv2
-import numpy as np
-
+from nerf2gs_bench.hand_labels import labelled_view, load_labels
 from nerf2gs_plugin.utils.io import atomic_write_text
-
-LABELS = Path(__file__).parent / "labels"
-
-
-def label_mask(entry: dict, size: tuple[int, int], labels: dict, crop_rows: int) -> np.ndarray:
-    """The frame's 'moving' and 'ignore' polygons, and the labels' 'ego' polygon (the ego car, in every frame),
-    as one uint8 mask (255) at ``size`` (w, h): the source frame's first ``crop_rows`` rows resized."""
-    sx, sy = size[0] / labels["size"][0], size[1] / crop_rows
-    m = np.zeros(size[::-1], np.uint8)
-    for polys in [*entry.values(), [labels["ego"]] if labels.get("ego") else []]:
-        for p in polys:
-            q = np.round(np.array(p, np.float64) * [sx, sy]).astype(np.int32)
-            cv2.fillPoly(m, [q], 255)
-    return m
-
-
-def labelled_view(capture: Path, labels: dict, crop_rows: int, out: Path) -> list[str]:
-    """``out``: the capture's files linked, its masks too, the held-out frames' transient masks replaced by the
-    labels where they have them; returns those frames' image stems."""
-    out.mkdir(parents=True, exist_ok=True)
-    for f in capture.iterdir():
-        if f.name != "masks":
-            (out / f.name).symlink_to(f.resolve())
-    for kind in ("sky", "ground", "transient"):
-        src = capture / "masks" / kind
-        if src.is_dir():
-            (out / "masks" / kind).mkdir(parents=True, exist_ok=True)
-            for m in src.iterdir():
-                (out / "masks" / kind / m.name).symlink_to(m.resolve())
-    from nerf2gs_plugin.data import dataparser_config
-
-    stems = []
-    for img in sorted(f.image for f in dataparser_config(capture).raw_frames().get("test", [])):
-        digits = re.search(r"(\d+)$", img.stem)
-        key = digits.group(1)[-6:] if digits else None
-        if key not in labels["frames"]:
-            continue
-        h, w = cv2.imread(str(img)).shape[:2]
-        dst = out / "masks" / "transient" / f"{img.stem}.png"
-        dst.unlink(missing_ok=True)
-        cv2.imwrite(str(dst), label_mask(labels["frames"][key], (w, h), labels, crop_rows))
-        stems.append(img.stem)
-    return stems
 
 
 def evaluate(run: Path, data: Path | None) -> dict:
@@ -95,11 +49,11 @@ def main() -> None:
     ap.add_argument("--estimated", type=Path, help="the same capture with the masks stage's masks of every frame "
                     "(ns2gs-data masks over all splits); default: CAPTURE's own masks")
     args = ap.parse_args()
-    labels = json.loads((LABELS / f"{args.labels}.json").read_text())
+    labels = load_labels(args.labels)
     rows = {}
     with tempfile.TemporaryDirectory() as tmp:
         view = Path(tmp) / args.capture.name
-        stems = labelled_view(args.capture, labels, args.crop_rows or labels["size"][1], view)
+        stems = labelled_view(args.capture, labels, view, args.crop_rows)
         for run in args.runs:
             rows[run.name] = {"estimated": evaluate(run, args.estimated), "hand": evaluate(run, view)}
             print(run.name, json.dumps(rows[run.name]))

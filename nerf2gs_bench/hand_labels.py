@@ -1,0 +1,124 @@
+"""Hand-drawn moving-object labels of real frames (``benchmarks/validation/labels/<name>.json``) as masks.
+
+A labels file holds, per frame (keyed by the trailing digits of the source frame's name), polygons in the
+source frame's pixels (``size``): each moving object (one polygon under its own name, or a list of them
+under ``moving``), ``ignore`` regions (objects whose motion cannot be told: they count neither way) and,
+for the whole capture, the ``ego`` car's outline (a bonnet). What the benches do with them: the masks
+stage's transient masks of training frames scored against the moving objects (:func:`moving_scores`), and
+held-out frames scored on their static pixels only (:func:`labelled_view`, read by ``ns2gs-eval``).
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+
+LABELS_DIR = Path(__file__).resolve().parents[1] / "benchmarks" / "validation" / "labels"
+IGNORE, EGO = "ignore", "ego"
+
+
+def load_labels(name: str) -> dict:
+    """``LABELS_DIR/<name>.json``; one clear line when it is not there."""
+    import json
+
+    from nerf2gs_plugin.errors import DataError
+
+    path = LABELS_DIR / f"{name}.json"
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise DataError(f"hand labels '{name}' unreadable ({e.__class__.__name__})", path) from e
+
+
+def frame_key(stem: str) -> Optional[str]:
+    """The labels' key of a frame: its name's trailing digits (``frame_000031`` / ``000031`` -> ``000031``)."""
+    m = re.search(r"(\d+)$", stem)
+    return m.group(1)[-6:] if m else None
+
+
+def _polygons(value: list) -> list[np.ndarray]:
+    """One polygon (``[[x, y], ...]``) or a list of them, as int-able arrays."""
+    if not value:
+        return []
+    first = value[0]
+    nested = isinstance(first, (list, tuple)) and first and isinstance(first[0], (list, tuple))
+    return [np.asarray(p, np.float64) for p in (value if nested else [value])]
+
+
+def frame_masks(entry: dict, labels: dict, size: tuple[int, int], crop_rows: Optional[int] = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(moving, leave_out)`` bool masks ``[h, w]`` of one labelled frame at ``size`` (w, h): the source
+    frame's first ``crop_rows`` rows (all by default) resized. ``leave_out``: its ignore regions and the ego car."""
+    import cv2
+
+    src_w, src_h = labels["size"]
+    sx, sy = size[0] / src_w, size[1] / (crop_rows or src_h)
+    moving = np.zeros(size[::-1], np.uint8)
+    leave_out = np.zeros(size[::-1], np.uint8)
+    extra = [(EGO, labels[EGO])] if labels.get(EGO) else []
+    for what, value in [*entry.items(), *extra]:
+        target = leave_out if what in (IGNORE, EGO) else moving
+        for p in _polygons(value):
+            cv2.fillPoly(target, [np.round(p * [sx, sy]).astype(np.int32)], 1)
+    return moving > 0, leave_out > 0
+
+
+def split_images(capture: Path, split: str) -> list[Path]:
+    """The capture's images of ``split`` (``train`` / ``test``), as the dataparser holds the frames out."""
+    from nerf2gs_plugin.data import dataparser_config
+
+    return sorted(f.image for f in dataparser_config(capture).raw_frames().get(split, []))
+
+
+def moving_scores(capture: Path, labels: dict, crop_rows: Optional[int] = None) -> Optional[dict]:
+    """IoU, precision and recall of the masks stage's ``masks/transient/`` against the moving objects, pooled
+    over the labelled training frames (the masks stage marks those); None when none is labelled."""
+    import cv2
+
+    counts, frames = np.zeros(4, np.int64), []
+    for img in split_images(capture, "train"):
+        key, mask_path = frame_key(img.stem), capture / "masks" / "transient" / f"{img.stem}.png"
+        if key not in labels["frames"] or not mask_path.is_file():
+            continue
+        est = cv2.imread(str(mask_path), cv2.IMREAD_GRAYSCALE) > 0
+        moving, leave_out = frame_masks(labels["frames"][key], labels, (est.shape[1], est.shape[0]), crop_rows)
+        keep = ~leave_out
+        pred, truth = est & keep, moving & keep
+        counts += [int((pred & truth).sum()), int((pred | truth).sum()), int(pred.sum()), int(truth.sum())]
+        frames.append(img.stem)
+    if not frames:
+        return None
+    i, u, p, t = (int(x) for x in counts)
+    return {"iou": i / max(u, 1), "precision": i / max(p, 1), "recall": i / max(t, 1), "frames": frames}
+
+
+def labelled_view(capture: Path, labels: dict, out: Path, crop_rows: Optional[int] = None) -> list[str]:
+    """``out``: the capture's files linked, its masks too, the held-out frames' transient masks replaced by
+    the labels (moving, ignore and ego: what leaves a static score) where they have them; returns those
+    frames' image stems. ``ns2gs-eval --data out`` then scores their static pixels by hand labels."""
+    import cv2
+
+    out.mkdir(parents=True, exist_ok=True)
+    for f in capture.iterdir():
+        if f.name != "masks":
+            (out / f.name).symlink_to(f.resolve())
+    for kind in ("sky", "ground", "transient"):
+        src = capture / "masks" / kind
+        (out / "masks" / kind).mkdir(parents=True, exist_ok=True)
+        if src.is_dir():
+            for m in src.iterdir():
+                (out / "masks" / kind / m.name).symlink_to(m.resolve())
+    stems = []
+    for img in split_images(capture, "test"):
+        key = frame_key(img.stem)
+        if key not in labels["frames"]:
+            continue
+        h, w = cv2.imread(str(img)).shape[:2]
+        moving, leave_out = frame_masks(labels["frames"][key], labels, (w, h), crop_rows)
+        dst = out / "masks" / "transient" / f"{img.stem}.png"
+        dst.unlink(missing_ok=True)
+        cv2.imwrite(str(dst), ((moving | leave_out) * 255).astype(np.uint8))
+        stems.append(img.stem)
+    return stems
