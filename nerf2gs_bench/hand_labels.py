@@ -1,7 +1,8 @@
 """Hand-drawn moving-object labels of real frames (``benchmarks/validation/labels/<name>.json``) as masks.
 
 A labels file holds, per frame (keyed by the trailing digits of the source frame's name), polygons in the
-source frame's pixels (``size``): each moving object (one polygon under its own name, or a list of them
+source frame's pixels (``size``; or in a resized crop of it: ``size``, ``source_size`` and ``source_rows``, the
+source rows the crop kept): each moving object (one polygon under its own name, or a list of them
 under ``moving``), ``ignore`` regions (objects whose motion cannot be told: they count neither way) and,
 for the whole capture, the ``ego`` car's outline (a bonnet). What the benches do with them: the masks
 stage's transient masks of training frames scored against the moving objects (:func:`moving_scores`), and
@@ -53,15 +54,17 @@ def frame_masks(entry: dict, labels: dict, size: tuple[int, int], crop_rows: Opt
     frame's first ``crop_rows`` rows (all by default) resized. ``leave_out``: its ignore regions and the ego car."""
     import cv2
 
-    src_w, src_h = labels["size"]
-    sx, sy = size[0] / src_w, size[1] / (crop_rows or src_h)
+    # labels drawn on a resized crop of the source say so (source_size, source_rows): to source pixels first
+    src_w, src_h = labels.get("source_size", labels["size"])
+    to_src = np.array([src_w / labels["size"][0], labels.get("source_rows", src_h) / labels["size"][1]])
+    scale = to_src * [size[0] / src_w, size[1] / (crop_rows or src_h)]
     moving = np.zeros(size[::-1], np.uint8)
     leave_out = np.zeros(size[::-1], np.uint8)
     extra = [(EGO, labels[EGO])] if labels.get(EGO) else []
     for what, value in [*entry.items(), *extra]:
         target = leave_out if what in (IGNORE, EGO) else moving
         for p in _polygons(value):
-            cv2.fillPoly(target, [np.round(p * [sx, sy]).astype(np.int32)], 1)
+            cv2.fillPoly(target, [np.round(p * scale).astype(np.int32)], 1)
     return moving > 0, leave_out > 0
 
 

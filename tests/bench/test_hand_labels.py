@@ -41,6 +41,11 @@ def test_frame_masks_scale_both_label_formats_to_the_cropped_frame():
     assert not (car & leave_out).any() and leave_out[:, :35].sum() == 2 * 35  # nothing else: the bonnet's two rows
     moving, _ = hl.frame_masks(LABELS["frames"]["000009"], LABELS, (64, 32), crop_rows=64)
     assert moving[:10, :20].all() and moving.sum() == 10 * 20  # a list of polygons under 'moving'
+    # drawn on a resized crop of the source (its first 64 rows at 32x16): to source pixels, then to the frame's
+    on_crop = {"size": [32, 16], "source_size": [128, 80], "source_rows": 64, "frames": {}}
+    car_on_crop, _ = hl.frame_masks({"car": [[5, 2], [15, 2], [15, 12], [5, 12]]}, on_crop, (64, 32), crop_rows=64)
+    in_source, _ = hl.frame_masks({"car": [[20, 8], [60, 8], [60, 48], [20, 48]]}, {"size": [128, 80]}, (64, 32), crop_rows=64)
+    assert np.array_equal(car_on_crop, in_source) and in_source.sum() == 21 * 21
 
 
 def test_moving_iou_is_pooled_over_labelled_training_frames(capture):
@@ -82,7 +87,7 @@ def test_missing_labels_are_named(tmp_path, monkeypatch):
 
 
 def test_committed_labels_name_their_frames_and_source_size():
-    for name in ("kitti_moving", "nuscenes_moving_heldout"):
+    for name in ("kitti_moving", "nuscenes_moving_heldout", "nuscenes_moving"):
         labels = hl.load_labels(name)
         assert len(labels["size"]) == 2 and labels["frames"]
         for key, entry in labels["frames"].items():

@@ -1,0 +1,71 @@
+"""Moving-object IoU of a capture's masks (``ns2gs-data masks``) against hand labels, per frame and pooled.
+
+The labelled training frames of CAPTURE (the masks stage marks those) are scored against the moving objects
+of the named label files (``labels/<name>.json``; where two label a frame the first named wins); 'ignore'
+regions and the bonnet count neither way. The capture's frames must be the labels' source frames (trailing
+digits of the name: ``frame_000031.jpg`` <-> ``000031``), their first ``--crop-rows`` source rows kept and resized.
+
+Usage: python benchmarks/validation/moving_iou_hand_labels.py CAPTURE OUT_STEM --labels NAME [NAME ...]
+[--crop-rows 747]. Writes OUT_STEM.{json,md}.
+"""
+import argparse
+import json
+from pathlib import Path
+
+from nerf2gs_bench.hand_labels import frame_key, load_labels, moving_scores
+from nerf2gs_plugin.utils.io import atomic_write_text
+
+
+def merged(names: list[str]) -> dict:
+    """One labels document of several, each frame's polygons in source pixels (the first named wins)."""
+    import numpy as np
+
+    from nerf2gs_bench.hand_labels import _polygons
+
+    out: dict = {"size": None, "frames": {}}
+    for name in reversed(names):
+        lab = load_labels(name)
+        src_w, src_h = lab.get("source_size", lab["size"])
+        to_src = np.array([src_w / lab["size"][0], lab.get("source_rows", src_h) / lab["size"][1]])
+        if out["size"] not in (None, [src_w, src_h]):
+            raise SystemExit(f"labels '{name}' are of {src_w}x{src_h} source frames, the others of {out['size']}")
+        out["size"] = [src_w, src_h]
+        out["ego"] = lab.get("ego", out.get("ego"))
+        for key, entry in lab["frames"].items():
+            out["frames"][key] = {what: [(p * to_src).tolist() for p in _polygons(v)] for what, v in entry.items()}
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("capture", type=Path)
+    ap.add_argument("out", type=Path)
+    ap.add_argument("--labels", nargs="+", required=True)
+    ap.add_argument("--crop-rows", type=int, help="the source rows the capture's frames keep (a bonnet cut off); default: all")
+    args = ap.parse_args()
+    labels = merged(args.labels)
+    pooled = moving_scores(args.capture, labels, args.crop_rows)
+    if pooled is None:
+        raise SystemExit(f"{args.capture}: no labelled training frame with a transient mask")
+    per_frame = {}
+    for stem in pooled["frames"]:
+        one = {**labels, "frames": {frame_key(stem): labels["frames"][frame_key(stem)]}}
+        per_frame[stem] = {k: v for k, v in moving_scores(args.capture, one, args.crop_rows).items() if k != "frames"}
+    from nerf2gs_bench.machine import machine_info
+
+    doc = {"machine": machine_info(), "capture": str(args.capture), "labels": args.labels, "crop_rows": args.crop_rows,
+           "pooled": pooled, "per_frame": per_frame}
+    atomic_write_text(args.out.with_suffix(".json"), json.dumps(doc, indent=1))
+    lines = [f"# Moving-object IoU against hand labels ({', '.join(args.labels)})", "",
+             f"Capture {args.capture.resolve().parent.name}/{args.capture.name} (its source frames' first {args.crop_rows or 'all'} "
+             "rows); its masks stage's transient masks on the labelled training frames. 'ignore' regions and the bonnet "
+             "count neither way.", "", "| frame | IoU | precision | recall |", "|---|---|---|---|"]
+    for stem, s in per_frame.items():
+        lines.append(f"| {stem} | {s['iou']:.3f} | {s['precision']:.2f} | {s['recall']:.2f} |")
+    lines.append(f"| **pooled** | **{pooled['iou']:.3f}** | {pooled['precision']:.2f} | {pooled['recall']:.2f} |")
+    atomic_write_text(args.out.with_suffix(".md"), "\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
