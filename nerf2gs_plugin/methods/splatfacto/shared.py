@@ -85,10 +85,13 @@ class Background(nn.Module):
         if c2w.requires_grad or not torch.allclose(rot.T @ rot, eye, atol=1e-5):
             return sh_basis(self.sh_degree, camera_directions(camera)) @ self.coeffs
         turn = sh_rotation(self.sh_degree, rot).to(self.coeffs)
-        return self._camera_basis(camera) @ (turn @ self.coeffs)
+        basis = self._camera_basis(camera)  # [K, H, W]
+        # [3, K] @ [K, H*W], read back as [H, W, 3]: a GEMM with three output columns over a long
+        # [H*W, K] operand runs several times slower, forward and backward, on CPU BLAS
+        return ((turn @ self.coeffs).T @ basis.flatten(1)).T.reshape(*basis.shape[1:], -1)
 
     def _camera_basis(self, camera: Cameras) -> Tensor:
-        """SH basis ``[H, W, K]`` of the camera-frame ray directions of a one-camera ``camera``, per intrinsics."""
+        """SH basis ``[K, H, W]`` (contiguous) of the camera-frame ray directions of a one-camera ``camera``, per intrinsics."""
         key = (int(camera.height[0]), int(camera.width[0]), str(camera.device),
                *(float(v) for v in (camera.fx[0], camera.fy[0], camera.cx[0], camera.cy[0])),
                *(float(v) for v in camera.distortion_params[0]))
@@ -97,7 +100,8 @@ class Background(nn.Module):
             if len(cache) >= 8:  # a few image sizes at most in one run; never grow without bound
                 cache.clear()
             pose = torch.eye(4, device=camera.device)[None, :3]
-            cache[key] = sh_basis(self.sh_degree, camera_directions(camera.with_poses(pose))).to(self.coeffs.dtype)
+            basis = sh_basis(self.sh_degree, camera_directions(camera.with_poses(pose))).to(self.coeffs.dtype)
+            cache[key] = basis.permute(2, 0, 1).contiguous()
         return cache[key]
 
     def forward(self, camera: Cameras, training: bool) -> Tensor:
