@@ -108,3 +108,20 @@ def test_real_captures_record_takes_the_hand_labels():
     assert rec["moving_iou"] is None and "static_psnr_delta" not in rec  # the eval's own figure stays
     line = rc.label_lines([{"capture": "c", "hand_labels": hand}])[-1]
     assert "IoU 0.300 (precision 0.50, recall 0.40) on 000007" in line and "25.00 / 24.50 / 24.00" in line
+
+
+def test_real_captures_scores_a_capture_with_labels(tiny_scene, tmp_path, monkeypatch):
+    """The bench's hand-label step on a real dataset folder: its training frames' masks scored against a labels
+    file named by the capture; no held-out frame is labelled, so no static PSNR is made up."""
+    import nerf2gs_bench.real_captures as rc
+
+    est = cv2.imread(str(tiny_scene / "masks" / "transient" / "train_002.png"), cv2.IMREAD_GRAYSCALE) > 0
+    ys, xs = np.nonzero(est)
+    box = [[int(xs.min()), int(ys.min())], [int(xs.max()), int(ys.min())], [int(xs.max()), int(ys.max())], [int(xs.min()), int(ys.max())]]
+    (tmp_path / "tiny.json").write_text(json.dumps({"size": [est.shape[1], est.shape[0]], "frames": {"002": {"patch": box}}}))
+    monkeypatch.setattr(hl, "LABELS_DIR", tmp_path)
+    cap = rc.Capture("tiny", "tiny", "tests", "CC0", "tiny scene", camera_height=1.5, labels="tiny")
+    hand = rc.hand_label_scores(cap, tiny_scene, {})
+    assert hand["moving"]["frames"] == ["train_002"] and hand["moving"]["recall"] == 1.0
+    assert hand["moving"]["iou"] == pytest.approx(est.sum() / ((ys.max() - ys.min() + 1) * (xs.max() - xs.min() + 1)))
+    assert hand["static_frames"] == [] and set(hand["static"].values()) == {None}
