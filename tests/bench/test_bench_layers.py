@@ -11,7 +11,8 @@ BENCH = "nerf2gs_bench"
 ROOT = Path(__file__).resolve().parents[2] / BENCH
 
 LAYERS: list[tuple[str, ...]] = [
-    ("", "machine", "code_version", "stage_record", "perturb", "breaking_point", "stability_levels", "fault_models", "step_ab"),
+    ("", "machine", "code_version", "stage_record", "perturb", "breaking_point", "stability_levels", "fault_models", "step_ab",
+     "hand_labels"),
     ("runs",),  # run specs, keys and reuse of trained runs
     ("runner",),  # training, evaluating and writing a bench's results
     ("paper", "speed_quality", "size", "stability", "raster", "field", "faults", "faults_capture", "real", "real_photos", "scale",
