@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -75,14 +75,16 @@ def split_images(capture: Path, split: str) -> list[Path]:
     return sorted(f.image for f in dataparser_config(capture).raw_frames().get(split, []))
 
 
-def moving_scores(capture: Path, labels: dict, crop_rows: Optional[int] = None) -> Optional[dict]:
+def moving_scores(capture: Path, labels: dict, crop_rows: Optional[int] = None,
+                  key_of: Callable[[str], Optional[str]] = frame_key) -> Optional[dict]:
     """IoU, precision and recall of the masks stage's ``masks/transient/`` against the moving objects, pooled
-    over the labelled training frames (the masks stage marks those); None when none is labelled."""
+    over the labelled training frames (the masks stage marks those); None when none is labelled. ``key_of``:
+    a frame's labels key from its image stem (:func:`frame_key`; a video's frames are named by their index)."""
     import cv2
 
     counts, frames = np.zeros(4, np.int64), []
     for img in split_images(capture, "train"):
-        key, mask_path = frame_key(img.stem), capture / "masks" / "transient" / f"{img.stem}.png"
+        key, mask_path = key_of(img.stem), capture / "masks" / "transient" / f"{img.stem}.png"
         if key not in labels["frames"] or not mask_path.is_file():
             continue
         est = cv2.imread(str(mask_path), cv2.IMREAD_GRAYSCALE) > 0

@@ -6,7 +6,7 @@ regions and the bonnet count neither way. The capture's frames must be the label
 digits of the name: ``frame_000031.jpg`` <-> ``000031``), their first ``--crop-rows`` source rows kept and resized.
 
 Usage: python benchmarks/validation/moving_iou_hand_labels.py CAPTURE OUT_STEM --labels NAME [NAME ...]
-[--crop-rows 747]. Writes OUT_STEM.{json,md}.
+[--crop-rows 747] [--frame-offset 1]. Writes OUT_STEM.{json,md}.
 """
 import argparse
 import json
@@ -42,15 +42,23 @@ def main() -> None:
     ap.add_argument("out", type=Path)
     ap.add_argument("--labels", nargs="+", required=True)
     ap.add_argument("--crop-rows", type=int, help="the source rows the capture's frames keep (a bonnet cut off); default: all")
+    ap.add_argument("--frame-offset", type=int, default=0, help="label key = the frame's number + this (a video's frame_000075 "
+                    "is source frame 0076 of a folder numbered from 1: 1)")
     args = ap.parse_args()
     labels = merged(args.labels)
-    pooled = moving_scores(args.capture, labels, args.crop_rows)
+    width = len(next(iter(labels["frames"])))
+
+    def key_of(stem: str) -> str | None:
+        key = frame_key(stem)
+        return None if key is None else f"{int(key) + args.frame_offset:0{width}d}"
+
+    pooled = moving_scores(args.capture, labels, args.crop_rows, key_of)
     if pooled is None:
         raise SystemExit(f"{args.capture}: no labelled training frame with a transient mask")
     per_frame = {}
     for stem in pooled["frames"]:
-        one = {**labels, "frames": {frame_key(stem): labels["frames"][frame_key(stem)]}}
-        per_frame[stem] = {k: v for k, v in moving_scores(args.capture, one, args.crop_rows).items() if k != "frames"}
+        one = {**labels, "frames": {key_of(stem): labels["frames"][key_of(stem)]}}
+        per_frame[stem] = {k: v for k, v in moving_scores(args.capture, one, args.crop_rows, key_of).items() if k != "frames"}
     from nerf2gs_bench.machine import machine_info
 
     doc = {"machine": machine_info(), "capture": str(args.capture), "labels": args.labels, "crop_rows": args.crop_rows,

@@ -62,6 +62,9 @@ def test_moving_iou_is_pooled_over_labelled_training_frames(capture):
     cv2.imwrite(str(capture / "masks" / "transient" / "000007.png"), car.astype(np.uint8) * 255)
     assert hl.moving_scores(capture, LABELS, crop_rows=64)["iou"] == 1.0
     assert hl.moving_scores(capture, {**LABELS, "frames": {"000009": LABELS["frames"]["000009"]}}, 64) is None  # held out only
+    # frames named by their index in a video: the labels' key from the stem by the caller's rule
+    shifted = hl.moving_scores(capture, LABELS, 64, key_of=lambda stem: f"{int(stem) + 1:06d}")
+    assert shifted["frames"] == ["000006"] and shifted["recall"] == 1.0 and shifted["precision"] < 0.5  # 000006's mask is all set
 
 
 def test_labelled_view_scores_held_out_frames_by_their_labels(capture, tmp_path):
