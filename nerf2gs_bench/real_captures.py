@@ -284,7 +284,8 @@ def hand_label_scores(cap: Capture, data: Path, run_dirs: dict[str, str]) -> dic
     from nerf2gs_plugin.runs.load import load_run
 
     labels = load_labels(cap.labels)
-    crop_rows = int(round(labels["size"][1] * (1.0 - cap.crop_bottom)))  # as stage_frames cuts the bonnet
+    src_h = labels.get("source_size", labels["size"])[1]
+    crop_rows = int(round(src_h * (1.0 - cap.crop_bottom)))  # as stage_frames cuts the bonnet
     static: dict[str, Optional[float]] = {label: None for label in (REFERENCE, TARGET, AUGMENTED)}
     with tempfile.TemporaryDirectory() as tmp:
         view = Path(tmp) / "data"
