@@ -40,7 +40,7 @@ def frame_key(stem: str) -> Optional[str]:
     return m.group(1)[-6:] if m else None
 
 
-def _polygons(value: list) -> list[np.ndarray]:
+def polygons(value: list) -> list[np.ndarray]:
     """One polygon (``[[x, y], ...]``) or a list of them, as int-able arrays."""
     if not value:
         return []
@@ -49,21 +49,35 @@ def _polygons(value: list) -> list[np.ndarray]:
     return [np.asarray(p, np.float64) for p in (value if nested else [value])]
 
 
+def _to_source(labels: dict) -> np.ndarray:
+    """Label pixels -> source pixels (x, y): labels drawn on a resized crop of the source say so (``source_size``,
+    ``source_rows``); others are in source pixels already."""
+    src_w, src_h = labels.get("source_size", labels["size"])
+    return np.array([src_w / labels["size"][0], labels.get("source_rows", src_h) / labels["size"][1]])
+
+
+def in_source_pixels(labels: dict) -> dict:
+    """``labels`` with every polygon in the source frame's pixels (``size`` the source's)."""
+    to_src = _to_source(labels)
+    frames = {key: {what: [(p * to_src).tolist() for p in polygons(v)] for what, v in entry.items()}
+              for key, entry in labels["frames"].items()}
+    out = {k: v for k, v in labels.items() if k not in ("source_size", "source_rows")}
+    return {**out, "size": list(labels.get("source_size", labels["size"])), "frames": frames}
+
+
 def frame_masks(entry: dict, labels: dict, size: tuple[int, int], crop_rows: Optional[int] = None) -> tuple[np.ndarray, np.ndarray]:
     """``(moving, leave_out)`` bool masks ``[h, w]`` of one labelled frame at ``size`` (w, h): the source
     frame's first ``crop_rows`` rows (all by default) resized. ``leave_out``: its ignore regions and the ego car."""
     import cv2
 
-    # labels drawn on a resized crop of the source say so (source_size, source_rows): to source pixels first
     src_w, src_h = labels.get("source_size", labels["size"])
-    to_src = np.array([src_w / labels["size"][0], labels.get("source_rows", src_h) / labels["size"][1]])
-    scale = to_src * [size[0] / src_w, size[1] / (crop_rows or src_h)]
+    scale = _to_source(labels) * [size[0] / src_w, size[1] / (crop_rows or src_h)]
     moving = np.zeros(size[::-1], np.uint8)
     leave_out = np.zeros(size[::-1], np.uint8)
     extra = [(EGO, labels[EGO])] if labels.get(EGO) else []
     for what, value in [*entry.items(), *extra]:
         target = leave_out if what in (IGNORE, EGO) else moving
-        for p in _polygons(value):
+        for p in polygons(value):
             cv2.fillPoly(target, [np.round(p * scale).astype(np.int32)], 1)
     return moving > 0, leave_out > 0
 
@@ -78,11 +92,12 @@ def split_images(capture: Path, split: str) -> list[Path]:
 def moving_scores(capture: Path, labels: dict, crop_rows: Optional[int] = None,
                   key_of: Callable[[str], Optional[str]] = frame_key) -> Optional[dict]:
     """IoU, precision and recall of the masks stage's ``masks/transient/`` against the moving objects, pooled
-    over the labelled training frames (the masks stage marks those); None when none is labelled. ``key_of``:
+    over the labelled training frames (the masks stage marks those) and per frame (``per_frame``); None when
+    none is labelled. ``key_of``:
     a frame's labels key from its image stem (:func:`frame_key`; a video's frames are named by their index)."""
     import cv2
 
-    counts, frames = np.zeros(4, np.int64), []
+    counts, frames, per_frame = np.zeros(4, np.int64), [], {}
     for img in split_images(capture, "train"):
         key, mask_path = key_of(img.stem), capture / "masks" / "transient" / f"{img.stem}.png"
         if key not in labels["frames"] or not mask_path.is_file():
@@ -91,12 +106,19 @@ def moving_scores(capture: Path, labels: dict, crop_rows: Optional[int] = None,
         moving, leave_out = frame_masks(labels["frames"][key], labels, (est.shape[1], est.shape[0]), crop_rows)
         keep = ~leave_out
         pred, truth = est & keep, moving & keep
-        counts += [int((pred & truth).sum()), int((pred | truth).sum()), int(pred.sum()), int(truth.sum())]
+        c = np.array([int((pred & truth).sum()), int((pred | truth).sum()), int(pred.sum()), int(truth.sum())])
+        counts += c
         frames.append(img.stem)
+        per_frame[img.stem] = _ratios(c)
     if not frames:
         return None
+    return {**_ratios(counts), "frames": frames, "per_frame": per_frame}
+
+
+def _ratios(counts: np.ndarray) -> dict:
+    """IoU, precision and recall from (intersection, union, predicted, true) pixel counts."""
     i, u, p, t = (int(x) for x in counts)
-    return {"iou": i / max(u, 1), "precision": i / max(p, 1), "recall": i / max(t, 1), "frames": frames}
+    return {"iou": i / max(u, 1), "precision": i / max(p, 1), "recall": i / max(t, 1)}
 
 
 def labelled_view(capture: Path, labels: dict, out: Path, crop_rows: Optional[int] = None) -> list[str]:

@@ -290,9 +290,8 @@ def hand_label_scores(cap: Capture, data: Path, run_dirs: dict[str, str]) -> dic
     with tempfile.TemporaryDirectory() as tmp:
         view = Path(tmp) / "data"
         frames = labelled_view(data, labels, view, crop_rows)
-        for label, run in run_dirs.items():
-            if frames:
-                static[label] = evaluate_run(load_run(Path(run), device="cpu", data=view), ["test"])["results"]["test"]["static_psnr"]
+        for label, run in run_dirs.items() if frames else ():
+            static[label] = evaluate_run(load_run(Path(run), device="cpu", data=view), ["test"])["results"]["test"]["static_psnr"]
     return {"labels": cap.labels, "moving": moving_scores(data, labels, crop_rows), "static": static, "static_frames": frames}
 
 

@@ -12,27 +12,19 @@ import argparse
 import json
 from pathlib import Path
 
-from nerf2gs_bench.hand_labels import frame_key, load_labels, moving_scores
+from nerf2gs_bench.hand_labels import frame_key, in_source_pixels, load_labels, moving_scores
 from nerf2gs_plugin.utils.io import atomic_write_text
 
 
 def merged(names: list[str]) -> dict:
     """One labels document of several, each frame's polygons in source pixels (the first named wins)."""
-    import numpy as np
-
-    from nerf2gs_bench.hand_labels import _polygons
-
     out: dict = {"size": None, "frames": {}}
     for name in reversed(names):
-        lab = load_labels(name)
-        src_w, src_h = lab.get("source_size", lab["size"])
-        to_src = np.array([src_w / lab["size"][0], lab.get("source_rows", src_h) / lab["size"][1]])
-        if out["size"] not in (None, [src_w, src_h]):
-            raise SystemExit(f"labels '{name}' are of {src_w}x{src_h} source frames, the others of {out['size']}")
-        out["size"] = [src_w, src_h]
-        out["ego"] = lab.get("ego", out.get("ego"))
-        for key, entry in lab["frames"].items():
-            out["frames"][key] = {what: [(p * to_src).tolist() for p in _polygons(v)] for what, v in entry.items()}
+        lab = in_source_pixels(load_labels(name))
+        if out["size"] not in (None, lab["size"]):
+            raise SystemExit(f"labels '{name}' are of {lab['size']} source frames, the others of {out['size']}")
+        out.update({k: v for k, v in lab.items() if k != "frames"})
+        out["frames"].update(lab["frames"])
     return out
 
 
@@ -55,10 +47,7 @@ def main() -> None:
     pooled = moving_scores(args.capture, labels, args.crop_rows, key_of)
     if pooled is None:
         raise SystemExit(f"{args.capture}: no labelled training frame with a transient mask")
-    per_frame = {}
-    for stem in pooled["frames"]:
-        one = {**labels, "frames": {key_of(stem): labels["frames"][key_of(stem)]}}
-        per_frame[stem] = {k: v for k, v in moving_scores(args.capture, one, args.crop_rows, key_of).items() if k != "frames"}
+    per_frame = pooled.pop("per_frame")
     from nerf2gs_bench.machine import machine_info
 
     doc = {"machine": machine_info(), "capture": str(args.capture), "labels": args.labels, "crop_rows": args.crop_rows,

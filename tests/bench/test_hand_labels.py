@@ -95,7 +95,7 @@ def test_committed_labels_name_their_frames_and_source_size():
         assert len(labels["size"]) == 2 and labels["frames"]
         for key, entry in labels["frames"].items():
             assert hl.frame_key(key) == key
-            polys = [p for v in entry.values() for p in hl._polygons(v)]
+            polys = [p for v in entry.values() for p in hl.polygons(v)]
             assert all(p.ndim == 2 and p.shape[1] == 2 and (p >= 0).all() and (p <= labels["size"]).all() for p in polys)
 
 
