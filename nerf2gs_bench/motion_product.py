@@ -57,8 +57,10 @@ def ensure_keyed_reference(capture: Path, reference: Path, reuse_stale: bool = F
     return {"code": code, "today": today, "stale": code != today}
 
 
-def product_masks(capture: Path, reference: Path, render_downscale: int, log: Callable[[str], None] = print) -> dict:
-    """The training frames' masks of the masks stage on ``capture`` with ``reference``:
+def product_masks(capture: Path, reference: Path, render_downscale: int, log: Callable[[str], None] = print,
+                  motion=None) -> dict:
+    """The training frames' masks of the masks stage on ``capture`` with ``reference`` (``motion``: the
+    route's ``MotionOptions``, its defaults when None):
     ``{"names", "without_motion", "first_pass", "second_pass", "settled", "timings"}`` (the masks as
     :class:`~nerf2gs_plugin.masks.auto.FrameMasks` lists at the frames' full size)."""
     from nerf2gs_plugin.masking.auto_masks import at_full_size, masks_for_renders, render_views
@@ -75,7 +77,7 @@ def product_masks(capture: Path, reference: Path, render_downscale: int, log: Ca
     at_full_size(renders, without)  # the masks upsampled in place, as they would be written
     first: dict = {}
     second: dict = {}
-    result = masks_for_renders(view, reference, renders, AutoOptions(), log, False, MotionOptions(), timings, render_downscale,
+    result = masks_for_renders(view, reference, renders, AutoOptions(), log, False, motion or MotionOptions(), timings, render_downscale,
                                first_pass=lambda res: first.update(copy.deepcopy(res)),
                                before_settle=lambda res: second.update(copy.deepcopy(res)))
     timings.update(seconds=round(time.perf_counter() - t0, 1), cpu_seconds=round(cpu_seconds() - c0, 1))

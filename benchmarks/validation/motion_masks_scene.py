@@ -113,11 +113,15 @@ ap.add_argument("out_stem", type=Path)
 ap.add_argument("mode", nargs="?", default="both", choices=("gt", "est", "both", "product", "md"), help="md: rewrite OUT_STEM.md from the JSON")
 ap.add_argument("size", type=int, nargs="*", default=[400, 224], help="WIDTH HEIGHT")
 ap.add_argument("--render-downscale", type=int, nargs="+", default=[1, 2], help="product: the masks' renders at 1/D (ns2gs-data masks: 2)")
+ap.add_argument("--motion", nargs="+", default=[], metavar="KEY=VALUE",
+                help="product: motion options other than the defaults (e.g. loose_vote=0.5), recorded in the JSON")
 ap.add_argument("--reuse-reference", action="store_true", help="product: keep a reference trained by other model code (recorded as stale)")
 args = ap.parse_args()
 if len(args.size) != 2:
     ap.error("size: WIDTH HEIGHT")
 seed, work, out, mode, size = args.seed, args.work, args.out_stem, args.mode, tuple(args.size)
+OVERRIDES = {k: type(getattr(MotionOptions(), k))(v) for k, v in (kv.split("=", 1) for kv in args.motion)}
+MOTION = MotionOptions(**OVERRIDES)
 work.mkdir(parents=True, exist_ok=True)
 street = work / "street"
 if not (street / "transforms.json").is_file():
@@ -233,10 +237,10 @@ def run_product() -> dict:
     em = {Path(f["file_path"]).name: f for f in json.loads((capture / "transforms.json").read_text())["frames"]}
     out = {}
     for d in args.render_downscale:
-        res = product_masks(capture, work / "reference", d)
+        res = product_masks(capture, work / "reference", d, motion=MOTION)
         out[str(d)] = {label: {kind: score_masks(res["names"], res[label], kind, em) for kind in ("sky", "ground", "transient")}
                        for label in ("without_motion", "first_pass", "second_pass", "settled")}
-        out[str(d)].update(timings=res["timings"], reference=key, train_views=len(res["names"]))
+        out[str(d)].update(timings=res["timings"], reference=key, train_views=len(res["names"]), motion=dict(OVERRIDES))
         print("product", d, {k: v["transient"] for k, v in out[str(d)].items() if isinstance(v, dict) and "transient" in v}, flush=True)
     return out
 

@@ -80,6 +80,15 @@ class MotionOptions:
     vote: float = 1.0
     """... in at least this fraction of its valid neighbour pairs on each side (1: all of them; lower
     values let in more of the road a mover uncovers)."""
+    loose_vote: float = 1.0
+    """Hysteresis: pixels that move in at least this share of their pairs on each side join a moving
+    region they touch (connected to a pixel that ``vote`` keeps; 1: off). A mover's flow holds in every
+    pair where DIS follows it, its plain parts (a car's windows and roof, a walker's clothes) in
+    fewer. Off by default: 0.5 finds more of the movers on real video-rate frames, and marks more
+    static road and facade beside the movers on the synthetic streets (docs/masks-motion.md)."""
+    loose_share: float = 0.25
+    """... and only a region of which the kept pixels make up at least this share (a static object that
+    the reference renders badly, half its pairs misread, touches a stray kept pixel)."""
     one_sided_grey: float = 5.0
     """Where only the pairs on one side are valid (what leaves the frame on the other: the road near
     the bottom, the side walls), a pair counts only where frame ``j`` warped by the prior's rigid flow
@@ -329,6 +338,16 @@ def residual_gate(frame: MotionFrame, rel: float) -> Tensor:
     return torch.from_numpy(r > rel * max(med, 1e-6))
 
 
+def touching(seeds: Tensor, loose: Tensor) -> Tensor:
+    """``seeds`` with the 8-connected regions of ``loose | seeds`` that hold a seed pixel."""
+    import cv2
+
+    n, labels = cv2.connectedComponents((loose | seeds).numpy().astype(np.uint8), connectivity=8)
+    keep = np.bincount(labels[seeds.numpy()], minlength=n) > 0
+    keep[0] = False
+    return seeds | torch.from_numpy(keep[labels])
+
+
 def carried_share(seeds: Tensor, flows: dict[int, Tensor], others: dict[int, Tensor]) -> Tensor:
     """``[H, W]``: the share of the frames in ``flows`` (index -> observed flow ``[H, W, 2]`` into it)
     where a pixel, carried by the flow, lands on (or one pixel beside) a seed of that frame
@@ -430,7 +449,10 @@ def motion_masks(frames: Sequence[MotionFrame], opts: MotionOptions, progress: O
         ``carry`` a frame is finished here, else it waits for its neighbours' seeds."""
         frac, fl = frame_votes(frames, i, opts, greys)
         s = fr.opening(frac >= opts.vote, 1) if opts.vote > 0 else frac > 0
-        s = s & residual_gate(frames[i], opts.residual_rel)
+        gate = residual_gate(frames[i], opts.residual_rel)
+        s = s & gate
+        if opts.loose_vote < opts.vote:
+            s = touching(s, (frac >= opts.loose_vote) & gate)
         kept = {j: keep_flow(f) for j, f in fl.items()} if flows_out is not None else {}
         if opts.carry > 0:
             return s, fl, kept, None

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import torch
 
-from nerf2gs_plugin.masks.motion import MotionFrame, MotionOptions, motion_masks, outline, rigid_flow, static_distance
+from nerf2gs_plugin.masks.motion import MotionFrame, MotionOptions, motion_masks, outline, rigid_flow, static_distance, touching
 
 W, H, F = 160, 96, 100.0
 INTR = (F, F, W / 2, H / 2)
@@ -205,6 +205,35 @@ def test_outlines_complete_the_movers():
     assert _pooled(votes, truth, "crossing") < 0.72
     assert _pooled(outlined, truth, "crossing") > 0.78
     assert _pooled(outlined, truth, "parked") < 0.15 and _static_fp(outlined, truth) < 0.003
+
+
+def test_pixels_half_the_pairs_see_moving_join_the_region_they_touch():
+    """Hysteresis (``loose_vote``): the crossing block moves in every pair only along its textured
+    edges; its middle moves in some pairs. Where those pixels touch a pixel every pair sees moving,
+    they join it; the static scene, which some pairs misread too, stays out."""
+    frames, truth = _sequence()
+    inner = range(1, len(frames) - 1)
+    strict = motion_masks(frames, MotionOptions(loose_vote=1.0))
+    loose = motion_masks(frames, MotionOptions(loose_vote=0.5))
+    assert _pooled(strict, truth, "crossing") < 0.1
+    assert _pooled(loose, truth, "crossing") > 0.4
+    assert _pooled(loose, truth, "rider") >= _pooled(strict, truth, "rider") > 0.8
+    assert _pooled(loose, truth, "parked") < 0.1
+    for k in inner:  # little new away from the movers (the road beside them that the grown regions take)
+        movers = truth[k]["rider"] | truth[k]["crossing"]
+        assert float((loose[k] & ~strict[k] & ~movers).float().mean()) < 0.025
+
+
+def test_touching_keeps_the_loose_regions_that_hold_a_seed():
+    seeds = torch.zeros(8, 12, dtype=torch.bool)
+    seeds[2, 2] = True
+    loose = torch.zeros(8, 12, dtype=torch.bool)
+    loose[1:4, 1:6] = True  # holds the seed
+    loose[6:8, 8:12] = True  # apart from it
+    out = touching(seeds, loose)
+    assert torch.equal(out, seeds | (torch.arange(8)[:, None].ge(1) & torch.arange(8)[:, None].lt(4) & torch.arange(12).ge(1) & torch.arange(12).lt(6)))
+    assert not bool(out[6:, 8:].any())
+    assert torch.equal(touching(torch.zeros_like(seeds), loose), torch.zeros_like(seeds))
 
 
 def _noisy_block(seed: int) -> tuple[torch.Tensor, torch.Tensor]:
