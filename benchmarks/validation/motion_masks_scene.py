@@ -23,6 +23,7 @@ Produced benchmarks/results/motion_masks.{json,md} with seeds 0 and 3 (``both``,
 second keeps it as its key matches) and motion_masks_real.py (``--product 2``, then ``--product 1``).
 """
 import argparse
+import ast
 import json
 import sys
 import time
@@ -114,13 +115,13 @@ ap.add_argument("mode", nargs="?", default="both", choices=("gt", "est", "both",
 ap.add_argument("size", type=int, nargs="*", default=[400, 224], help="WIDTH HEIGHT")
 ap.add_argument("--render-downscale", type=int, nargs="+", default=[1, 2], help="product: the masks' renders at 1/D (ns2gs-data masks: 2)")
 ap.add_argument("--motion", nargs="+", default=[], metavar="KEY=VALUE",
-                help="product: motion options other than the defaults (e.g. loose_vote=0.5), recorded in the JSON")
+                help="product: motion options other than the defaults as Python literals (loose_vote=0.5, 'neighbours=(-4, -2, 2, 4)'), recorded in the JSON")
 ap.add_argument("--reuse-reference", action="store_true", help="product: keep a reference trained by other model code (recorded as stale)")
 args = ap.parse_args()
 if len(args.size) != 2:
     ap.error("size: WIDTH HEIGHT")
 seed, work, out, mode, size = args.seed, args.work, args.out_stem, args.mode, tuple(args.size)
-OVERRIDES = {k: type(getattr(MotionOptions(), k))(v) for k, v in (kv.split("=", 1) for kv in args.motion)}
+OVERRIDES = {k: ast.literal_eval(v) for k, v in (kv.split("=", 1) for kv in args.motion)}  # 0.5, (-4, -2, 2, 4), False
 MOTION = MotionOptions(**OVERRIDES)
 work.mkdir(parents=True, exist_ok=True)
 street = work / "street"
