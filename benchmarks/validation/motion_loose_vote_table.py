@@ -5,8 +5,8 @@
   * real captures: ``ns2gs-data masks CAPTURE --reference REF --motion.loose-vote V`` on a copy of the capture
     per arm, scored by ``moving_iou_hand_labels.py`` (one JSON per capture and arm).
 
-Usage: python benchmarks/validation/motion_loose_vote_table.py OUT_STEM --synthetic OFF.json HALF.json
---real NAME OFF.json HALF.json [--real ...]. Writes OUT_STEM.{json,md}.
+Usage: python benchmarks/validation/motion_loose_vote_table.py OUT_STEM --arms LABEL ... --synthetic ARM1.json ARM2.json ...
+--real NAME ARM1.json ARM2.json ... [--real ...] (one JSON per arm, in the order of ``--arms``). Writes OUT_STEM.{json,md}.
 """
 import argparse
 import json
@@ -17,8 +17,9 @@ from nerf2gs_plugin.utils.io import atomic_write_text
 
 ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
 ap.add_argument("out", type=Path)
-ap.add_argument("--synthetic", nargs=2, type=Path, metavar=("OFF", "HALF"), required=True)
-ap.add_argument("--real", nargs=3, action="append", default=[], metavar=("NAME", "OFF", "HALF"))
+ap.add_argument("--arms", nargs="+", required=True, help="a label per arm: the options it ran with")
+ap.add_argument("--synthetic", nargs="+", type=Path, required=True)
+ap.add_argument("--real", nargs="+", action="append", default=[], metavar="NAME JSON")
 args = ap.parse_args()
 
 
@@ -28,25 +29,26 @@ def synthetic(path: Path) -> dict:
             for s, row in sorted(doc["seeds"].items())}
 
 
-arms = {"off": {}, "half": {}}
+arms: dict = {label: {} for label in args.arms}
 for arm, path in zip(arms, args.synthetic):
     arms[arm].update(synthetic(path))
 for name, *paths in args.real:
     for arm, path in zip(arms, paths):
         doc = json.loads(Path(path).read_text())
         arms[arm][name] = {k: doc["pooled"][k] for k in ("iou", "precision", "recall")} | {"frames": len(doc["pooled"]["frames"])}
-doc = {"machine": machine_info(), "loose_vote": {"off": 1.0, "half": 0.5}, "transient": arms}
+doc = {"machine": machine_info(), "transient": arms}
 atomic_write_text(args.out.with_suffix(".json"), json.dumps(doc, indent=1))
-cols = list(arms["off"])
+first = arms[args.arms[0]]
+cols = list(first)
 lines = ["# The motion route's hysteresis (`--motion.loose-vote`), A/B through the masks stage", "",
          "Transient IoU (precision / recall) of the masks the stage writes (`--render-downscale 2`, second pass, neighbours "
          "agree; every other setting the default; the same first references in both arms). Synthetic streets: exact masks, "
          "all training frames. Real captures: hand labels on the labelled training frames (approximate polygons). "
          f"Machine: {doc['machine']['cpu']}, {doc['machine']['cores']} cores.", "",
-         "| `loose_vote` | " + " | ".join(c + (f" ({arms['off'][c]['frames']} frames)" if "frames" in arms["off"][c] else "") for c in cols) + " |",
+         "| arm | " + " | ".join(c + (f" ({first[c]['frames']} frames)" if "frames" in first[c] else "") for c in cols) + " |",
          "|---" * (len(cols) + 1) + "|"]
-for arm, label in (("off", "1.0 (default)"), ("half", "0.5")):
-    lines.append(f"| {label} | " + " | ".join(f"{arms[arm][c]['iou']:.3f} ({arms[arm][c]['precision']:.2f} / {arms[arm][c]['recall']:.2f})"
+for arm in args.arms:
+    lines.append(f"| {arm} | " + " | ".join(f"{arms[arm][c]['iou']:.3f} ({arms[arm][c]['precision']:.2f} / {arms[arm][c]['recall']:.2f})"
                                              for c in cols) + " |")
 lines += ["", "See docs/masks-motion.md (\"Hysteresis\")."]
 atomic_write_text(args.out.with_suffix(".md"), "\n".join(lines) + "\n")

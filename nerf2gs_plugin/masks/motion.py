@@ -86,9 +86,10 @@ class MotionOptions:
     pair where DIS follows it, its plain parts (a car's windows and roof, a walker's clothes) in
     fewer. Off by default: 0.5 finds more of the movers on real video-rate frames, and marks more
     static road and facade beside the movers on the synthetic streets (docs/masks-motion.md)."""
-    loose_share: float = 0.25
-    """... and only a region of which the kept pixels make up at least this share (a static object that
-    the reference renders badly, half its pairs misread, touches a stray kept pixel)."""
+    loose_residual_rel: float = 2.0
+    """... where those pixels also differ from the reference's render by more than this multiple of the
+    frame's median residual (``residual_rel``'s test, stricter: a mover's plain parts differ from the
+    static scene behind them, the road and facades beside a mover less)."""
     one_sided_grey: float = 5.0
     """Where only the pairs on one side are valid (what leaves the frame on the other: the road near
     the bottom, the side walls), a pair counts only where frame ``j`` warped by the prior's rigid flow
@@ -452,7 +453,7 @@ def motion_masks(frames: Sequence[MotionFrame], opts: MotionOptions, progress: O
         gate = residual_gate(frames[i], opts.residual_rel)
         s = s & gate
         if opts.loose_vote < opts.vote:
-            s = touching(s, (frac >= opts.loose_vote) & gate)
+            s = touching(s, (frac >= opts.loose_vote) & residual_gate(frames[i], opts.loose_residual_rel))
         kept = {j: keep_flow(f) for j, f in fl.items()} if flows_out is not None else {}
         if opts.carry > 0:
             return s, fl, kept, None

@@ -222,6 +222,10 @@ def test_pixels_half_the_pairs_see_moving_join_the_region_they_touch():
     for k in inner:  # little new away from the movers (the road beside them that the grown regions take)
         movers = truth[k]["rider"] | truth[k]["crossing"]
         assert float((loose[k] & ~strict[k] & ~movers).float().mean()) < 0.025
+    # the half-vote pixels must differ from the reference's render too: where nothing does, none joins
+    gated = _with_residual(frames, truth)
+    assert all(torch.equal(a, b) for a, b in zip(motion_masks(gated, MotionOptions(loose_vote=0.5, loose_residual_rel=1e9)),
+                                                   motion_masks(gated, MotionOptions(loose_vote=1.0))))
 
 
 def test_touching_keeps_the_loose_regions_that_hold_a_seed():
