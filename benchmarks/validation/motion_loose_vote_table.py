@@ -1,9 +1,10 @@
-"""One table of the motion route's hysteresis A/B (``--motion.loose-vote``), from the runs that made it:
+"""One table of the motion route's hysteresis A/B (``--motion.loose-vote``), from the runs that made it, one
+JSON per arm and capture:
 
-  * the synthetic streets: ``motion_masks_scene.py SEED WORK OFF_STEM product --render-downscale 2`` and the
-    same with ``--motion loose_vote=0.5`` into HALF_STEM (the masks stage's code, same references);
-  * real captures: ``ns2gs-data masks CAPTURE --reference REF --motion.loose-vote V`` on a copy of the capture
-    per arm, scored by ``moving_iou_hand_labels.py`` (one JSON per capture and arm).
+  * the synthetic streets: ``motion_masks_scene.py SEED WORK STEM product --render-downscale 2 [--motion KEY=VALUE ...]``
+    per arm (the masks stage's code, the same references);
+  * real captures: ``ns2gs-data masks CAPTURE --reference REF [--motion.KEY VALUE ...]`` on a copy of the capture per
+    arm, scored by ``moving_iou_hand_labels.py``.
 
 Usage: python benchmarks/validation/motion_loose_vote_table.py OUT_STEM --arms LABEL ... --synthetic ARM1.json ARM2.json ...
 --real NAME ARM1.json ARM2.json ... [--real ...] (one JSON per arm, in the order of ``--arms``). Writes OUT_STEM.{json,md}.
@@ -42,7 +43,7 @@ first = arms[args.arms[0]]
 cols = list(first)
 lines = ["# The motion route's hysteresis (`--motion.loose-vote`), A/B through the masks stage", "",
          "Transient IoU (precision / recall) of the masks the stage writes (`--render-downscale 2`, second pass, neighbours "
-         "agree; every other setting the default; the same first references in both arms). Synthetic streets: exact masks, "
+         "agree; every other setting the default; the same first references in every arm). Synthetic streets: exact masks, "
          "all training frames. Real captures: hand labels on the labelled training frames (approximate polygons). "
          f"Machine: {doc['machine']['cpu']}, {doc['machine']['cores']} cores.", "",
          "| arm | " + " | ".join(c + (f" ({first[c]['frames']} frames)" if "frames" in first[c] else "") for c in cols) + " |",

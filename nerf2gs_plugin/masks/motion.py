@@ -450,8 +450,7 @@ def motion_masks(frames: Sequence[MotionFrame], opts: MotionOptions, progress: O
         ``carry`` a frame is finished here, else it waits for its neighbours' seeds."""
         frac, fl = frame_votes(frames, i, opts, greys)
         s = fr.opening(frac >= opts.vote, 1) if opts.vote > 0 else frac > 0
-        gate = residual_gate(frames[i], opts.residual_rel)
-        s = s & gate
+        s = s & residual_gate(frames[i], opts.residual_rel)
         if opts.loose_vote < opts.vote:
             s = touching(s, (frac >= opts.loose_vote) & residual_gate(frames[i], opts.loose_residual_rel))
         kept = {j: keep_flow(f) for j, f in fl.items()} if flows_out is not None else {}
