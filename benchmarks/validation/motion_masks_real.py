@@ -4,7 +4,7 @@ downloaded here):
   * ``nuscenes``: CAM_FRONT frames (the ``image_2/`` folder of github:youngibby/nuscene, 1600x900 at
     2 Hz), the bonnet cropped (rows 0-789) and resized to 480x237, 64.6 deg FOV, camera 1.5 m up;
   * ``kitti``: the KITTI excerpt of github:rahulagrawal048/kitti-odometry (``kitti/0001-0133.png``,
-    800x240, video rate), 81 deg FOV, camera 1.65 m up.
+    800x240; its frames 1.2 camera heights apart by its SfM: not consecutive 10 Hz frames), 81 deg FOV, camera 1.65 m up.
 
 Frames FIRST..FIRST+N-1 as a video -> ``process video`` -> 1000-step mask-less reference -> transient
 masks without / with the motion route, scored against ``labels/<capture>_moving.json`` (polygons drawn

@@ -103,7 +103,7 @@ static pixels within 24 pixels of a mover (DIS spreads its flow onto the road an
 31% / 26% beyond 48 pixels, 95% / 98% of them 5-20 m off; the off-epipolar test finds almost all of them; missed: far movers
 (parallax below 2 pixels) and oncoming cars (their flow runs along the epipolar line).
 `real`: nuScenes CAM_FRONT frames 25-54 (2 Hz key frames, about 5 m apart; 21 of 30 registered, 5
-labelled training frames) and KITTI frames 70-99 of the excerpt (video rate, a pedestrian street: people
+labelled training frames) and KITTI frames 70-99 of the excerpt (not consecutive 10 Hz frames, a pedestrian street: people
 walking and crossing, a car passing; 30 of 30 registered, 3 labelled training frames)
 (`benchmarks/validation/motion_masks_real.py`, labels drawn by eye as polygons, approximate).
 """  # written by hand after the seeds 0 and 3 and the nuScenes runs
@@ -117,7 +117,10 @@ ap.add_argument("--render-downscale", type=int, nargs="+", default=[1, 2], help=
 ap.add_argument("--motion", nargs="+", default=[], metavar="KEY=VALUE",
                 help="product: motion options other than the defaults as Python literals (loose_vote=0.5, 'neighbours=(-4, -2, 2, 4)'), recorded in the JSON")
 ap.add_argument("--reuse-reference", action="store_true", help="product: keep a reference trained by other model code (recorded as stale)")
+ap.add_argument("--num-train", type=int, default=60, help="the street's training views (both directions); 240 puts the frames 0.4 m apart, a 15 fps video at the drive's 6 m/s")
+ap.add_argument("--frames", type=int, default=FRAMES, help="the first FRAMES training views are the drive")
 args = ap.parse_args()
+FRAMES = args.frames
 if len(args.size) != 2:
     ap.error("size: WIDTH HEIGHT")
 seed, work, out, mode, size = args.seed, args.work, args.out_stem, args.mode, tuple(args.size)
@@ -126,7 +129,7 @@ MOTION = MotionOptions(**OVERRIDES)
 work.mkdir(parents=True, exist_ok=True)
 street = work / "street"
 if not (street / "transforms.json").is_file():
-    generate_street(SynthStreetConfig(out=street, seed=seed, movers=True, width=size[0], height=size[1], num_street=1, num_bev=1,
+    generate_street(SynthStreetConfig(out=street, seed=seed, movers=True, width=size[0], height=size[1], num_train=args.num_train, num_street=1, num_bev=1,
                                       num_val_street=0, num_val_bev=0, progress=False, overwrite=True))
 meta = json.loads((street / "transforms.json").read_text())
 gt_frames = meta["frames"][:FRAMES]
@@ -259,7 +262,7 @@ if mode == "product":
 doc = json.loads(out.with_suffix(".json").read_text()) if out.with_suffix(".json").is_file() else {"seeds": {}}
 if mode != "md":
     row = doc["seeds"].get(str(seed), {})
-    row["scene"] = {"seed": seed, "size": list(size), "frames": FRAMES, "fov_deg": FOV, "cam_height": CAM_H, "movers": True}
+    row["scene"] = {"seed": seed, "size": list(size), "frames": FRAMES, "num_train": args.num_train, "fov_deg": FOV, "cam_height": CAM_H, "movers": True}
     row.setdefault("product", {}).update(new.pop("product", {}))
     row.update(new)
     doc["seeds"][str(seed)] = row

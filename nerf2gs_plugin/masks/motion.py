@@ -32,7 +32,7 @@ Memory: one frame's flows at a time, plus the sequence's grey images.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable, Optional, Sequence
 
 import numpy as np
@@ -57,7 +57,14 @@ class MotionOptions:
     """Only for captures processed as a sequence (``process video``, or sequential matching): the
     route compares neighbouring frames; in a photo set they need not be near each other."""
     neighbours: tuple[int, ...] = (-2, -1, 1, 2)
-    """Frames compared with each frame (offsets in the sequence, sorted by file name)."""
+    """Frames compared with each frame (offsets in the sequence, sorted by file name), in steps of
+    ``min_baseline``'s stride."""
+    min_baseline: float = 0.35
+    """The offsets count in strides of the fewest frames whose median camera step reaches this fraction
+    of the camera's median height above the road (0: one frame). A video at 15 fps moves a dashcam a
+    few tens of centimetres a frame: the road a few metres ahead then flows by a pixel or two, within
+    the route's tolerances, and a mover riding ahead is not told from it. Captures whose frames are
+    that far apart already (key frames, a long video's frames spread out) keep a stride of one."""
     perp_px: float = 1.5
     """A pixel moves where its flow leaves the epipolar line by more than this many pixels ..."""
     perp_rel: float = 0.05
@@ -84,7 +91,7 @@ class MotionOptions:
     """Hysteresis: pixels that move in at least this share of their pairs on each side join a moving
     region they touch (connected to a pixel that ``vote`` keeps; 1: off). A mover's flow holds in every
     pair where DIS follows it, its plain parts (a car's windows and roof, a walker's clothes) in
-    fewer. Off by default: 0.5 finds more of the movers on real video-rate frames, and marks more
+    fewer. Off by default: 0.5 finds more of the movers on KITTI's real frames, and marks more
     static road and facade beside the movers on the synthetic streets (docs/masks-motion.md)."""
     loose_residual_rel: float = 2.0
     """... where those pixels also differ from the reference's render by more than this multiple of the
@@ -296,10 +303,11 @@ def frame_votes(frames: Sequence[MotionFrame], i: int, opts: MotionOptions, grey
     Where only one side has a valid pair, its pairs count only where the static warp fails too
     (``one_sided_grey``).
     0 where no pair is valid, and where the static scene is at infinity (sky: no parallax to test).
-    Also the observed flows into the frames just before and after (by index)."""
+    Also the observed flows into the nearest neighbours before and after (by index)."""
     greys = greys if greys is not None else [grey(f.image) for f in frames]
     f = frames[i]
     rays = ray_directions(f.c2w, f.intr, *f.dist.shape)  # shared by the frame's pairs
+    nearest = min(abs(o) for o in opts.neighbours)
     shares, flows = [], {}
     for side in (-1, 1):
         votes = torch.zeros(f.dist.shape)
@@ -313,7 +321,7 @@ def frame_votes(frames: Sequence[MotionFrame], i: int, opts: MotionOptions, grey
             votes += (moving & valid).float()
             confirmed += (moving & valid & ((static > opts.one_sided_grey) | (opts.one_sided_grey <= 0))).float()
             valid_n += valid.float()
-            if abs(off) == 1:
+            if abs(off) == nearest:
                 flows[j] = obs
         shares.append((votes / valid_n.clamp(min=1), valid_n > 0, confirmed / valid_n.clamp(min=1)))
     (back, has_b, back_c), (fwd, has_f, fwd_c) = shares
@@ -503,6 +511,20 @@ def _intr(view: dict) -> Intrinsics:
     return tuple(float(x) for x in view["intr"])  # type: ignore[return-value]
 
 
+def neighbour_stride(frames: Sequence[MotionFrame], up: Tensor, height: float, opts: MotionOptions) -> int:
+    """How many frames one step of ``opts.neighbours`` is (``min_baseline``): at most what leaves every
+    offset inside half the sequence; 1 on a sequence too short or standing still."""
+    reach = max((abs(o) for o in opts.neighbours), default=1)
+    if opts.min_baseline <= 0 or len(frames) < 2:
+        return 1
+    c = torch.stack([f.c2w[:, 3].double() for f in frames])
+    step = float((c[1:] - c[:-1]).norm(dim=-1).median())
+    above = float((c @ up.double() - height).abs().median())
+    if step <= 1e-9 or above <= 1e-9:
+        return 1
+    return max(1, min(math.ceil(opts.min_baseline * above / step - 1e-9), (len(frames) - 1) // (2 * reach)))
+
+
 def is_sequence(meta: dict) -> bool:
     """Whether a capture's ``transforms.json`` (``meta``) says it was processed as a sequence: from a
     video, or matched sequentially (its frames in capture order)."""
@@ -529,6 +551,10 @@ def add_motion(renders, result: dict, opts: MotionOptions, log: Callable[[str], 
     order = sorted(((v["name"], s, i) for s, vs in renders.views.items() for i, v in enumerate(vs)))
     frames = frames_from_renders([renders.views[s][i] for _, s, i in order], [result[s][i].sky for _, s, i in order],
                                  renders.up, renders.height, opts.ground_clamp)
+    stride = neighbour_stride(frames, renders.up, renders.height, opts)
+    if stride > 1:
+        opts = replace(opts, neighbours=tuple(o * stride for o in opts.neighbours))
+        log(f"masks: motion compares frames {stride} apart (the camera's median step is short against its height)")
     with make_progress(progress) as prog:
         task = prog.add_task("masks: motion", total=len(frames), stats="")
         flows: Optional[list] = [] if kept is not None else None

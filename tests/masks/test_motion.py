@@ -11,7 +11,7 @@ import math
 import numpy as np
 import torch
 
-from nerf2gs_plugin.masks.motion import MotionFrame, MotionOptions, motion_masks, outline, rigid_flow, static_distance, touching
+from nerf2gs_plugin.masks.motion import MotionFrame, MotionOptions, motion_masks, neighbour_stride, outline, rigid_flow, static_distance, touching
 
 W, H, F = 160, 96, 100.0
 INTR = (F, F, W / 2, H / 2)
@@ -39,24 +39,24 @@ def _sample(tex: np.ndarray, tx: np.ndarray, ty: np.ndarray) -> np.ndarray:
     return cv2.remap(tex, tx.astype(np.float32), ty.astype(np.float32), cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
 
 
-def _sequence(n: int = 5):
+def _sequence(n: int = 5, step: float = STEP):
     """Frames, the static distance a reference would give, and the true masks of the three blocks (and the
-    static scene's image: what a reference that learnt no mover renders)."""
+    static scene's image: what a reference that learnt no mover renders); the camera moves ``step`` a frame."""
     bg, parked_tex, mover_tex = _texture(0), _texture(1), _texture(2)
     v, u = np.meshgrid(np.arange(H) + 0.5, np.arange(W) + 0.5, indexing="ij")
     ray_len = np.sqrt(((u - INTR[2]) / F) ** 2 + ((v - INTR[3]) / F) ** 2 + 1)
     frames, truth = [], []
     for k in range(n):
-        cam_x = k * STEP
+        cam_x = k * step
         img = _sample(bg, ((u - INTR[2]) * Z_BG / F + cam_x) * 3 + 100, (v - INTR[3]) * Z_BG / F * 3 + 200)
         dist = Z_BG * ray_len
-        # parked: a static block at 8 m, world x in [2, 5] m: it flows by F * STEP / 8 = 15 px per frame
+        # parked: a static block at 8 m, world x in [2, 5] m: it flows by F * step / 8 (15 px at STEP) per frame
         pu = F * (np.array([2.0, 5.0]) - cam_x) / Z_PARKED + INTR[2]
         parked = (u >= pu[0]) & (u < pu[1]) & (v >= 30) & (v < 70)
         img[parked] = _sample(parked_tex, ((u - INTR[2]) * Z_PARKED / F + cam_x) * 8, v)[parked]
         dist = np.where(parked, Z_PARKED * ray_len, dist)
         static = img.copy()  # what a reference of the static scene renders
-        # rides with the camera: stays at columns 20..50, the background behind it flows by 6 px
+        # rides with the camera: stays at columns 20..50, the background behind it flows by F * step / 20 (6 px)
         rider = (u >= 20) & (u < 50) & (v >= 55) & (v < 85)
         img[rider] = _sample(mover_tex, u * 1.0, v * 1.0)[rider]
         # crossing: moves 2 px per frame to the right, where the background flows 6 px to the left
@@ -117,6 +117,28 @@ def test_moving_blocks_are_found_and_static_ones_are_not():
     inter = sum(float((loose[k] & (truth[k]["rider"] | truth[k]["crossing"])).sum()) for k in inner)
     union = sum(float((loose[k] | truth[k]["rider"] | truth[k]["crossing"]).sum()) for k in inner)
     assert inter / union > 0.6, inter / union
+
+
+def test_a_dense_video_compares_frames_a_stride_apart():
+    """At a quarter of the step (a video at four times the frame rate) the background flows 1.5 px a
+    frame, within ``floor_px``: the nearest frames do not tell the rider from it. ``min_baseline``
+    counts the offsets in strides of as many frames as the camera needs to move half its height."""
+    frames, truth = _sequence(13, STEP / 4)
+    up, road = torch.tensor([0.0, 1.0, 0.0]), -1.5  # the camera 1.5 m above the road: a step is 0.2 of it
+    assert neighbour_stride(frames, up, road, MotionOptions(min_baseline=0.0)) == 1
+    assert neighbour_stride(frames, up, road, MotionOptions()) == 2  # the default: 0.35 of the height
+    assert neighbour_stride(_sequence(5)[0], up, road, MotionOptions()) == 1  # steps of 0.8 of the height
+    opts = MotionOptions(min_baseline=0.5)
+    assert neighbour_stride(frames, up, road, opts) == 3
+    assert neighbour_stride(frames[:9], up, road, opts) == 2  # every offset stays within half the sequence
+    assert neighbour_stride([dataclasses.replace(f, c2w=_pose(0.0)) for f in frames], up, road, opts) == 1  # standing still
+    inner = range(3, 10)  # a pair a stride away on each side
+    recall = lambda m, kind: sum(float((m[k] & truth[k][kind]).sum()) for k in inner) / sum(float(truth[k][kind].sum()) for k in inner)  # noqa: E731
+    near = motion_masks(frames, MotionOptions())
+    apart = motion_masks(frames, MotionOptions(neighbours=tuple(3 * o for o in MotionOptions().neighbours)))
+    assert recall(near, "rider") < 0.2, recall(near, "rider")
+    assert recall(apart, "rider") > 0.8, recall(apart, "rider")
+    assert recall(apart, "parked") < 0.1
 
 
 def test_an_object_riding_with_the_camera_is_found_by_the_ground_clamp():
