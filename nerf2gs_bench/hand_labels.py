@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 
@@ -32,6 +32,20 @@ def load_labels(name: str) -> dict:
         return json.loads(path.read_text())
     except (OSError, ValueError) as e:
         raise DataError(f"hand labels '{name}' unreadable ({e.__class__.__name__})", path) from e
+
+
+def merged_labels(names: Sequence[str]) -> dict:
+    """One labels document of several label sets of the same frames, each frame's polygons in source pixels
+    (:func:`in_source_pixels`; where two sets label a frame, the first named wins)."""
+    from nerf2gs_plugin.errors import DataError
+
+    out: dict = {}
+    for name in names:
+        lab = in_source_pixels(load_labels(name))
+        if out and out["size"] != lab["size"]:
+            raise DataError(f"hand labels '{name}' are of {lab['size']} source frames, the others of {out['size']}", LABELS_DIR / f"{name}.json")
+        out = {**lab, **out, "frames": {**lab["frames"], **out.get("frames", {})}}
+    return out
 
 
 def frame_key(stem: str) -> Optional[str]:

@@ -50,9 +50,10 @@ class Capture:
     mount: str = "car"
     show_renders: bool = False
     """Whether the licence lets the bench's picture show renders of it."""
-    labels: Optional[str] = None
-    """Hand labels of moving objects (``benchmarks/validation/labels/<labels>.json``, in the source frames' pixels),
-    when any exist: the masks' IoU on labelled training frames, static PSNR on labelled held-out frames."""
+    labels: tuple[str, ...] = ()
+    """Hand labels of moving objects (``benchmarks/validation/labels/<name>.json``, in the source frames' pixels; several
+    sets of the same frames merge), when any exist: the masks' IoU on labelled training frames, static PSNR on labelled
+    held-out frames."""
     truth: Optional[str] = None
     """Folder (under the data root) of ground-truth cameras ``<image name>.camera`` (Strecha's format), when surveyed."""
 
@@ -60,13 +61,13 @@ class Capture:
 CAPTURES: tuple[Capture, ...] = (
     Capture("kitti", "kitti", "github:rahulagrawal048/kitti-odometry, kitti/0001-0133.png (commit 403ebe5)",
             "CC BY-NC-SA 3.0 (KITTI)", "KITTI raw excerpt (Geiger et al.), 133 frames 800x240 from a car-mounted camera",
-            camera_height=1.65, fov_deg=81.0, labels="kitti_moving"),
+            camera_height=1.65, fov_deg=81.0, labels=("kitti_moving", "kitti_moving_more")),
     Capture("lund", "lund/images", "github:mapillary/OpenSfM, data/lund/images (commit 238744c)",
             "BSD-2-Clause (OpenSfM)", "29 hand-held photos of a street in Lund, 1024x768, EXIF focal and GPS",
             camera_height=1.6, mount="walk", show_renders=True),
     Capture("nuscenes", "nuscenes/image_2", "github:youngibby/nuscene, image_2/ (nuScenes CAM_FRONT)",
             "CC BY-NC-SA 4.0 (nuScenes)", "nuScenes CAM_FRONT 1600x900, first shot (frames 1-52: every 8th, held out, is labelled), bonnet cropped",
-            camera_height=1.5, fov_deg=64.0, first=1, last=53, crop_bottom=0.1, labels="nuscenes_moving_heldout"),
+            camera_height=1.5, fov_deg=64.0, first=1, last=53, crop_bottom=0.1, labels=("nuscenes_moving_heldout",)),
     Capture("herzjesu", "herzjesu/images", "github:openMVG/SfM_quality_evaluation, Benchmarking_Camera_Calibration_2008/"
             "Herz-Jesus-P25/ (images/ and gt_dense_cameras/, commit 348a981)",
             "no licence stated in the repository (Strecha et al. 2008, EPFL CVLab: research use)",
@@ -279,11 +280,11 @@ def hand_label_scores(cap: Capture, data: Path, run_dirs: dict[str, str]) -> dic
     labelled held-out frames (``static``, by ``ns2gs-eval`` on the capture with those frames' labels as masks)."""
     import tempfile
 
-    from nerf2gs_bench.hand_labels import labelled_view, load_labels, moving_scores
+    from nerf2gs_bench.hand_labels import labelled_view, merged_labels, moving_scores
     from nerf2gs_plugin.eval.evaluate import evaluate_run
     from nerf2gs_plugin.runs.load import load_run
 
-    labels = load_labels(cap.labels)
+    labels = merged_labels(cap.labels)
     src_h = labels.get("source_size", labels["size"])[1]
     crop_rows = int(round(src_h * (1.0 - cap.crop_bottom)))  # as stage_frames cuts the bonnet
     static: dict[str, Optional[float]] = {label: None for label in (REFERENCE, TARGET, AUGMENTED)}
@@ -292,7 +293,7 @@ def hand_label_scores(cap: Capture, data: Path, run_dirs: dict[str, str]) -> dic
         frames = labelled_view(data, labels, view, crop_rows)
         for label, run in run_dirs.items() if frames else ():
             static[label] = evaluate_run(load_run(Path(run), device="cpu", data=view), ["test"])["results"]["test"]["static_psnr"]
-    return {"labels": cap.labels, "moving": moving_scores(data, labels, crop_rows), "static": static, "static_frames": frames}
+    return {"labels": list(cap.labels), "moving": moving_scores(data, labels, crop_rows), "static": static, "static_frames": frames}
 
 
 def failed_record(cap: Capture, why: str) -> dict:
@@ -463,7 +464,8 @@ def label_lines(captures: Sequence[dict]) -> list[str]:
                          f"views / StreetNeRF) on {', '.join(hand['static_frames'])}")
         else:
             parts.append("no labelled held-out frame in this run (no static PSNR)")
-        out.append(f"- {c['capture']} (labels `{hand['labels']}`): " + "; ".join(parts) + ".")
+        names = [hand["labels"]] if isinstance(hand["labels"], str) else hand["labels"]  # one name in records before label sets merged
+        out.append(f"- {c['capture']} (labels {', '.join(f'`{n}`' for n in names)}): " + "; ".join(parts) + ".")
     return ["", "Hand labels (moving objects drawn by eye; 'ignore' regions and the bonnet count neither way):", ""] + out if out else []
 
 

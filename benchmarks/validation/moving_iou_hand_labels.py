@@ -12,20 +12,8 @@ import argparse
 import json
 from pathlib import Path
 
-from nerf2gs_bench.hand_labels import frame_key, in_source_pixels, load_labels, moving_scores
+from nerf2gs_bench.hand_labels import frame_key, merged_labels, moving_scores
 from nerf2gs_plugin.utils.io import atomic_write_text
-
-
-def merged(names: list[str]) -> dict:
-    """One labels document of several, each frame's polygons in source pixels (the first named wins)."""
-    out: dict = {"size": None, "frames": {}}
-    for name in reversed(names):
-        lab = in_source_pixels(load_labels(name))
-        if out["size"] not in (None, lab["size"]):
-            raise SystemExit(f"labels '{name}' are of {lab['size']} source frames, the others of {out['size']}")
-        out.update({k: v for k, v in lab.items() if k != "frames"})
-        out["frames"].update(lab["frames"])
-    return out
 
 
 def main() -> None:
@@ -37,7 +25,7 @@ def main() -> None:
     ap.add_argument("--frame-offset", type=int, default=0, help="label key = the frame's number + this (a video's frame_000075 "
                     "is source frame 0076 of a folder numbered from 1: 1)")
     args = ap.parse_args()
-    labels = merged(args.labels)
+    labels = merged_labels(args.labels)
     width = len(next(iter(labels["frames"])))
 
     def key_of(stem: str) -> str | None:

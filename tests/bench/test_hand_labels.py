@@ -123,8 +123,25 @@ def test_real_captures_scores_a_capture_with_labels(tiny_scene, tmp_path, monkey
     box = [[int(xs.min()), int(ys.min())], [int(xs.max()), int(ys.min())], [int(xs.max()), int(ys.max())], [int(xs.min()), int(ys.max())]]
     (tmp_path / "tiny.json").write_text(json.dumps({"size": [est.shape[1], est.shape[0]], "frames": {"002": {"patch": box}}}))
     monkeypatch.setattr(hl, "LABELS_DIR", tmp_path)
-    cap = rc.Capture("tiny", "tiny", "tests", "CC0", "tiny scene", camera_height=1.5, labels="tiny")
+    cap = rc.Capture("tiny", "tiny", "tests", "CC0", "tiny scene", camera_height=1.5, labels=("tiny",))
     hand = rc.hand_label_scores(cap, tiny_scene, {})
     assert hand["moving"]["frames"] == ["train_002"] and hand["moving"]["recall"] == 1.0
     assert hand["moving"]["iou"] == pytest.approx(est.sum() / ((ys.max() - ys.min() + 1) * (xs.max() - xs.min() + 1)))
     assert hand["static_frames"] == [] and set(hand["static"].values()) == {None}
+
+
+def test_label_sets_of_the_same_frames_merge(tmp_path, monkeypatch):
+    """Several label sets of one capture make one document: their frames together, the first named winning
+    a frame both label; sets of differently sized frames are refused, naming the file."""
+    from nerf2gs_plugin.errors import DataError
+
+    square = lambda x: [[x, 0], [x + 4, 0], [x + 4, 4], [x, 4]]  # noqa: E731
+    for name, frames in (("a", {"001": {"car": square(0)}, "002": {"car": square(0)}}), ("b", {"002": {"car": square(8)}, "003": {"car": square(8)}})):
+        (tmp_path / f"{name}.json").write_text(json.dumps({"size": [16, 8], "frames": frames}))
+    (tmp_path / "c.json").write_text(json.dumps({"size": [32, 8], "frames": {}}))
+    monkeypatch.setattr(hl, "LABELS_DIR", tmp_path)
+    both = hl.merged_labels(["a", "b"])
+    assert sorted(both["frames"]) == ["001", "002", "003"] and both["size"] == [16, 8]
+    assert hl.polygons(both["frames"]["002"]["car"])[0][0].tolist() == [0, 0]  # a's, the first named
+    with pytest.raises(DataError, match="c.json"):
+        hl.merged_labels(["a", "c"])
