@@ -16,7 +16,10 @@ import copy
 import shutil
 import time
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable, Optional
+
+if TYPE_CHECKING:
+    from nerf2gs_plugin.masks.motion import MotionOptions
 
 REFERENCE_STEPS = 1000
 """The benches' first reference (mask-less StreetNeRF), as ``ns2gs-data masks``' default."""
@@ -58,7 +61,7 @@ def ensure_keyed_reference(capture: Path, reference: Path, reuse_stale: bool = F
 
 
 def product_masks(capture: Path, reference: Path, render_downscale: int, log: Callable[[str], None] = print,
-                  motion=None) -> dict:
+                  motion: Optional[MotionOptions] = None) -> dict:
     """The training frames' masks of the masks stage on ``capture`` with ``reference`` (``motion``: the
     route's ``MotionOptions``, its defaults when None):
     ``{"names", "without_motion", "first_pass", "second_pass", "settled", "timings"}`` (the masks as

@@ -14,6 +14,7 @@ import json
 from pathlib import Path
 
 from nerf2gs_bench.machine import machine_info
+from nerf2gs_plugin.data.synthetic_street import SynthStreetConfig
 from nerf2gs_plugin.utils.io import atomic_write_text
 
 ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -26,13 +27,21 @@ ap.add_argument("--real", nargs="+", action="append", default=[], metavar="NAME 
 args = ap.parse_args()
 
 
+STREET = SynthStreetConfig()
+
+
+def street_name(seed: str, scene: dict) -> str:
+    """The column of a street: its seed, and its frames' spacing where the drive has other than the generator's
+    number of training views (half of them one way along the drive)."""
+    views = scene.get("num_train", STREET.num_train)
+    if views == STREET.num_train:
+        return f"seed {seed}"
+    return f"seed {seed}, {2 * STREET.drive_half_len / ((views + 1) // 2 - 1):.1f} m a frame"
+
+
 def synthetic(path: Path) -> dict:
     doc = json.loads(path.read_text())
-    def name(s: str, scene: dict) -> str:  # the street's drive is 48 m, half its training views one way
-        views = scene.get("num_train", 60)
-        return f"seed {s}" if views == 60 else f"seed {s}, {48 / (views // 2 - 1):.1f} m a frame"
-
-    return {name(s, row["scene"]): {**row["product"]["2"]["settled"]["transient"], "motion": row["product"]["2"].get("motion", {})}
+    return {street_name(s, row["scene"]): {**row["product"]["2"]["settled"]["transient"], "motion": row["product"]["2"].get("motion", {})}
             for s, row in sorted(doc["seeds"].items())}
 
 

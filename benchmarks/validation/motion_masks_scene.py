@@ -117,7 +117,7 @@ ap.add_argument("--render-downscale", type=int, nargs="+", default=[1, 2], help=
 ap.add_argument("--motion", nargs="+", default=[], metavar="KEY=VALUE",
                 help="product: motion options other than the defaults as Python literals (loose_vote=0.5, 'neighbours=(-4, -2, 2, 4)'), recorded in the JSON")
 ap.add_argument("--reuse-reference", action="store_true", help="product: keep a reference trained by other model code (recorded as stale)")
-ap.add_argument("--num-train", type=int, default=60, help="the street's training views (both directions); 240 puts the frames 0.4 m apart, a 15 fps video at the drive's 6 m/s")
+ap.add_argument("--num-train", type=int, default=SynthStreetConfig.num_train, help="the street's training views (both directions); 240 puts the frames 0.4 m apart, a 15 fps video at the drive's 6 m/s")
 ap.add_argument("--frames", type=int, default=FRAMES, help="the first FRAMES training views are the drive")
 args = ap.parse_args()
 FRAMES = args.frames

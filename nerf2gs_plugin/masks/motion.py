@@ -514,9 +514,9 @@ def _intr(view: dict) -> Intrinsics:
 def neighbour_stride(frames: Sequence[MotionFrame], up: Tensor, height: float, opts: MotionOptions) -> int:
     """How many frames one step of ``opts.neighbours`` is (``min_baseline``): at most what leaves every
     offset inside half the sequence; 1 on a sequence too short or standing still."""
-    reach = max((abs(o) for o in opts.neighbours), default=1)
     if opts.min_baseline <= 0 or len(frames) < 2:
         return 1
+    reach = max((abs(o) for o in opts.neighbours), default=1)
     c = torch.stack([f.c2w[:, 3].double() for f in frames])
     step = float((c[1:] - c[:-1]).norm(dim=-1).median())
     above = float((c @ up.double() - height).abs().median())
