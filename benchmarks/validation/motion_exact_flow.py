@@ -25,6 +25,7 @@ import torch
 
 torch.set_num_threads(1)
 from nerf2gs_plugin.data.images import load_image, load_mask  # noqa: E402
+from nerf2gs_bench import mover_kinds as mk  # noqa: E402
 from nerf2gs_plugin.data.synthetic.layout import Boxes, build_layout  # noqa: E402
 from nerf2gs_plugin.data.synthetic.movers import build_movers, frame_boxes  # noqa: E402
 from nerf2gs_plugin.data.synthetic.raycast import Pinhole  # noqa: E402
@@ -35,7 +36,6 @@ from nerf2gs_plugin.masks import motion as mo  # noqa: E402
 from nerf2gs_plugin.utils.io import atomic_write_text  # noqa: E402
 
 FRAMES, SIZE = 30, (400, 224)
-NEAR_PX = 24  # "beside a mover": within this many pixels of one (the spill of DIS's flow)
 
 
 def street_frames(street: Path) -> tuple[dict, list[mo.MotionFrame], list[torch.Tensor]]:
@@ -128,24 +128,10 @@ def run_stages(frames: list, opts: mo.MotionOptions) -> dict:
 
 
 def breakdown(preds: list, gts: list, hits: list, n_static: int, cars: list) -> dict:
-    """Recall per kind of mover (by the pixel-centre ray's object; the drive goes toward +x) and the share of the static pixels
-    marked within NEAR_PX of a mover."""
-    kinds = {"traffic, same way": [(3 * c, 3 * c + 3) for c, car in enumerate(cars) if car.direction > 0],
-             "traffic, oncoming": [(3 * c, 3 * c + 3) for c, car in enumerate(cars) if car.direction < 0],
-             "lead car": [(3 * len(cars), 3 * len(cars) + 3)], "cyclist": [(3 * len(cars) + 3, 3 * len(cars) + 6)],
-             "pedestrians": [(3 * len(cars) + 6, 10 ** 6)]}
-    rec = {}
-    for name, spans in kinds.items():
-        sel = [sum(((h.obj >= n_static + lo) & (h.obj < n_static + min(hi, len(h.moving))) for lo, hi in spans), torch.zeros_like(h.obj)) > 0
-               for h in hits]
-        tot = sum(int(s.sum()) for s in sel)
-        rec[name] = {"pixels": tot, "recall": round(sum(int((p & s).sum()) for p, s in zip(preds, sel)) / max(tot, 1), 4)}
-    fp = near = 0
-    for p, g in zip(preds, gts):
-        d = cv2.distanceTransform((~g).numpy().astype(np.uint8), cv2.DIST_L2, 5)
-        f = (p & ~g).numpy()
-        fp, near = fp + int(f.sum()), near + int((f & (d <= NEAR_PX)).sum())
-    return {"recall_by_kind": rec, "static_marked": fp, "static_marked_near_share": round(near / max(fp, 1), 4)}
+    """Recall per kind of mover (``nerf2gs_bench/mover_kinds.py``) and the share of the static pixels
+    marked within ``mover_kinds.NEAR_PX`` of a mover."""
+    kinds = [mk.kinds_of_hits(h.obj, len(h.moving), n_static, cars) for h in hits]
+    return {"recall_by_kind": mk.recall_by_kind(preds, kinds), **mk.static_marked(preds, gts)}
 
 
 VARIANTS = ("dis", "exact", "exact, occlusion ignored", "exact, blur9", "exact, blur17")

@@ -141,6 +141,14 @@ class MotionOptions:
     pair's flow spill, a facade a short reference renders badly) has no counterpart; a mover has."""
     persist_ring: float = 0.035
     """... the ring, as a fraction of the image's shorter side (the flow's error at a mover's edge)."""
+    floating: float = 0.4
+    """Oncoming traffic (``masks/floating.py``): regions of the reference's surface that float over the road below
+    the camera's height, their lowest tenth above this share of the camera's height, join the moving ones (0: off).
+    A car driving toward the camera reads to the reference as a static copy nearer the camera whose wheels float
+    (a car as fast as the camera: at half the camera's height); nothing else of the route sees it."""
+    floating_reach: float = 3.5
+    """... where their middle lies within this many metres of the camera's path sideways (the copy sits over the
+    road: a lane's width)."""
 
 
 @dataclass
@@ -561,12 +569,24 @@ def add_motion(renders, result: dict, opts: MotionOptions, log: Callable[[str], 
         moving = motion_masks(frames, opts, lambda: prog.advance(task), flows)
     if kept is not None:
         kept.update(order=order, flows=flows)
+    if opts.floating > 0:
+        floats = list(map_ahead(lambda k: _floating(frames[k], result[order[k][1]][order[k][2]].sky, renders, opts), range(len(frames))))
+        log(f"masks: floating over the road (oncoming traffic): {100 * sum(float(f.float().mean()) for f in floats) / max(len(floats), 1):.2f}% of the pixels")
+        moving = [m | f for m, f in zip(moving, floats)]
     share = 0.0
     for (_, s, i), m in zip(order, moving):
         result[s][i].transient = result[s][i].transient | m
         share += float(m.float().mean()) / max(len(order), 1)
     log(f"masks: motion marked {100 * share:.2f}% of the pixels as moving")
     return True
+
+
+def _floating(frame: MotionFrame, sky: Tensor, renders, opts: MotionOptions) -> Tensor:
+    from nerf2gs_plugin.masks.floating import floating_objects
+
+    rays = ray_directions(frame.c2w, frame.intr, *frame.dist.shape)
+    return floating_objects(frame.dist, rays, frame.c2w[:, 3], renders.up, renders.height, renders.metres_to_world,
+                            opts.floating, opts.floating_reach, sky)
 
 
 def settle_transients(renders, result: dict, kept: dict, opts: MotionOptions, log: Callable[[str], None] = print,

@@ -12,7 +12,7 @@ ROOT = Path(__file__).resolve().parents[2] / BENCH
 
 LAYERS: list[tuple[str, ...]] = [
     ("", "machine", "code_version", "stage_record", "perturb", "breaking_point", "stability_levels", "fault_models", "step_ab",
-     "hand_labels"),
+     "hand_labels", "mover_kinds"),
     ("runs",),  # run specs, keys and reuse of trained runs
     ("runner",),  # training, evaluating and writing a bench's results
     ("paper", "speed_quality", "size", "stability", "raster", "field", "faults", "faults_capture", "real", "real_photos", "scale",
