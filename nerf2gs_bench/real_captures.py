@@ -119,11 +119,16 @@ def capture_frames(cap: Capture, data_root: Path) -> list[Path]:
 
 def stage_frames(cap: Capture, frames: Sequence[Path], out: Path, count: Optional[int]) -> list[Path]:
     """The first ``count`` frames (consecutive: neighbours keep their overlap) copied into ``out``;
-    cropped ones rewritten, the rest copied byte for byte (their EXIF focal stays)."""
+    cropped ones rewritten, the rest copied byte for byte (their EXIF focal stays). Frames another scale
+    staged there before are removed: ``process`` takes the whole folder."""
     import cv2
 
     out.mkdir(parents=True, exist_ok=True)
     picked = list(frames)[:count] if count else list(frames)
+    keep = {src.name for src in picked}
+    for old in out.iterdir():
+        if old.is_file() and old.name not in keep:
+            old.unlink()
     staged = []
     for src in picked:
         dst = out / src.name

@@ -76,6 +76,10 @@ def test_stage_frames_crops_the_bonnet_and_keeps_the_order(tmp_path):
     staged = rc.stage_frames(cap, frames, tmp_path / "staged", count=3)
     assert [f.name for f in staged] == ["0002.png", "0003.png", "0004.png"]
     assert cv2.imread(str(staged[0])).shape == (15, 40, 3)
+    everything = rc.stage_frames(cap, frames, tmp_path / "staged", count=None)  # a full scale in the same folder
+    assert len(everything) == 7
+    again = rc.stage_frames(cap, frames, tmp_path / "staged", count=3)  # then the quick one: only its frames stay
+    assert sorted(p.name for p in (tmp_path / "staged").iterdir()) == [f.name for f in again] == ["0002.png", "0003.png", "0004.png"]
     assert rc.downscale_for(800, rc.SCALES["quick"]) == 2.0 and rc.downscale_for(1600, rc.SCALES["full"]) == 1.0
 
 
