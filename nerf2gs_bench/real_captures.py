@@ -326,7 +326,9 @@ def run_capture(cap: Capture, data_root: Path, runs_root: Path, scale: BenchScal
     opts = RealPhotosOptions(images=root / "frames", provenance=f"{cap.provenance}; {cap.fetch}; {cap.licence}",
                              camera_height=cap.camera_height, fov_deg=cap.fov_deg, downscale=downscale_for(min(width, 1600), scale),
                              reference_steps=scale.reference_steps, streetnerf_steps=scale.streetnerf_steps,
-                             splatfacto_steps=scale.splatfacto_steps, delta_h=aug.delta_h, theta_pitch=aug.theta_pitch)
+                             splatfacto_steps=scale.splatfacto_steps, delta_h=aug.delta_h, theta_pitch=aug.theta_pitch,
+                             # a drive's frames in order, as `process video` matches them: the masks' motion route runs on a sequence
+                             matching="sequential" if cap.mount == "car" else "auto")
     doc = run_real_photos(opts, runs_root / STEM, root / "results", rerun=rerun, log=log, name=cap.name)
     holes, views, seconds, reused = compare_or_reuse(cap, doc, root / "compare-birds-eye", rerun, log)
     doc["stage_seconds"]["holes from above"] = seconds

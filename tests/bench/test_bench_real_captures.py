@@ -100,7 +100,10 @@ def test_bench_keys_and_holes_on_a_stand_in_capture(tiny_scene, tmp_path, monkey
         t.setup()
         runs[label] = t.train()
 
+    seen = {}
+
     def fake_real_photos(opts, runs_root, out_dir, rerun=False, log=print, name=None):
+        seen["matching"] = opts.matching
         res = {rc.REFERENCE: {"failed": True, "error": "not trained here"}}
         res.update({lab: {"run_dir": str(runs[lab]), "results": {"test": {"psnr": p}}}
                     for lab, p in ((rc.TARGET, 20.0), (rc.AUGMENTED, 19.5))})
@@ -118,6 +121,7 @@ def test_bench_keys_and_holes_on_a_stand_in_capture(tiny_scene, tmp_path, monkey
                  docs_picture=tmp_path / "docs.png")
 
     saved = json.loads((tmp_path / "out" / "real_captures.json").read_text())
+    assert seen["matching"] == "sequential"  # a car's frames are a drive: matched as a video's, so the motion route runs
     c = saved["captures"][0]
     for key in ("moving_iou", "static_psnr_delta", "bev_hole_fraction", "stage_seconds", "registered_fraction", "masks_coverage"):
         assert key in c
