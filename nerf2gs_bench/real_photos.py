@@ -232,7 +232,11 @@ def masks_or_reuse(opts: RealPhotosOptions, data: Path, reference: Path, stages:
     from nerf2gs_bench.stage_record import read_stage, stage_key, write_stage
     from nerf2gs_plugin.masking.make_masks import MasksConfig, make_masks
 
-    key = stage_key("masks", str(reference), opts.reference_steps, opts.downscale, source_hash(("masks", "masking")))
+    from nerf2gs_plugin.masks.motion import is_sequence
+
+    # a sequence gets the motion route too: the same reference makes other masks for it
+    sequence = is_sequence(json.loads((data / "transforms.json").read_text()))
+    key = stage_key("masks", str(reference), opts.reference_steps, opts.downscale, sequence, source_hash(("masks", "masking")))
     masks_json = data / "masks" / "masks.json"
     done = json.loads(masks_json.read_text()) if masks_json.is_file() else {}
     record = read_stage(data / "masks" / MASKS_RECORD, key)

@@ -81,7 +81,7 @@ def test_process_is_reused_with_its_saved_seconds_until_the_sfm_code_changes(tmp
     assert len(calls) == 3
 
 
-def test_masks_are_reused_only_from_the_same_reference_and_mask_code(tmp_path, monkeypatch):
+def test_masks_are_reused_only_from_the_same_reference_mask_code_and_kind_of_capture(tmp_path, monkeypatch):
     import nerf2gs_plugin.masking.make_masks as mm
 
     data = tmp_path / "data"
@@ -99,6 +99,8 @@ def test_masks_are_reused_only_from_the_same_reference_and_mask_code(tmp_path, m
     monkeypatch.setattr(code_version, "source_hash", lambda parts, root=None: code["hash"])
     opts = rp.RealPhotosOptions(images=tmp_path)
     ref = tmp_path / "ref-a"
+    data.mkdir()
+    (data / "transforms.json").write_text(json.dumps({"process": {"matching": "exhaustive"}, "frames": []}))
     rp.masks_or_reuse(opts, data, ref, {}, [], False, lambda s: None)
     stages, reused = {}, []
     assert rp.masks_or_reuse(opts, data, ref, stages, reused, False, lambda s: None)["coverage"] == {"sky": 0.1}
@@ -107,6 +109,9 @@ def test_masks_are_reused_only_from_the_same_reference_and_mask_code(tmp_path, m
     code["hash"] = "two"
     rp.masks_or_reuse(opts, data, tmp_path / "ref-b", {}, [], False, lambda s: None)  # other mask code
     assert len(made) == 3
+    (data / "transforms.json").write_text(json.dumps({"process": {"matching": "sequential"}, "frames": []}))
+    rp.masks_or_reuse(opts, data, tmp_path / "ref-b", {}, [], False, lambda s: None)  # now a sequence: the motion route too
+    assert len(made) == 4
 
 
 def test_run_seconds_are_the_runs_own():
