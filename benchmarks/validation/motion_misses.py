@@ -14,7 +14,7 @@ Usage: python benchmarks/validation/motion_misses.py SEED WORK OUT_STEM [--rende
 import argparse
 import ast
 import json
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from pathlib import Path
 
 import cv2
@@ -87,10 +87,7 @@ def main() -> None:
 
     names = sorted(n for n in em if br.frame_index(Path(n)) < args.frames)
     truth = {Path(n).stem: truth_on(n, "transient", (int(em[n]["h"]), int(em[n]["w"]))) for n in names}
-    if args.oracle_exclusion:
-        with oracle_exclusion(truth):
-            res = product_masks(capture, reference, args.render_downscale, motion=motion)
-    else:
+    with oracle_exclusion(truth) if args.oracle_exclusion else nullcontext():
         res = product_masks(capture, reference, args.render_downscale, motion=motion)
     tfs = [meta["frames"][br.frame_index(Path(n))] for n in res["names"]]
     kinds = mk.kind_ids(args.seed, tfs, (*true_pin, meta["w"], meta["h"]))

@@ -63,14 +63,12 @@ def floating_objects(dist: Tensor, rays: Tensor, origin: Tensor, up: Tensor, hei
     if not seeds.any():
         return torch.zeros(hh, ww, dtype=torch.bool)
     ld = np.log(np.where(finite, np.maximum(d, 1e-12), 1.0))
-    step = np.zeros_like(ld)
-    for axis in (0, 1):
-        diff = np.abs(np.diff(ld, axis=axis))
-        lo = [slice(None)] * 2
-        hi = [slice(None)] * 2
-        lo[axis], hi[axis] = slice(None, -1), slice(1, None)
-        step[tuple(lo)] = np.maximum(step[tuple(lo)], diff)
-        step[tuple(hi)] = np.maximum(step[tuple(hi)], diff)
+    dy, dx = np.abs(np.diff(ld, axis=0)), np.abs(np.diff(ld, axis=1))
+    step = np.zeros_like(ld)  # the largest log-distance step to a 4-neighbour
+    step[:-1] = np.maximum(step[:-1], dy)
+    step[1:] = np.maximum(step[1:], dy)
+    step[:, :-1] = np.maximum(step[:, :-1], dx)
+    step[:, 1:] = np.maximum(step[:, 1:], dx)
     patch = (band & (step < CONTINUOUS)) | seeds
     n, labels = cv2.connectedComponents(patch.astype(np.uint8), connectivity=4)
     ids = np.unique(labels[seeds])
