@@ -310,8 +310,61 @@ def failed_record(cap: Capture, why: str) -> dict:
             "bev_hole_fraction": {"target": None, "augmented": None, "reference": None}}
 
 
+def pool_seeds(per_seed: Sequence[dict]) -> dict:
+    """The record's deltas over several seeds' target pairs (``per_seed``: ``{"seed", "psnr", "static_psnr"}``, each
+    PSNR by label or None): ``psnr_delta`` and ``static_psnr_delta`` the means over the seeds that have both runs
+    (None where none has), with the per-seed deltas beside them. One seed moves a few held-out frames' PSNR by
+    tenths of a dB: a target read off one run says little."""
+    def deltas(key: str) -> list[Optional[float]]:
+        out = []
+        for r in per_seed:
+            p = r.get(key) or {}
+            out.append(None if p.get(TARGET) is None or p.get(AUGMENTED) is None else p[AUGMENTED] - p[TARGET])
+        return out
+
+    pooled: dict = {"seeds": [r["seed"] for r in per_seed], "per_seed": list(per_seed)}
+    for key in ("psnr", "static_psnr"):
+        ds = deltas(key)
+        known = [d for d in ds if d is not None]
+        pooled[f"{key}_delta"] = sum(known) / len(known) if known else None
+        pooled[f"{key}_delta_per_seed"] = ds
+    return pooled
+
+
+def other_seeds(cap: Capture, opts, data: Path, runs_root: Path, seeds: Sequence[int], log: Callable[[str], None]) -> list[dict]:
+    """Splatfacto alone and with NeRF views (from the bench's StreetNeRF, reused) trained with each of ``seeds``:
+    per seed the held-out PSNR of both and, where the capture's held-out frames are labelled, their static PSNR."""
+    from nerf2gs_bench.real_photos import NERF_VIEWS, run_specs
+    from nerf2gs_bench.runner import BenchRunner, failure_reason
+
+    runner = BenchRunner(Path(runs_root) / STEM, log=log)
+    out = []
+    for seed in seeds:
+        specs = run_specs(opts, seed)
+        ref = runner.run(specs[REFERENCE], data)  # the bench's own run: reused
+        if failure_reason(ref) is not None:
+            break
+        done = {TARGET: runner.run(specs[TARGET], data), AUGMENTED: runner.run(specs[NERF_VIEWS], data, reference=(Path(ref.run_dir), ref.key))}
+        ok = {label: o for label, o in done.items() if failure_reason(o) is None}
+        psnr = {label: ((ok[label].result.get("results") or {}).get("test") or {}).get("psnr") if label in ok else None
+                for label in (TARGET, AUGMENTED)}
+        static = None
+        if cap.labels and ok:
+            static = hand_label_scores(cap, data, {label: o.run_dir for label, o in ok.items()})["static"]
+        out.append({"seed": seed, "psnr": psnr, "static_psnr": static})
+        log(f"[bench] {cap.name}: seed {seed}: PSNR {psnr[TARGET]} / {psnr[AUGMENTED]} (alone / + NeRF views)")
+    return out
+
+
+def _default_seed() -> int:
+    """The seed the bench's own runs train with (the method's default)."""
+    from nerf2gs_plugin.registry import get_method
+
+    return int(get_method("splatfacto").config.seed)
+
+
 def run_capture(cap: Capture, data_root: Path, runs_root: Path, scale: BenchScale, rerun: bool = False,
-                log: Callable[[str], None] = print) -> tuple[dict, list[Path]]:
+                log: Callable[[str], None] = print, seeds: Sequence[int] = ()) -> tuple[dict, list[Path]]:
     """One capture through the whole path; its record and its compare frames from above (PNG, labelled)."""
     import cv2
 
@@ -341,6 +394,11 @@ def run_capture(cap: Capture, data_root: Path, runs_root: Path, scale: BenchScal
         log(f"[bench] {cap.name}: hand labels: moving-object IoU "
             f"{'n/a (no labelled training frame)' if moving is None else '%.3f on %d frames' % (moving['iou'], len(moving['frames']))}, "
             f"static PSNR on {len(hand['static_frames'])} labelled held-out frames")
+    extra = [seed for seed in seeds if seed != _default_seed()]
+    if extra:
+        first = {"seed": _default_seed(), "psnr": {label: summary["psnr"][label] for label in (TARGET, AUGMENTED)},
+                 "static_psnr": summary["static_psnr"]}
+        summary.update(pool_seeds([first, *other_seeds(cap, opts, Path(doc["data"]), runs_root, extra, log)]))
     summary["stage_seconds"]["holes from above"] = doc["stage_seconds"]["holes from above"]
     # named as in the record's stage_seconds (runs by their label)
     summary["reused_stages"] = [k.removeprefix("train + eval: ") for k in doc.get("reused_stages", [])] + (
@@ -365,9 +423,11 @@ def run_capture(cap: Capture, data_root: Path, runs_root: Path, scale: BenchScal
 
 # ----------------------------------------------------------------------------- the bench
 def run(names: Sequence[str], data_root: Path, runs_root: Path, out_dir: Path, scale_name: str = "quick",
-        rerun: bool = False, log: Callable[[str], None] = print, docs_picture: Optional[Path] = None) -> dict:
+        rerun: bool = False, log: Callable[[str], None] = print, docs_picture: Optional[Path] = None,
+        seeds: Sequence[int] = ()) -> dict:
     """Every named capture; writes ``real_captures.{json,md,png}`` into ``out_dir`` (and, with ``docs_picture``,
-    one compare frame of the first capture whose licence allows renders there); returns the document."""
+    one compare frame of the first capture whose licence allows renders there); returns the document. ``seeds``: the
+    targets' pair trained with each (the default seed's is the bench's own run), the deltas their means."""
     from nerf2gs_plugin.errors import ConfigError, UserError
 
     by_name = {c.name: c for c in CAPTURES}
@@ -384,7 +444,7 @@ def run(names: Sequence[str], data_root: Path, runs_root: Path, out_dir: Path, s
            "load_average": {"start": load_start, "end": load_start}}
     for cap in caps:
         try:
-            record, renders = run_capture(cap, data_root, runs_root, scale, rerun=rerun, log=log)
+            record, renders = run_capture(cap, data_root, runs_root, scale, rerun=rerun, log=log, seeds=seeds)
         except UserError as e:  # a capture SfM cannot register is a result of the bench, not its end
             log(f"[bench] {cap.name}: failed: {e}")
             records.append(failed_record(cap, str(e)))
@@ -485,6 +545,9 @@ def target_lines(captures: Sequence[dict]) -> list[str]:
         parts = []
         if d is not None:
             over = "static pixels" if c["static_psnr_delta"] is not None else "all pixels, no labels"
+            if c.get("seeds"):
+                per = c["static_psnr_delta_per_seed" if c["static_psnr_delta"] is not None else "psnr_delta_per_seed"]
+                over += f"; mean of seeds {', '.join(map(str, c['seeds']))}: " + " / ".join(_f(x, "{:+.2f}") for x in per)
             parts.append(f"PSNR with NeRF views {d:+.2f} dB against without ({over}; target >= -0.3: {'met' if d >= -0.3 else 'not met'})")
         if h["target"] is not None and h["augmented"] is not None:
             ratio = h["augmented"] / h["target"] if h["target"] > 0 else 0.0

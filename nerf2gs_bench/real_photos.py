@@ -80,6 +80,19 @@ def augment_overrides(opts: RealPhotosOptions) -> dict:
     return {"delta_h": opts.delta_h, "theta_pitch": opts.theta_pitch, "every_n": opts.every_n}
 
 
+def run_specs(opts: RealPhotosOptions, seed: Optional[int] = None) -> dict:
+    """The bench's runs by label: StreetNeRF, Splatfacto alone and with NeRF views (from that StreetNeRF);
+    ``seed``: the two Splatfacto runs' training seed (None: the method's default)."""
+    from nerf2gs_bench.runs import RunSpec
+
+    target = run_overrides(opts, "splatfacto", opts.splatfacto_steps)
+    if seed is not None:
+        target = {**target, "seed": seed}
+    return {"StreetNeRF": RunSpec("StreetNeRF", "streetnerf", run_overrides(opts, "streetnerf", opts.streetnerf_steps)),
+            "splatfacto": RunSpec("splatfacto", "splatfacto", target),
+            NERF_VIEWS: RunSpec(NERF_VIEWS, "splatfacto", target, augment_from="StreetNeRF", augment=augment_overrides(opts))}
+
+
 def process_photos(opts: RealPhotosOptions, out: Path):
     """``ns2gs-data process images`` (same code path as the CLI) into ``out``."""
     from nerf2gs_plugin.data.process.frames import collect_images, list_images
@@ -100,7 +113,6 @@ def run_real_photos(opts: RealPhotosOptions, runs_root: Path, out_dir: Path, rer
     """The whole bench; writes ``real_photos.{json,md,png}`` into ``out_dir``; returns the JSON document."""
     from nerf2gs_plugin.masking.make_masks import MasksConfig, make_masks
     from nerf2gs_bench.runner import BenchRunner, failure_reason
-    from nerf2gs_bench.runs import RunSpec
     from nerf2gs_plugin.eval.reference_check import reference_report
 
     if not Path(opts.images).is_dir():
@@ -130,10 +142,7 @@ def run_real_photos(opts: RealPhotosOptions, runs_root: Path, out_dir: Path, rer
     reference = reference_dir(root, data, opts.reference_steps, f"downscale {opts.downscale}")
     masks = masks_or_reuse(opts, data, reference, stages, reused, rerun, log)
     runner = BenchRunner(Path(runs_root), log=log, rerun=rerun)
-    specs = {"StreetNeRF": RunSpec("StreetNeRF", "streetnerf", run_overrides(opts, "streetnerf", opts.streetnerf_steps)),
-             "splatfacto": RunSpec("splatfacto", "splatfacto", run_overrides(opts, "splatfacto", opts.splatfacto_steps)),
-             NERF_VIEWS: RunSpec(NERF_VIEWS, "splatfacto", run_overrides(opts, "splatfacto", opts.splatfacto_steps),
-                                 augment_from="StreetNeRF", augment=augment_overrides(opts))}
+    specs = run_specs(opts)
     results: dict[str, dict] = {}
     done_runs: dict[str, tuple[Path, str]] = {}
     check = None

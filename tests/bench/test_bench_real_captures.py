@@ -66,6 +66,25 @@ def test_capture_summary_takes_static_psnr_from_the_eval_results():
     assert c["static_psnr"][rc.AUGMENTED] is None and c["static_psnr_delta"] is None
 
 
+def test_seeds_pool_into_mean_deltas_and_the_targets_name_them():
+    """Several seeds' target pairs: the deltas are the means over the seeds that have both runs, the per-seed
+    deltas are kept, and the target line reads the mean and names every seed's delta."""
+    def rec(seed, alone, aug, static=None):
+        return {"seed": seed, "psnr": {rc.TARGET: alone, rc.AUGMENTED: aug}, "static_psnr": static}
+
+    pooled = rc.pool_seeds([rec(42, 20.0, 19.5, {rc.REFERENCE: 18.0, rc.TARGET: 22.0, rc.AUGMENTED: 21.5}),
+                            rec(43, 20.0, 20.1, {rc.REFERENCE: None, rc.TARGET: 22.0, rc.AUGMENTED: 22.3}),
+                            rec(44, 20.0, None, None)])
+    assert pooled["seeds"] == [42, 43, 44] and len(pooled["per_seed"]) == 3
+    assert pooled["psnr_delta"] == pytest.approx(-0.2) and pooled["psnr_delta_per_seed"][2] is None
+    assert pooled["static_psnr_delta"] == pytest.approx(-0.1)
+    assert pooled["static_psnr_delta_per_seed"][:2] == [pytest.approx(-0.5), pytest.approx(0.3)]
+    line = rc.target_lines([{"capture": "x", **pooled, "bev_hole_fraction": {"target": None, "augmented": None}}])[2]
+    assert "-0.10 dB" in line and "seeds 42, 43, 44: -0.50 / +0.30 / n/a" in line and "met" in line
+    none = rc.pool_seeds([rec(42, None, 19.0), rec(43, 20.0, None)])
+    assert none["psnr_delta"] is None and none["static_psnr_delta"] is None
+
+
 def test_stage_frames_crops_the_bonnet_and_keeps_the_order(tmp_path):
     import cv2
 
