@@ -129,6 +129,33 @@ def moving_scores(capture: Path, labels: dict, crop_rows: Optional[int] = None,
     return {**_ratios(counts), "frames": frames, "per_frame": per_frame}
 
 
+def completion_bound(capture: Path, labels: dict, crop_rows: Optional[int], key_of: Callable[[str], Optional[str]], hit: float) -> dict:
+    """Pooled IoU / precision / recall of the capture's transient masks (as :func:`moving_scores` scores them)
+    with every labelled object (one named polygon of a frame) that they cover by more than ``hit`` of its pixels
+    marked whole: what completing the objects the masks find could give."""
+    import cv2
+
+    counts = np.zeros(4, np.int64)
+    for img in split_images(capture, "train"):
+        key, mask_path = key_of(img.stem), capture / "masks" / "transient" / f"{img.stem}.png"
+        if key not in labels["frames"] or not mask_path.is_file():
+            continue
+        est = cv2.imread(str(mask_path), cv2.IMREAD_GRAYSCALE) > 0
+        size = (est.shape[1], est.shape[0])
+        entry = labels["frames"][key]
+        keep = ~frame_masks(entry, labels, size, crop_rows)[1]
+        pred, truth = est & keep, np.zeros_like(est)
+        for name, value in entry.items():
+            if name in (IGNORE, EGO):
+                continue
+            obj = frame_masks({name: value}, labels, size, crop_rows)[0] & keep
+            truth |= obj
+            if obj.any() and (pred & obj).sum() > hit * obj.sum():
+                pred |= obj
+        counts += [int((pred & truth).sum()), int((pred | truth).sum()), int(pred.sum()), int(truth.sum())]
+    return _ratios(counts)
+
+
 def _ratios(counts: np.ndarray) -> dict:
     """IoU, precision and recall from (intersection, union, predicted, true) pixel counts."""
     i, u, p, t = (int(x) for x in counts)

@@ -67,6 +67,26 @@ def test_moving_iou_is_pooled_over_labelled_training_frames(capture):
     assert shifted["frames"] == ["000006"] and shifted["recall"] == 1.0 and shifted["precision"] < 0.5  # 000006's mask is all set
 
 
+def test_completion_bound_marks_whole_only_the_objects_the_masks_cover_enough(capture):
+    """The bound: a labelled object the masks cover by more than ``hit`` counts as marked whole; one below
+    it stays as marked; what the masks mark off the objects stays as a false alarm."""
+    labels = {**LABELS, "frames": {"000007": {**LABELS["frames"]["000007"], "walker": [[100, 40], [120, 40], [120, 58], [100, 58]]}}}
+    car, _ = hl.frame_masks({"car": labels["frames"]["000007"]["car"]}, labels, (64, 32), crop_rows=64)
+    walker, _ = hl.frame_masks({"walker": labels["frames"]["000007"]["walker"]}, labels, (64, 32), crop_rows=64)
+    est = np.zeros((32, 64), bool)
+    est[5:10, 10:31] = True  # a quarter of the car
+    ys, xs = np.nonzero(walker)
+    est[ys[0], xs[0]] = True  # one pixel of the walker
+    est[0:2, 0:4] = True  # a false alarm
+    cv2.imwrite(str(capture / "masks" / "transient" / "000007.png"), est.astype(np.uint8) * 255)
+    plain = hl.moving_scores(capture, labels, crop_rows=64)
+    b = hl.completion_bound(capture, labels, 64, hl.frame_key, hit=0.2)
+    assert b["recall"] == pytest.approx((car.sum() + 1) / (car.sum() + walker.sum())) and b["recall"] > plain["recall"]
+    assert b["precision"] == pytest.approx((car.sum() + 1) / (car.sum() + 1 + 8))
+    assert hl.completion_bound(capture, labels, 64, hl.frame_key, hit=0.0)["recall"] == 1.0  # one pixel is more than 0
+    assert hl.completion_bound(capture, labels, 64, hl.frame_key, hit=1.0)["iou"] == pytest.approx(plain["iou"])
+
+
 def test_labelled_view_scores_held_out_frames_by_their_labels(capture, tmp_path):
     cv2.imwrite(str(capture / "masks" / "transient" / "000007.png"), np.zeros((32, 64), np.uint8))
     view = tmp_path / "view"
