@@ -603,6 +603,10 @@ def results_md(doc: dict) -> str:
                      f"{_f(p[AUGMENTED])} | {_f(c['psnr_delta'], '{:+.2f}')} | {_f(c['static_psnr_delta'], '{:+.2f}')} | "
                      f"{_f(h['target'] and 100 * h['target'], '{:.1f}%')} | {_f(h['augmented'] and 100 * h['augmented'], '{:.1f}%')} | "
                      f"{_f(h['reference'] and 100 * h['reference'], '{:.1f}%')} | {_f(c['moving_iou'], '{:.2f}')} |")
+    seeded = sorted({tuple(c["seeds"]) for c in doc["captures"] if c.get("seeds")})
+    if seeded:
+        lines += ["", f"The deltas are the means over seeds {', '.join(map(str, seeded[0]))} of the two Splatfacto runs "
+                  "(`--seeds`; the StreetNeRF is one); the PSNR and holes columns and the picture are the first seed's."]
     lines += [""] + target_lines(doc["captures"])
     lines += truth_lines(doc["captures"])
     lines += ["", "Static delta: PSNR outside the moving-object masks of the held-out frames, by hand labels (the masks "
