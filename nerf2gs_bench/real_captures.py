@@ -331,16 +331,18 @@ def pool_seeds(per_seed: Sequence[dict]) -> dict:
     return pooled
 
 
-def other_seeds(cap: Capture, opts, data: Path, runs_root: Path, seeds: Sequence[int], log: Callable[[str], None]) -> list[dict]:
-    """Splatfacto alone and with NeRF views (from the bench's StreetNeRF, reused) trained with each of ``seeds``:
-    per seed the held-out PSNR of both and, where the capture's held-out frames are labelled, their static PSNR."""
+def other_seeds(cap: Capture, opts, data: Path, runs_root: Path, seeds: Sequence[int], log: Callable[[str], None],
+                augment: Optional[dict] = None) -> list[dict]:
+    """Splatfacto alone and with NeRF views (from the bench's StreetNeRF, reused; ``augment``: more ``--augment.*``
+    of the latter) trained with each of ``seeds``: per seed the held-out PSNR of both, where the capture's held-out
+    frames are labelled their static PSNR, and their run folders."""
     from nerf2gs_bench.real_photos import NERF_VIEWS, run_specs
     from nerf2gs_bench.runner import BenchRunner, failure_reason
 
     runner = BenchRunner(Path(runs_root) / STEM, log=log)
     out = []
     for seed in seeds:
-        specs = run_specs(opts, seed)
+        specs = run_specs(opts, seed, augment)
         ref = runner.run(specs[REFERENCE], data)  # the bench's own run: reused
         if failure_reason(ref) is not None:
             break
@@ -351,7 +353,7 @@ def other_seeds(cap: Capture, opts, data: Path, runs_root: Path, seeds: Sequence
         static = None
         if cap.labels and ok:
             static = hand_label_scores(cap, data, {label: o.run_dir for label, o in ok.items()})["static"]
-        out.append({"seed": seed, "psnr": psnr, "static_psnr": static})
+        out.append({"seed": seed, "psnr": psnr, "static_psnr": static, "run_dirs": {label: str(o.run_dir) for label, o in ok.items()}})
         log(f"[bench] {cap.name}: seed {seed}: PSNR {psnr[TARGET]} / {psnr[AUGMENTED]} (alone / + NeRF views)")
     return out
 

@@ -80,9 +80,10 @@ def augment_overrides(opts: RealPhotosOptions) -> dict:
     return {"delta_h": opts.delta_h, "theta_pitch": opts.theta_pitch, "every_n": opts.every_n}
 
 
-def run_specs(opts: RealPhotosOptions, seed: Optional[int] = None) -> dict:
+def run_specs(opts: RealPhotosOptions, seed: Optional[int] = None, augment: Optional[dict] = None) -> dict:
     """The bench's runs by label: StreetNeRF, Splatfacto alone and with NeRF views (from that StreetNeRF);
-    ``seed``: the two Splatfacto runs' training seed (None: the method's default)."""
+    ``seed``: the two Splatfacto runs' training seed (None: the method's default); ``augment``: more
+    ``--augment.*`` of the run with NeRF views (a lever measured against the bench's own)."""
     from nerf2gs_bench.runs import RunSpec
 
     target = run_overrides(opts, "splatfacto", opts.splatfacto_steps)
@@ -90,7 +91,8 @@ def run_specs(opts: RealPhotosOptions, seed: Optional[int] = None) -> dict:
         target = {**target, "seed": seed}
     return {"StreetNeRF": RunSpec("StreetNeRF", "streetnerf", run_overrides(opts, "streetnerf", opts.streetnerf_steps)),
             "splatfacto": RunSpec("splatfacto", "splatfacto", target),
-            NERF_VIEWS: RunSpec(NERF_VIEWS, "splatfacto", target, augment_from="StreetNeRF", augment=augment_overrides(opts))}
+            NERF_VIEWS: RunSpec(NERF_VIEWS, "splatfacto", target, augment_from="StreetNeRF",
+                                augment={**augment_overrides(opts), **(augment or {})})}
 
 
 def process_photos(opts: RealPhotosOptions, out: Path):
