@@ -103,27 +103,34 @@ def split_images(capture: Path, split: str) -> list[Path]:
     return sorted(f.image for f in dataparser_config(capture).raw_frames().get(split, []))
 
 
+def _labelled_masks(capture: Path, labels: dict, key_of: Callable[[str], Optional[str]]):
+    """``(stem, labels key, the masks stage's transient mask)`` of each labelled training frame that has one."""
+    import cv2
+
+    for img in split_images(capture, "train"):
+        key, mask_path = key_of(img.stem), capture / "masks" / "transient" / f"{img.stem}.png"
+        if key in labels["frames"] and mask_path.is_file():
+            yield img.stem, key, cv2.imread(str(mask_path), cv2.IMREAD_GRAYSCALE) > 0
+
+
+def _counts(pred: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """(intersection, union, predicted, true) pixel counts."""
+    return np.array([int((pred & truth).sum()), int((pred | truth).sum()), int(pred.sum()), int(truth.sum())])
+
+
 def moving_scores(capture: Path, labels: dict, crop_rows: Optional[int] = None,
                   key_of: Callable[[str], Optional[str]] = frame_key) -> Optional[dict]:
     """IoU, precision and recall of the masks stage's ``masks/transient/`` against the moving objects, pooled
     over the labelled training frames (the masks stage marks those) and per frame (``per_frame``); None when
     none is labelled. ``key_of``:
     a frame's labels key from its image stem (:func:`frame_key`; a video's frames are named by their index)."""
-    import cv2
-
     counts, frames, per_frame = np.zeros(4, np.int64), [], {}
-    for img in split_images(capture, "train"):
-        key, mask_path = key_of(img.stem), capture / "masks" / "transient" / f"{img.stem}.png"
-        if key not in labels["frames"] or not mask_path.is_file():
-            continue
-        est = cv2.imread(str(mask_path), cv2.IMREAD_GRAYSCALE) > 0
+    for stem, key, est in _labelled_masks(capture, labels, key_of):
         moving, leave_out = frame_masks(labels["frames"][key], labels, (est.shape[1], est.shape[0]), crop_rows)
-        keep = ~leave_out
-        pred, truth = est & keep, moving & keep
-        c = np.array([int((pred & truth).sum()), int((pred | truth).sum()), int(pred.sum()), int(truth.sum())])
+        c = _counts(est & ~leave_out, moving & ~leave_out)
         counts += c
-        frames.append(img.stem)
-        per_frame[img.stem] = _ratios(c)
+        frames.append(stem)
+        per_frame[stem] = _ratios(c)
     if not frames:
         return None
     return {**_ratios(counts), "frames": frames, "per_frame": per_frame}
@@ -133,16 +140,9 @@ def completion_bound(capture: Path, labels: dict, crop_rows: Optional[int], key_
     """Pooled IoU / precision / recall of the capture's transient masks (as :func:`moving_scores` scores them)
     with every labelled object (one named polygon of a frame) that they cover by more than ``hit`` of its pixels
     marked whole: what completing the objects the masks find could give."""
-    import cv2
-
     counts = np.zeros(4, np.int64)
-    for img in split_images(capture, "train"):
-        key, mask_path = key_of(img.stem), capture / "masks" / "transient" / f"{img.stem}.png"
-        if key not in labels["frames"] or not mask_path.is_file():
-            continue
-        est = cv2.imread(str(mask_path), cv2.IMREAD_GRAYSCALE) > 0
-        size = (est.shape[1], est.shape[0])
-        entry = labels["frames"][key]
+    for _, key, est in _labelled_masks(capture, labels, key_of):
+        size, entry = (est.shape[1], est.shape[0]), labels["frames"][key]
         keep = ~frame_masks(entry, labels, size, crop_rows)[1]
         pred, truth = est & keep, np.zeros_like(est)
         for name, value in entry.items():
@@ -152,7 +152,7 @@ def completion_bound(capture: Path, labels: dict, crop_rows: Optional[int], key_
             truth |= obj
             if obj.any() and (pred & obj).sum() > hit * obj.sum():
                 pred |= obj
-        counts += [int((pred & truth).sum()), int((pred | truth).sum()), int(pred.sum()), int(truth.sum())]
+        counts += _counts(pred, truth)
     return _ratios(counts)
 
 

@@ -340,12 +340,12 @@ def other_seeds(cap: Capture, opts, data: Path, runs_root: Path, seeds: Sequence
     from nerf2gs_bench.runner import BenchRunner, failure_reason
 
     runner = BenchRunner(Path(runs_root) / STEM, log=log)
+    ref = runner.run(run_specs(opts)[REFERENCE], data)  # the bench's own run: reused
+    if failure_reason(ref) is not None:
+        return []
     out = []
     for seed in seeds:
         specs = run_specs(opts, seed, augment)
-        ref = runner.run(specs[REFERENCE], data)  # the bench's own run: reused
-        if failure_reason(ref) is not None:
-            break
         done = {TARGET: runner.run(specs[TARGET], data), AUGMENTED: runner.run(specs[NERF_VIEWS], data, reference=(Path(ref.run_dir), ref.key))}
         ok = {label: o for label, o in done.items() if failure_reason(o) is None}
         psnr = {label: ((ok[label].result.get("results") or {}).get("test") or {}).get("psnr") if label in ok else None
@@ -396,9 +396,10 @@ def run_capture(cap: Capture, data_root: Path, runs_root: Path, scale: BenchScal
         log(f"[bench] {cap.name}: hand labels: moving-object IoU "
             f"{'n/a (no labelled training frame)' if moving is None else '%.3f on %d frames' % (moving['iou'], len(moving['frames']))}, "
             f"static PSNR on {len(hand['static_frames'])} labelled held-out frames")
-    extra = [seed for seed in seeds if seed != _default_seed()]
+    default_seed = _default_seed()
+    extra = [seed for seed in seeds if seed != default_seed]
     if extra:
-        first = {"seed": _default_seed(), "psnr": {label: summary["psnr"][label] for label in (TARGET, AUGMENTED)},
+        first = {"seed": default_seed, "psnr": {label: summary["psnr"][label] for label in (TARGET, AUGMENTED)},
                  "static_psnr": summary["static_psnr"]}
         summary.update(pool_seeds([first, *other_seeds(cap, opts, Path(doc["data"]), runs_root, extra, log)]))
     summary["stage_seconds"]["holes from above"] = doc["stage_seconds"]["holes from above"]

@@ -13,6 +13,7 @@ Usage: python benchmarks/validation/real_captures_lever.py CAPTURE OUT_STEM [--s
 """
 import argparse
 import ast
+import dataclasses
 import json
 from pathlib import Path
 
@@ -31,7 +32,16 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[42, 43, 44])
     ap.add_argument("--runs", type=Path, default=Path("benchmarks/runs"))
     args = ap.parse_args()
-    lever = {k: ast.literal_eval(v) for k, v in (a.split("=", 1) for a in args.lever)}
+    fields = {f.name for f in dataclasses.fields(AugmentConfig)}
+    lever = {}
+    for pair in args.lever:
+        key, _, value = pair.partition("=")
+        if key not in fields or not value:
+            raise SystemExit(f"lever '{pair}': expected KEY=VALUE with KEY an --augment field ({', '.join(sorted(fields))})")
+        try:
+            lever[key] = ast.literal_eval(value)
+        except (ValueError, SyntaxError):
+            raise SystemExit(f"lever '{pair}': VALUE must be a Python literal (0.6, False, 'visibility')") from None
     cap = next(c for c in CAPTURES if c.name == args.capture)
     bench = args.runs / STEM / cap.name / "results" / "real_photos.json"
     if not bench.is_file():
