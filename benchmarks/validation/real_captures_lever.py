@@ -24,6 +24,11 @@ from nerf2gs_plugin.engine.augment_config import AugmentConfig
 from nerf2gs_plugin.utils.io import atomic_write_text
 
 
+def _with_ext(stem: Path, ext: str) -> Path:
+    """STEM.ext; a stem that names a value (``..._real_only_from_0.6``) keeps its dot, where ``with_suffix`` would cut it."""
+    return stem.parent / f"{stem.name}{ext}"
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("capture", choices=[c.name for c in CAPTURES])
@@ -62,7 +67,7 @@ def main() -> None:
     from nerf2gs_bench.machine import machine_info, machine_line
 
     out = {"machine": machine_info(), "capture": cap.name, "lever": lever, **pooled, "hole_ratio_per_seed": ratios}
-    atomic_write_text(args.out.with_suffix(".json"), json.dumps(out, indent=1, default=str))
+    atomic_write_text(_with_ext(args.out, ".json"), json.dumps(out, indent=1, default=str))
     name = " ".join(f"--augment.{k.replace('_', '-')} {v}" for k, v in lever.items()) or "the defaults"
     lines = [f"# {cap.name}: {name}, seeds {', '.join(map(str, args.seeds))}", "", f"Machine: {machine_line(out['machine'])}", "",
              f"Held-out PSNR with NeRF views minus without ({'hand-labelled static pixels' if static else 'all pixels'}), "
@@ -74,7 +79,7 @@ def main() -> None:
         lines.append(f"| {r['seed']} | {'n/a' if d is None else f'{d:+.2f}'} | {100 * h.get(TARGET, float('nan')):.1f}% | "
                      f"{100 * h.get(AUGMENTED, float('nan')):.1f}% | {q:.3f}x |")
     lines.append(f"| **mean** | **{'n/a' if delta is None else f'{delta:+.2f}'}** | | | {sum(ratios) / len(ratios):.3f}x |")
-    atomic_write_text(args.out.with_suffix(".md"), "\n".join(lines) + "\n")
+    atomic_write_text(_with_ext(args.out, ".md"), "\n".join(lines) + "\n")
     print("\n".join(lines))
 
 

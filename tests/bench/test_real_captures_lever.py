@@ -22,3 +22,13 @@ def test_a_capture_the_bench_never_ran_is_named(tmp_path):
                        capture_output=True, text=True)
     assert p.returncode != 0 and "real_photos.json" in p.stderr and "ns2gs-bench real-captures --captures kitti" in p.stderr
     assert "Traceback" not in p.stderr
+
+
+def test_a_stem_that_names_a_value_keeps_its_dot():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("real_captures_lever", SCRIPT)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    a, b = (mod._with_ext(Path("out") / f"lund_real_only_from_{v}", ".json") for v in ("0.6", "0.75"))
+    assert a.name == "lund_real_only_from_0.6.json" and b.name == "lund_real_only_from_0.75.json"
