@@ -293,12 +293,15 @@ def hand_label_scores(cap: Capture, data: Path, run_dirs: dict[str, str]) -> dic
     src_h = labels.get("source_size", labels["size"])[1]
     crop_rows = int(round(src_h * (1.0 - cap.crop_bottom)))  # as stage_frames cuts the bonnet
     static: dict[str, Optional[float]] = {label: None for label in (REFERENCE, TARGET, AUGMENTED)}
+    per_image: dict[str, Optional[list]] = {label: None for label in (REFERENCE, TARGET, AUGMENTED)}
     with tempfile.TemporaryDirectory() as tmp:
         view = Path(tmp) / "data"
         frames = labelled_view(data, labels, view, crop_rows)
         for label, run in run_dirs.items() if frames else ():
-            static[label] = evaluate_run(load_run(Path(run), device="cpu", data=view), ["test"])["results"]["test"]["static_psnr"]
-    return {"labels": list(cap.labels), "moving": moving_scores(data, labels, crop_rows), "static": static, "static_frames": frames}
+            test = evaluate_run(load_run(Path(run), device="cpu", data=view), ["test"])["results"]["test"]
+            static[label], per_image[label] = test["static_psnr"], test.get("static_psnr_per_image")
+    return {"labels": list(cap.labels), "moving": moving_scores(data, labels, crop_rows), "static": static, "static_frames": frames,
+            "static_per_image": per_image}
 
 
 def failed_record(cap: Capture, why: str) -> dict:
@@ -328,7 +331,28 @@ def pool_seeds(per_seed: Sequence[dict]) -> dict:
         known = [d for d in ds if d is not None]
         pooled[f"{key}_delta"] = sum(known) / len(known) if known else None
         pooled[f"{key}_delta_per_seed"] = ds
+        halves = [split_delta((r.get(f"{key}_per_image") or {}).get(TARGET), (r.get(f"{key}_per_image") or {}).get(AUGMENTED))
+                  for r in per_seed]
+        for i, half in enumerate(("validation", "test")):
+            known = [h[i] for h in halves if h is not None]
+            pooled[f"{key}_delta_{half}"] = sum(known) / len(known) if known else None
     return pooled
+
+
+def split_delta(target: Optional[Sequence[Optional[float]]], augmented: Optional[Sequence[Optional[float]]]
+                ) -> Optional[tuple[float, float]]:
+    """(validation, test): the mean per-frame PSNR with NeRF views minus without over the 1st, 3rd, ... held-out frame
+    (choose a lever on these) and over the 2nd, 4th, ... (report it), as ``ns2gs-bench street-level`` splits them;
+    frames without a value (no labels) are left out. None without per-frame values or with a half empty."""
+    if not target or not augmented or len(target) != len(augmented):
+        return None
+    out = []
+    for start in (0, 1):
+        pairs = [(a, b) for a, b in zip(target[start::2], augmented[start::2]) if a is not None and b is not None]
+        if not pairs:
+            return None
+        out.append(sum(b - a for a, b in pairs) / len(pairs))
+    return out[0], out[1]
 
 
 def other_seeds(cap: Capture, opts, data: Path, runs_root: Path, seeds: Sequence[int], log: Callable[[str], None],
@@ -350,10 +374,14 @@ def other_seeds(cap: Capture, opts, data: Path, runs_root: Path, seeds: Sequence
         ok = {label: o for label, o in done.items() if failure_reason(o) is None}
         psnr = {label: ((ok[label].result.get("results") or {}).get("test") or {}).get("psnr") if label in ok else None
                 for label in (TARGET, AUGMENTED)}
-        static = None
+        per_image = {label: ((ok[label].result.get("results") or {}).get("test") or {}).get("psnr_per_image") if label in ok else None
+                     for label in (TARGET, AUGMENTED)}
+        static, static_per_image = None, None
         if cap.labels and ok:
-            static = hand_label_scores(cap, data, {label: o.run_dir for label, o in ok.items()})["static"]
-        out.append({"seed": seed, "psnr": psnr, "static_psnr": static, "run_dirs": {label: str(o.run_dir) for label, o in ok.items()}})
+            hand = hand_label_scores(cap, data, {label: o.run_dir for label, o in ok.items()})
+            static, static_per_image = hand["static"], hand["static_per_image"]
+        out.append({"seed": seed, "psnr": psnr, "static_psnr": static, "psnr_per_image": per_image,
+                    "static_psnr_per_image": static_per_image, "run_dirs": {label: str(o.run_dir) for label, o in ok.items()}})
         log(f"[bench] {cap.name}: seed {seed}: PSNR {psnr[TARGET]} / {psnr[AUGMENTED]} (alone / + NeRF views)")
     return out
 
@@ -399,8 +427,10 @@ def run_capture(cap: Capture, data_root: Path, runs_root: Path, scale: BenchScal
     default_seed = _default_seed()
     extra = [seed for seed in seeds if seed != default_seed]
     if extra:
+        tests = {label: ((doc["results"].get(label) or {}).get("results") or {}).get("test") or {} for label in (TARGET, AUGMENTED)}
         first = {"seed": default_seed, "psnr": {label: summary["psnr"][label] for label in (TARGET, AUGMENTED)},
-                 "static_psnr": summary["static_psnr"]}
+                 "static_psnr": summary["static_psnr"], "psnr_per_image": {label: t.get("psnr_per_image") for label, t in tests.items()},
+                 "static_psnr_per_image": hand["static_per_image"] if cap.labels else None}
         summary.update(pool_seeds([first, *other_seeds(cap, opts, Path(doc["data"]), runs_root, extra, log)]))
     summary["stage_seconds"]["holes from above"] = doc["stage_seconds"]["holes from above"]
     # named as in the record's stage_seconds (runs by their label)

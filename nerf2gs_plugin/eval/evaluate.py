@@ -119,6 +119,7 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
     warm = False
     for name in names:
         rows: dict[str, list[float]] = {**{metric: [] for metric in IMAGE_METRICS}, "lpips": [], "psnr_ground": [], "static_psnr": []}
+        static_by_image: list[Optional[float]] = []
         shown, times, resolutions = [], [], []
         labelled = transient_labelled(dm, name)
         for i, (camera, batch) in enumerate(dm.eval_images(name)):
@@ -136,8 +137,10 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
             if ground is not None and (v := masked_psnr(pred, gt, ground[..., 0])) is not None:
                 rows["psnr_ground"].append(v)  # road + sidewalk only: where the paper's holes are
             moving = batch.get("transient_mask")
-            if moving is not None and labelled[i] and (v := masked_psnr(pred, gt, ~moving[..., 0])) is not None:
+            v = masked_psnr(pred, gt, ~moving[..., 0]) if moving is not None and labelled[i] else None
+            if v is not None:
                 rows["static_psnr"].append(v)  # the scene without what moves: what a static model can get right
+            static_by_image.append(v)
             if lpips_model is not None:
                 rows["lpips"].append(float(lpips_model(pred, gt)))
             if len(shown) < 4:
@@ -156,6 +159,8 @@ def evaluate_run(run: LoadedRun, splits: Optional[list[str]] = None, max_images:
             entry[metric], entry[f"{metric}_std"] = mean, std
         entry["static_psnr_images"] = len(rows["static_psnr"])
         entry["psnr_per_image"] = rows["psnr"]  # in the split's order: a mean over few views hides one lost view
+        if rows["static_psnr"]:
+            entry["static_psnr_per_image"] = static_by_image  # the same order; None where a view has no labels
         results[name] = entry
         if render_dir is not None and shown:
             which = "all views" if len(shown) == n_img else f"views 1-{len(shown)} of {n_img}"

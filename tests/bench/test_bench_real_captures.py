@@ -83,6 +83,19 @@ def test_seeds_pool_into_mean_deltas_and_the_targets_name_them():
     assert "-0.10 dB" in line and "seeds 42, 43, 44: -0.50 / +0.30 / n/a" in line and "met" in line
     none = rc.pool_seeds([rec(42, None, 19.0), rec(43, 20.0, None)])
     assert none["psnr_delta"] is None and none["static_psnr_delta"] is None
+    assert pooled["psnr_delta_validation"] is None  # no per-frame PSNR: no halves
+
+
+def test_held_out_frames_split_into_validation_and_test_halves():
+    """The 1st, 3rd, ... held-out frame choose, the 2nd, 4th, ... report; unlabelled frames are left out; seeds pool."""
+    assert rc.split_delta([20.0, 21.0, 22.0], [21.0, 20.0, 22.5]) == (pytest.approx(0.75), pytest.approx(-1.0))
+    assert rc.split_delta([20.0, None, 22.0, 21.0], [19.0, 25.0, 23.0, 21.5]) == (pytest.approx(0.0), pytest.approx(0.5))
+    assert rc.split_delta([20.0], [21.0]) is None and rc.split_delta(None, [1.0]) is None and rc.split_delta([1.0, 2.0], [1.0]) is None
+    recs = [{"seed": s, "psnr": {rc.TARGET: 20.0, rc.AUGMENTED: 20.0}, "static_psnr": None,
+             "psnr_per_image": {rc.TARGET: [20.0, 20.0], rc.AUGMENTED: [20.0 + v, 20.0 + t]}} for s, v, t in ((42, 1.0, -1.0), (43, 0.0, -0.5))]
+    pooled = rc.pool_seeds(recs)
+    assert pooled["psnr_delta_validation"] == pytest.approx(0.5) and pooled["psnr_delta_test"] == pytest.approx(-0.75)
+    assert pooled["static_psnr_delta_validation"] is None
 
 
 def test_stage_frames_crops_the_bonnet_and_keeps_the_order(tmp_path):

@@ -138,3 +138,6 @@ def test_static_psnr_over_labelled_images_only(tiny_run, tmp_path):
     assert res["street"]["static_psnr_images"] == 1 and res["street"]["static_psnr"] == pytest.approx(direct, abs=1e-3)
     assert res["street"]["static_psnr"] != pytest.approx(res["street"]["psnr_per_image"][0], abs=1e-3)
     assert res["bev_1"]["static_psnr"] is None and res["bev_1"]["static_psnr_images"] == 0
+    per = res["street"]["static_psnr_per_image"]  # in the split's order, None for the unlabelled image
+    assert len(per) == len(res["street"]["psnr_per_image"]) and per[0] == pytest.approx(direct, abs=1e-3) and per[1] is None
+    assert "static_psnr_per_image" not in res["bev_1"]
