@@ -3,9 +3,10 @@
 Each family has its own share: the probability that a training sample is one of its views
 (``--augment.birds-eye-share``, ``--augment.lane-shift.share``, ...), drawn uniformly among that
 family's views. A share left at None is the family's views' share of them and the input views (the
-draw of one image among all, as when the bird's-eye views were the only family), taken out of
-what the input views have left once the families before it (in the order of ``--augment.views``)
-are served: so a family added after the others takes samples from the input views only.
+draw of one image among all, as when the bird's-eye views were the only family), at most
+:data:`DEFAULT_SHARE_CAP`, taken out of what the input views have left once the families before it (in
+the order of ``--augment.views``) are served: so a family added after the others takes samples from the
+input views only.
 ``--augment.extra-prob``, when set, is the probability of all additional views together, split
 between the families in proportion to their shares.
 """
@@ -21,6 +22,13 @@ from nerf2gs_plugin.engine.augment_config import check_given_shares, given_share
 from nerf2gs_plugin.errors import ConfigError
 
 
+DEFAULT_SHARE_CAP = 0.35
+"""The most a family's share left at None takes: with as many views from above as input views the draw among
+all gives them half the samples, and the input views' street level pays for it; at 0.35 the synthetic streets'
+validation views keep their gain from above within 0.1 dB and gain at street level, and the real captures'
+validation frames gain on three of four (docs/augmentation.md, "Street level")."""
+
+
 def family_shares(families: list[str], n_real: int, augment: Any) -> dict[str, float]:
     """Family -> the probability that a training sample is one of its views, for the additional
     views whose families are ``families`` (one name per view) beside ``n_real`` input views."""
@@ -31,7 +39,7 @@ def family_shares(families: list[str], n_real: int, augment: Any) -> dict[str, f
     left = 1.0  # the input views' share so far: each family in turn takes its share out of it
     for f in order:
         given = given_share(augment, f)
-        shares[f] = float(given) if given is not None else left * counts[f] / (n_real + counts[f])
+        shares[f] = float(given) if given is not None else min(DEFAULT_SHARE_CAP, left * counts[f] / (n_real + counts[f]))
         left -= shares[f]
     if left <= 0 and augment.extra_prob is None:
         raise ConfigError(f"the view families' shares add up to {1 - left:g}: the input views need some samples "

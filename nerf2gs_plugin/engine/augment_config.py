@@ -117,8 +117,9 @@ class AugmentConfig:
     view-downscale 2 the longer run gives those samples back in about the time the full-size views took."""
     birds_eye_share: Optional[float] = None
     """Probability that a training sample is a bird's-eye view (None: their share of them and the input
-    views, the paper's draw of one image among all); each family has its own (--augment.lane-shift.share
-    ...), so adding a family takes samples from the input views only (augment/shares.py)."""
+    views, the paper's draw of one image among all, at most augment/shares.DEFAULT_SHARE_CAP = 0.35: at half
+    the samples street level pays for them; docs/augmentation.md "Street level"); each family has its own
+    (--augment.lane-shift.share ...), so adding a family takes samples from the input views only (augment/shares.py)."""
     extra_prob: Optional[float] = None
     """Probability that a training sample comes from any additional view (None: the families' shares
     added up); when set, split between the families in proportion to their shares."""

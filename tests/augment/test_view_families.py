@@ -172,24 +172,28 @@ def test_tiny_training_run_with_two_families(tiny_scene, tmp_path):
 
 
 def test_each_family_has_its_own_share_of_the_samples():
-    from nerf2gs_plugin.augment.shares import extra_sampling, family_shares
+    from nerf2gs_plugin.augment.shares import DEFAULT_SHARE_CAP, extra_sampling, family_shares
 
     bev, lanes = ["birds-eye"] * 10, ["lane-shift"] * 20
-    alone = family_shares(bev, 10, AugmentConfig())
-    assert alone == {"birds-eye": 0.5}  # the draw of one image among all, as before the families
+    alone = family_shares(bev, 30, AugmentConfig())
+    assert alone == {"birds-eye": 0.25}  # the draw of one image among all, as before the families
+    # as many views from above as input views: the draw would give them half the samples, the cap gives them less
+    assert family_shares(bev, 10, AugmentConfig()) == {"birds-eye": DEFAULT_SHARE_CAP} and DEFAULT_SHARE_CAP < 0.5
+    assert family_shares(bev, 10, AugmentConfig(birds_eye_share=0.5)) == {"birds-eye": 0.5}  # a given share is taken as given
     both = AugmentConfig(views=("birds-eye", "lane-shift"), lane_shift=LaneShiftConfig(share=None))
     # lane-shift (share unset) added after birds-eye: its share comes out of the input views' share only
-    assert family_shares(bev + lanes, 10, both) == pytest.approx({"birds-eye": 0.5, "lane-shift": 0.5 * 20 / 30})
-    assert family_shares(bev + lanes, 10, AugmentConfig(views=("birds-eye", "lane-shift")))["birds-eye"] == 0.5
+    assert family_shares(bev + lanes, 30, both) == pytest.approx({"birds-eye": 0.25, "lane-shift": 0.75 * 20 / 50})
+    assert family_shares(bev + lanes, 30, AugmentConfig(views=("birds-eye", "lane-shift")))["birds-eye"] == 0.25
     given = dataclasses.replace(both, lane_shift=LaneShiftConfig(share=0.2))
-    assert family_shares(bev + lanes, 10, given) == pytest.approx({"birds-eye": 0.5, "lane-shift": 0.2})
+    assert family_shares(bev + lanes, 30, given) == pytest.approx({"birds-eye": 0.25, "lane-shift": 0.2})
     # --augment.extra-prob: all additional views together, split in proportion to the shares
-    assert family_shares(bev + lanes, 10, dataclasses.replace(given, extra_prob=0.35)) == pytest.approx({"birds-eye": 0.25, "lane-shift": 0.1})
-    prob, per_view = extra_sampling(bev + lanes, 10, given)
-    assert prob == pytest.approx(0.7) and per_view[:10].sum() == pytest.approx(0.5 / 0.7) and per_view[10:].sum() == pytest.approx(0.2 / 0.7)
+    assert family_shares(bev + lanes, 30, dataclasses.replace(given, extra_prob=0.45)) == pytest.approx({"birds-eye": 0.25, "lane-shift": 0.2})
+    assert family_shares(bev + lanes, 30, dataclasses.replace(given, extra_prob=0.09)) == pytest.approx({"birds-eye": 0.05, "lane-shift": 0.04})
+    prob, per_view = extra_sampling(bev + lanes, 30, given)
+    assert prob == pytest.approx(0.45) and per_view[:10].sum() == pytest.approx(0.25 / 0.45) and per_view[10:].sum() == pytest.approx(0.2 / 0.45)
     assert extra_sampling(bev, 10, AugmentConfig())[1] is None  # one family: the uniform draw of before
     with pytest.raises(ConfigError, match="lane-shift.share"):
-        family_shares(bev + lanes, 10, dataclasses.replace(both, lane_shift=LaneShiftConfig(share=0.6)))
+        family_shares(bev + lanes, 30, dataclasses.replace(both, lane_shift=LaneShiftConfig(share=0.8)))
     with pytest.raises(ConfigError, match="birds-eye-share"):
         family_shares(bev, 10, AugmentConfig(birds_eye_share=1.0))
     # a share is how often the views are drawn, not what they are: it keys no cache entry
@@ -215,8 +219,10 @@ def test_training_samples_each_family_at_its_share(tiny_scene, tmp_path, manager
     drawn = torch.cat([torch.as_tensor(adm.next_train(step)[1]["image_idx"]).reshape(-1) for step in range(1500 if manager == "full-image" else 60)])
     extra = drawn[drawn >= n_real] - n_real
     frac = {f: sum(families[j] == f for j in extra.tolist()) / len(drawn) for f in ("birds-eye", "lane-shift")}
-    # birds-eye keeps its share of before (its views' share of them and the input views), lane-shift has its 0.2
-    assert frac["birds-eye"] == pytest.approx(0.5, abs=0.04) and frac["lane-shift"] == pytest.approx(0.2, abs=0.04)
+    # birds-eye keeps its share of before (its views' share of them and the input views, 0.5, at most the cap), lane-shift has its 0.2
+    from nerf2gs_plugin.augment.shares import DEFAULT_SHARE_CAP
+
+    assert frac["birds-eye"] == pytest.approx(DEFAULT_SHARE_CAP, abs=0.04) and frac["lane-shift"] == pytest.approx(0.2, abs=0.04)
 
 
 def test_export_names_each_view_by_its_family(tiny_scene, tmp_path):
