@@ -82,7 +82,7 @@ class ReferenceCheck:
         where = "BELOW" if self.weaker else "above"
         head = "reference is weaker than the target's baseline: " if self.weaker else "reference check: "
         tail = (" - its views may cost the target street quality (where street level matters more than the view "
-                "from above, --augment.real-only-from 0.6 gives the input views alone the last 40% of the steps: "
+                "from above, --augment.birds-eye-share 0.25 gives the input views more of the samples: "
                 "docs/augmentation.md)" if self.weaker else "")
         return (f"{head}the reference is {abs(self.delta_db):.2f} dB {where} the baseline on {self.views} held-out views "
                 f"({self.split}: reference {self.reference_psnr:.2f} dB vs baseline {self.baseline_psnr:.2f} dB PSNR; "

@@ -26,9 +26,9 @@ def test_compare_runs_signs_views_and_split(tmp_path):
     assert check.delta_db == pytest.approx(-2.7)
     line = check.line()
     assert "2.70 dB BELOW" in line and "5 held-out views" in line and "19.80" in line and "22.50" in line
-    assert "--augment.real-only-from 0.6" in line  # the measured lever, named where it matters
+    assert "--augment.birds-eye-share 0.25" in line  # the measured lever, named where it matters
     above = compare_runs(base, ref)
-    assert not above.weaker and "2.70 dB above" in above.line() and "real-only-from" not in above.line()
+    assert not above.weaker and "2.70 dB above" in above.line() and "birds-eye-share" not in above.line()
 
 
 def test_compare_runs_says_why_not(tmp_path):
