@@ -93,6 +93,27 @@ FULL_SIZE = {"view_downscale": 1, "step_factor": 1.0}
 (``steps_factor`` sets its length), as before the product's half-size views and longer run."""
 
 
+def augment_overrides(pairs: Sequence[str]) -> dict:
+    """``KEY=VALUE`` pairs (``--augment.*`` fields, Python literals: ``real_only_from=0.6``) -> overrides;
+    ValueError names the first bad pair in one line."""
+    import ast
+    import dataclasses
+
+    from nerf2gs_plugin.engine.augment_config import AugmentConfig
+
+    fields = {f.name for f in dataclasses.fields(AugmentConfig)}
+    out = {}
+    for pair in pairs:
+        key, _, value = pair.partition("=")
+        if key not in fields or not value:
+            raise ValueError(f"lever '{pair}': expected KEY=VALUE with KEY an --augment field ({', '.join(sorted(fields))})")
+        try:
+            out[key] = ast.literal_eval(value)
+        except (ValueError, SyntaxError):
+            raise ValueError(f"lever '{pair}': VALUE must be a Python literal (0.6, False, 'visibility')") from None
+    return out
+
+
 def variant_overrides(base: dict, variant: dict) -> dict:
     """``base`` run overrides with the variant's ``model`` overrides merged into ``pipeline.model`` and its
     ``optimizers`` overrides into ``optimizers``."""

@@ -12,14 +12,13 @@ Usage: python benchmarks/validation/real_captures_lever.py CAPTURE OUT_STEM [--s
 [KEY=VALUE ...]
 """
 import argparse
-import ast
-import dataclasses
 import json
 from pathlib import Path
 
 from nerf2gs_bench.real_captures import (AUGMENTED, CAPTURES, SCALES, STEM, TARGET, holes_from_above, other_seeds,
                                          pool_seeds, split_delta)
 from nerf2gs_bench.real_photos import RealPhotosOptions
+from nerf2gs_bench.street_level import augment_overrides
 from nerf2gs_plugin.engine.augment_config import AugmentConfig
 from nerf2gs_plugin.utils.io import atomic_write_text
 
@@ -37,16 +36,10 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[42, 43, 44])
     ap.add_argument("--runs", type=Path, default=Path("benchmarks/runs"))
     args = ap.parse_args()
-    fields = {f.name for f in dataclasses.fields(AugmentConfig)}
-    lever = {}
-    for pair in args.lever:
-        key, _, value = pair.partition("=")
-        if key not in fields or not value:
-            raise SystemExit(f"lever '{pair}': expected KEY=VALUE with KEY an --augment field ({', '.join(sorted(fields))})")
-        try:
-            lever[key] = ast.literal_eval(value)
-        except (ValueError, SyntaxError):
-            raise SystemExit(f"lever '{pair}': VALUE must be a Python literal (0.6, False, 'visibility')") from None
+    try:
+        lever = augment_overrides(args.lever)
+    except ValueError as e:
+        raise SystemExit(str(e)) from None
     cap = next(c for c in CAPTURES if c.name == args.capture)
     bench = args.runs / STEM / cap.name / "results" / "real_photos.json"
     if not bench.is_file():

@@ -11,8 +11,6 @@ Usage: python benchmarks/validation/synthetic_levers.py OUT_STEM --streets DATA 
 [--seeds 42 43] [--runs benchmarks/runs/synthetic_levers] [--lever "NAME=KEY=VALUE[,KEY=VALUE]" ...]
 """
 import argparse
-import ast
-import dataclasses
 import json
 from pathlib import Path
 
@@ -20,27 +18,19 @@ from nerf2gs_bench.machine import machine_info, machine_line
 from nerf2gs_bench.paper import step_overrides
 from nerf2gs_bench.runner import EVAL_SPLITS, VAL_SPLITS, BenchRunner, failure_reason
 from nerf2gs_bench.runs import RunSpec
-from nerf2gs_bench.street_level import SYNTHETIC_STEPS
-from nerf2gs_plugin.engine.augment_config import AugmentConfig
+from nerf2gs_bench.street_level import SYNTHETIC_STEPS, augment_overrides
 from nerf2gs_plugin.utils.io import atomic_write_text
 
 SHOWN = ("val_street", "val_bev", "street", "bev_1", "bev_2")
 
 
 def parse_lever(text: str) -> tuple[str, dict]:
-    """``NAME=KEY=VALUE[,KEY=VALUE]`` -> (name, --augment overrides); ``default`` alone: no override."""
+    """``NAME=KEY=VALUE[,KEY=VALUE]`` -> (name, --augment overrides)."""
     name, _, pairs = text.partition("=")
-    fields = {f.name for f in dataclasses.fields(AugmentConfig)}
-    out = {}
-    for pair in filter(None, pairs.split(",")):
-        key, _, value = pair.partition("=")
-        if key not in fields or not value:
-            raise SystemExit(f"lever '{text}': expected NAME=KEY=VALUE with KEY an --augment field")
-        try:
-            out[key] = ast.literal_eval(value)
-        except (ValueError, SyntaxError):
-            raise SystemExit(f"lever '{text}': VALUE must be a Python literal") from None
-    return name, out
+    try:
+        return name, augment_overrides([p for p in pairs.split(",") if p])
+    except ValueError as e:
+        raise SystemExit(f"{e} (--lever '{text}')") from None
 
 
 def street_rows(data: Path, runs: Path, target: str, levers: dict[str, dict], seeds: list[int]) -> dict[str, dict[str, float]]:
