@@ -333,6 +333,7 @@ def pool_seeds(per_seed: Sequence[dict]) -> dict:
         pooled[f"{key}_delta_per_seed"] = ds
         halves = [split_delta((r.get(f"{key}_per_image") or {}).get(TARGET), (r.get(f"{key}_per_image") or {}).get(AUGMENTED))
                   for r in per_seed]
+        pooled[f"{key}_delta_halves_per_seed"] = halves
         for i, half in enumerate(("validation", "test")):
             known = [h[i] for h in halves if h is not None]
             pooled[f"{key}_delta_{half}"] = sum(known) / len(known) if known else None
@@ -372,10 +373,9 @@ def other_seeds(cap: Capture, opts, data: Path, runs_root: Path, seeds: Sequence
         specs = run_specs(opts, seed, augment)
         done = {TARGET: runner.run(specs[TARGET], data), AUGMENTED: runner.run(specs[NERF_VIEWS], data, reference=(Path(ref.run_dir), ref.key))}
         ok = {label: o for label, o in done.items() if failure_reason(o) is None}
-        psnr = {label: ((ok[label].result.get("results") or {}).get("test") or {}).get("psnr") if label in ok else None
-                for label in (TARGET, AUGMENTED)}
-        per_image = {label: ((ok[label].result.get("results") or {}).get("test") or {}).get("psnr_per_image") if label in ok else None
-                     for label in (TARGET, AUGMENTED)}
+        tests = {label: ((ok[label].result.get("results") or {}).get("test") or {}) if label in ok else {} for label in (TARGET, AUGMENTED)}
+        psnr = {label: t.get("psnr") for label, t in tests.items()}
+        per_image = {label: t.get("psnr_per_image") for label, t in tests.items()}
         static, static_per_image = None, None
         if cap.labels and ok:
             hand = hand_label_scores(cap, data, {label: o.run_dir for label, o in ok.items()})

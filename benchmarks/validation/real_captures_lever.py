@@ -16,7 +16,7 @@ import json
 from pathlib import Path
 
 from nerf2gs_bench.real_captures import (AUGMENTED, CAPTURES, SCALES, STEM, TARGET, holes_from_above, other_seeds,
-                                         pool_seeds, split_delta)
+                                         pool_seeds)
 from nerf2gs_bench.real_photos import RealPhotosOptions
 from nerf2gs_bench.street_level import augment_overrides
 from nerf2gs_plugin.engine.augment_config import AugmentConfig
@@ -56,7 +56,7 @@ def main() -> None:
     delta = pooled["static_psnr_delta" if static else "psnr_delta"]
     per = pooled["static_psnr_delta_per_seed" if static else "psnr_delta_per_seed"]
     key = "static_psnr" if static else "psnr"
-    halves = [split_delta(*((r.get(f"{key}_per_image") or {}).get(label) for label in (TARGET, AUGMENTED))) for r in records]
+    halves = pooled[f"{key}_delta_halves_per_seed"]
     ratios = [r["bev_hole_fraction"].get(AUGMENTED, float("nan")) / max(r["bev_hole_fraction"].get(TARGET, float("nan")), 1e-9)
               for r in records]
     from nerf2gs_bench.machine import machine_info, machine_line

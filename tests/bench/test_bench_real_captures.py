@@ -95,6 +95,7 @@ def test_held_out_frames_split_into_validation_and_test_halves():
              "psnr_per_image": {rc.TARGET: [20.0, 20.0], rc.AUGMENTED: [20.0 + v, 20.0 + t]}} for s, v, t in ((42, 1.0, -1.0), (43, 0.0, -0.5))]
     pooled = rc.pool_seeds(recs)
     assert pooled["psnr_delta_validation"] == pytest.approx(0.5) and pooled["psnr_delta_test"] == pytest.approx(-0.75)
+    assert pooled["psnr_delta_halves_per_seed"] == [(pytest.approx(1.0), pytest.approx(-1.0)), (pytest.approx(0.0), pytest.approx(-0.5))]
     assert pooled["static_psnr_delta_validation"] is None
 
 
