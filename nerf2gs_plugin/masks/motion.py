@@ -84,6 +84,17 @@ class MotionOptions:
     """... or where frame ``j`` warped by the rigid flow differs from frame ``i`` by more than this
     (grey levels of images normalised to a spread of 48, 3x3 means; 0: off): a small mover that DIS
     loses in its coarse levels still fails to line up."""
+    sweep_grey: float = 0.0
+    """... or where a textured pixel matches frame ``j`` nowhere on its epipolar line at a parallax a static
+    surface could have (``masks/static_sweep.py``: no optical flow) by this many grey levels (5x5 means, 0: off) ..."""
+    sweep_rel: float = 3.0
+    """... and this multiple of the frame's median best match ..."""
+    sweep_texture: float = 8.0
+    """... textured: a 5x5 mean gradient above this (grey levels a pixel) ..."""
+    sweep_reach: float = 0.35
+    """... the line searched up to this fraction of the image width from where the rotation alone puts the pixel ..."""
+    sweep_scale: int = 2
+    """... on images shrunk by this factor (a power of two; speed) ..."""
     vote: float = 1.0
     """... in at least this fraction of its valid neighbour pairs on each side (1: all of them; lower
     values let in more of the road a mover uncovers)."""
@@ -289,7 +300,14 @@ def pair_moving(fi: "MotionFrame", fj: "MotionFrame", grey_i: np.ndarray, grey_j
         s_b = torch.where(ok_b, along(rb, p_inf, u), torch.zeros_like(s_obs))
     else:
         s_b = torch.zeros_like(s_obs)
-    moving |= line_ok & (s_obs < s_b - torch.clamp(opts.rel * s_b, min=opts.floor_px))
+    lowest = s_b - torch.clamp(opts.rel * s_b, min=opts.floor_px)
+    moving |= line_ok & (s_obs < lowest)
+    if opts.sweep_grey > 0:
+        from nerf2gs_plugin.masks.static_sweep import unexplained
+
+        explained = [wj] + ([warp(grey_j, rb.numpy())[0]] if fi.bound is not None else [])
+        moving |= line_ok & unexplained(grey_i, grey_j, p_inf, u, lowest, explained, opts.sweep_grey, opts.sweep_rel,
+                                        opts.sweep_texture, opts.sweep_reach, opts.sweep_scale)
     if math.isfinite(opts.ref_rel):
         s_r = along(rig, p_inf, u)
         moving |= line_ok & ok & (s_r - s_obs > torch.clamp(opts.ref_rel * s_r.abs(), min=opts.floor_px))
