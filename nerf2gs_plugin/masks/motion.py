@@ -84,7 +84,7 @@ class MotionOptions:
     """... or where frame ``j`` warped by the rigid flow differs from frame ``i`` by more than this
     (grey levels of images normalised to a spread of 48, 3x3 means; 0: off): a small mover that DIS
     loses in its coarse levels still fails to line up."""
-    sweep_grey: float = 0.0
+    sweep_grey: float = 6.0
     """... or where a textured pixel matches frame ``j`` nowhere on its epipolar line at a parallax a static
     surface could have (``masks/static_sweep.py``: no optical flow) by this many grey levels (5x5 means, 0: off) ..."""
     sweep_rel: float = 3.0

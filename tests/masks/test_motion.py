@@ -110,8 +110,9 @@ def test_moving_blocks_are_found_and_static_ones_are_not():
     # the crossing block: its plain middle lines up with itself, so not every pair sees it move;
     # a vote of half the pairs on each side finds it (and lets in more of the road a mover uncovers),
     # given that the depth is exact enough to judge parallax beyond it (off by default: a short
-    # reference's holes read as static pixels closer than it says)
-    loose = motion_masks(frames, MotionOptions(vote=0.5, ref_close_rel=0.15))
+    # reference's holes read as static pixels closer than it says); without the sweep, which marks the parked
+    # block where the crossing one hides its match in a pair, and half the pairs' vote lets that through
+    loose = motion_masks(frames, MotionOptions(vote=0.5, ref_close_rel=0.15, sweep_grey=0.0))
     assert _pooled(loose, truth, "crossing") > 0.5
     assert _pooled(loose, truth, "rider") > 0.8 and _pooled(loose, truth, "parked") < 0.1
     inter = sum(float((loose[k] & (truth[k]["rider"] | truth[k]["crossing"])).sum()) for k in inner)
@@ -134,8 +135,10 @@ def test_a_dense_video_compares_frames_a_stride_apart():
     assert neighbour_stride([dataclasses.replace(f, c2w=_pose(0.0)) for f in frames], up, road, opts) == 1  # standing still
     inner = range(3, 10)  # a pair a stride away on each side
     recall = lambda m, kind: sum(float((m[k] & truth[k][kind]).sum()) for k in inner) / sum(float(truth[k][kind].sum()) for k in inner)  # noqa: E731
-    near = motion_masks(frames, MotionOptions())
-    apart = motion_masks(frames, MotionOptions(neighbours=tuple(3 * o for o in MotionOptions().neighbours)))
+    flow_tests = MotionOptions(sweep_grey=0.0)  # the parallax tests the stride is for (the sweep marks the parked block
+    # where the crossing one hides its match in the pairs three frames apart)
+    near = motion_masks(frames, flow_tests)
+    apart = motion_masks(frames, dataclasses.replace(flow_tests, neighbours=tuple(3 * o for o in MotionOptions().neighbours)))
     assert recall(near, "rider") < 0.2, recall(near, "rider")
     assert recall(apart, "rider") > 0.8, recall(apart, "rider")
     assert recall(apart, "parked") < 0.1
@@ -221,7 +224,7 @@ def test_outlines_complete_the_movers():
     the image's outlines (grabCut seeded by the votes), the regions cover the blocks."""
     frames, truth = _sequence(7)
     frames = _with_residual(frames, truth)
-    opts = MotionOptions(vote=0.5, ref_close_rel=0.15)
+    opts = MotionOptions(vote=0.5, ref_close_rel=0.15, sweep_grey=0.0)  # the flow tests' votes (the sweep finds more of the block)
     votes = motion_masks(frames, dataclasses.replace(opts, outline=False))
     outlined = motion_masks(frames, opts)
     assert _pooled(votes, truth, "crossing") < 0.72
@@ -235,9 +238,11 @@ def test_pixels_half_the_pairs_see_moving_join_the_region_they_touch():
     they join it; the static scene, which some pairs misread too, stays out."""
     frames, truth = _sequence()
     inner = range(1, len(frames) - 1)
-    strict = motion_masks(frames, MotionOptions(loose_vote=1.0))
-    loose = motion_masks(frames, MotionOptions(loose_vote=0.5))
+    strict = motion_masks(frames, MotionOptions(loose_vote=1.0, sweep_grey=0.0))  # the flow tests alone
+    loose = motion_masks(frames, MotionOptions(loose_vote=0.5, sweep_grey=0.0))
     assert _pooled(strict, truth, "crossing") < 0.1
+    # the sweep (no flow) finds the block's textured middle in every pair, which the flow tests do not
+    assert _pooled(motion_masks(frames, MotionOptions(loose_vote=1.0)), truth, "crossing") > 0.25
     assert _pooled(loose, truth, "crossing") > 0.4
     assert _pooled(loose, truth, "rider") >= _pooled(strict, truth, "rider") > 0.8
     assert _pooled(loose, truth, "parked") < 0.1
@@ -246,8 +251,8 @@ def test_pixels_half_the_pairs_see_moving_join_the_region_they_touch():
         assert float((loose[k] & ~strict[k] & ~movers).float().mean()) < 0.025
     # the half-vote pixels must differ from the reference's render too: where nothing does, none joins
     gated = _with_residual(frames, truth)
-    assert all(torch.equal(a, b) for a, b in zip(motion_masks(gated, MotionOptions(loose_vote=0.5, loose_residual_rel=1e9)),
-                                                   motion_masks(gated, MotionOptions(loose_vote=1.0))))
+    assert all(torch.equal(a, b) for a, b in zip(motion_masks(gated, MotionOptions(loose_vote=0.5, loose_residual_rel=1e9, sweep_grey=0.0)),
+                                                   motion_masks(gated, MotionOptions(loose_vote=1.0, sweep_grey=0.0))))
 
 
 def test_touching_keeps_the_loose_regions_that_hold_a_seed():
