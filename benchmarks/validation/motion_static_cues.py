@@ -32,6 +32,7 @@ import numpy as np
 import torch
 
 import nerf2gs_plugin.masks.motion as mm
+from nerf2gs_plugin.masks.static_sweep import textured, unexplained
 from nerf2gs_bench.machine import machine_line
 from nerf2gs_plugin.utils.io import atomic_write_text
 
@@ -105,6 +106,7 @@ class Frame:
         self.__dict__.update(d)
         if getattr(self, "dist", None) is None:  # stashes made before the prior was kept
             self.dist = torch.full(self.image.shape[:2], float("inf"))
+        self.residual = getattr(self, "residual", None)
 
 
 def bound_parallax(fi, fj, rays, p_inf, u):
@@ -145,8 +147,6 @@ def plane_pair(fi, fj, gi, gj) -> dict:
 
 def product_sweep(frames, greys, i: int, stride: int, opts: mm.MotionOptions, grey_min: float, rel: float) -> np.ndarray:
     """``masks/static_sweep.unexplained`` in every valid pair of each side, opened (what the route's vote keeps of it)."""
-    from nerf2gs_plugin.masks.static_sweep import unexplained
-
     pairs = []
     fi = frames[i]
     rays = mm.ray_directions(fi.c2w, fi.intr, *fi.dist.shape)
@@ -186,11 +186,6 @@ def threshold(p: dict, tau: float, k: float) -> float:
     return max(tau, k * float(np.median(p["best"][p["ok"]]))) if p["ok"].any() else tau
 
 
-def textured(g: np.ndarray, level: float = 8.0) -> np.ndarray:
-    gx, gy = cv2.Sobel(g.astype(np.float32), cv2.CV_32F, 1, 0), cv2.Sobel(g.astype(np.float32), cv2.CV_32F, 0, 1)
-    return cv2.blur(np.sqrt(gx ** 2 + gy ** 2) / 8.0, (5, 5)) > level
-
-
 def regions(m: np.ndarray) -> tuple[int, np.ndarray]:
     n, lab = cv2.connectedComponents(m.astype(np.uint8), connectivity=8)
     return n, lab
@@ -209,15 +204,6 @@ def region_share_below(m: np.ndarray, e: np.ndarray, r: float) -> np.ndarray:
     n, lab = regions(m)
     share = np.bincount(lab.ravel(), e.ravel().astype(float), n) / np.maximum(np.bincount(lab.ravel(), minlength=n), 1)
     return (share < r)[lab] & m
-
-
-def touching(m: np.ndarray, new: np.ndarray) -> np.ndarray:
-    """``m`` with the 8-connected regions of ``m | new`` that hold a pixel of ``m``."""
-    n, lab = regions(m | new)
-    hit = np.zeros(n, bool)
-    hit[np.unique(lab[m])] = True
-    hit[0] = False
-    return hit[lab] | m
 
 
 def contact_cut(m: np.ndarray, ev: np.ndarray, margin: int, smooth: int, min_ev: int = 5) -> np.ndarray:
@@ -269,7 +255,7 @@ def run_score(stash_path: Path, out: Path, every: int) -> None:
         nbrs = [o * stride for o in opts.neighbours if 0 <= i + o * stride < len(frames)]
         sweeps[k] = [(o, sweep_pair(frames[i], frames[i + o], greys[i], greys[i + o], opts)) for o in nbrs]
         planes[k] = [(o, plane_pair(frames[i], frames[i + o], greys[i], greys[i + o])) for o in nbrs]
-        tex[k] = textured(greys[i])
+        tex[k] = textured(greys[i], opts.sweep_texture)
     settled = base["settled"]
     for tau in (6, 10, 15):
         for kmed in (2.0, 3.0):
@@ -279,10 +265,9 @@ def run_score(stash_path: Path, out: Path, every: int) -> None:
             new = [cv2.morphologyEx((per_side(sweeps[k], lambda p: p["best"] > threshold(p, tau, kmed)) & tex[k]).astype(np.uint8),
                                     cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)) > 0 for k in keys]
             rows[f"sweep: unexplained textured pixels added, tau {tau} k {kmed}"] = score(stash, keys, [cleaned(m | n) for m, n in zip(settled, new)])
-            gated = [n & mm.residual_gate(mm.MotionFrame(frames[pos[stash["names"][k]]].image, frames[pos[stash["names"][k]]].dist, None, None,
-                                                         residual=frames[pos[stash["names"][k]]].residual), opts.residual_rel).numpy() for n, k in zip(new, keys)]
+            gated = [n & mm.residual_gate(frames[pos[stash["names"][k]]], opts.residual_rel).numpy() for n, k in zip(new, keys)]
             rows[f"sweep: ... and differing from the reference's render, tau {tau} k {kmed}"] = score(stash, keys, [cleaned(m | n) for m, n in zip(settled, gated)])
-            rows[f"sweep: ... and touching a region, tau {tau} k {kmed}"] = score(stash, keys, [cleaned(touching(m, n)) for m, n in zip(settled, gated)])
+            rows[f"sweep: ... and touching a region, tau {tau} k {kmed}"] = score(stash, keys, [cleaned(mm.touching(torch.from_numpy(m), torch.from_numpy(n)).numpy()) for m, n in zip(settled, gated)])
     for tau in (6, 10):
         for kmed in (2.0, 3.0):
             new = [product_sweep(frames, greys, pos[stash["names"][k]], stride, opts, tau, kmed) for k in keys]

@@ -27,6 +27,23 @@ def textured(grey: np.ndarray, level: float) -> np.ndarray:
     return cv2.blur(mag, (5, 5)) > level
 
 
+def _shrunk(grey: np.ndarray, scale: int) -> np.ndarray:
+    """``grey`` halved per power of two in ``scale``, Gaussian before decimating (a fine texture aliases less)."""
+    import cv2
+
+    for _ in range(max(int(scale).bit_length() - 1, 0)):
+        grey = cv2.pyrDown(grey)
+    return grey
+
+
+def _window_cost(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The best 5x5 mean grey difference of ``a`` and ``b`` among the windows within a pixel of each: a window astride
+    a depth edge (a pole, a parked car's outline) matches at no single parallax, one beside it on the pixel's own side does."""
+    import cv2
+
+    return cv2.erode(cv2.blur(np.abs(a - b.astype(np.float32)), (5, 5)), np.ones((3, 3), np.uint8))
+
+
 def unexplained(grey_i: np.ndarray, grey_j: np.ndarray, p_inf: Tensor, u: Tensor, lowest: Tensor, warped: Sequence[np.ndarray],
                 grey_min: float, median_rel: float, texture: float, reach: float, scale: int) -> Tensor:
     """Bool ``[H, W]``: textured pixels of frame ``i`` that frame ``j`` matches nowhere on the epipolar line at a
@@ -40,34 +57,25 @@ def unexplained(grey_i: np.ndarray, grey_j: np.ndarray, p_inf: Tensor, u: Tensor
     import cv2
 
     h, w = grey_i.shape
-    gi, gj = grey_i, grey_j
-    for _ in range(max(int(scale).bit_length() - 1, 0)):  # halved per power of two in ``scale``
-        gi, gj = cv2.pyrDown(gi), cv2.pyrDown(gj)  # Gaussian before decimating: a fine texture aliases less
+    gi, gj = _shrunk(grey_i, scale), _shrunk(grey_j, scale)
     hs, ws = gi.shape
     sx, sy = ws / w, hs / h
 
     def small(t: Tensor) -> np.ndarray:
         return cv2.resize(np.ascontiguousarray(t.float().numpy()), (ws, hs), interpolation=cv2.INTER_NEAREST)
 
-    pi, ux, uy, low = small(p_inf[..., 0]) * sx, small(u[..., 0]), small(u[..., 1]), small(lowest) * sx
-    piy = small(p_inf[..., 1]) * sy
+    ux, uy, low = small(u[..., 0]), small(u[..., 1]), small(lowest) * sx
     xs, ys = np.meshgrid(np.arange(ws, dtype=np.float32), np.arange(hs, dtype=np.float32))
-    bx, by = xs + pi, ys + piy
+    bx, by = xs + small(p_inf[..., 0]) * sx, ys + small(p_inf[..., 1]) * sy
     a = gi.astype(np.float32)
     best = np.full((hs, ws), np.inf, np.float32)
-    shift = np.ones((3, 3), np.uint8)
     step = 1.0 / scale  # half a pixel on half-size images: a textured patch off by half a pixel matches poorly
     for s in np.arange(np.floor(max(float(np.nanmin(low)), -8.0)), reach * ws + 1, step, dtype=np.float32):
         mx, my = bx + s * ux, by + s * uy
         inside = cv2.blur(((mx >= 0) & (mx <= ws - 1) & (my >= 0) & (my <= hs - 1)).astype(np.float32), (5, 5)) > 0.999
-        # the best of the 5x5 windows within a pixel of this one: a window astride a depth edge (a pole, a parked
-        # car's outline) matches at no single parallax, one beside it on the pixel's own side does
-        c = cv2.erode(cv2.blur(np.abs(a - cv2.remap(gj, mx, my, cv2.INTER_LINEAR)), (5, 5)), shift)
-        best = np.where(inside & (s >= low), np.minimum(best, c), best)
+        best = np.where(inside & (s >= low), np.minimum(best, _window_cost(a, cv2.remap(gj, mx, my, cv2.INTER_LINEAR))), best)
     for wj in warped:
-        for _ in range(max(int(scale).bit_length() - 1, 0)):
-            wj = cv2.pyrDown(wj)
-        best = np.minimum(best, cv2.erode(cv2.blur(np.abs(a - wj.astype(np.float32)), (5, 5)), shift))
+        best = np.minimum(best, _window_cost(a, _shrunk(wj, scale)))
     seen = np.isfinite(best)
     if not seen.any():
         return torch.zeros(h, w, dtype=torch.bool)
